@@ -1,0 +1,191 @@
+"""Rig geometry: projection, back-projection, rays, planes and triangulation.
+
+Every function takes plain arrays (intrinsics ``K`` (3, 3) in pixels, OpenCV
+distortion coefficients ``dist`` (k1, k2, p1, p2[, k3, ...]), world-to-camera
+rotation ``R`` (3, 3) and translation ``t`` (3,) in metres, so that a world
+point X maps to camera coordinates ``R @ X + t``) and is vectorised over
+leading dimensions. Pixel coordinates follow OpenCV: (u, v) = (column, row),
+and pixel (0, 0) is the *centre* of the top-left pixel.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+_UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-14)
+
+
+def camera_centre(R: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Camera centre in world coordinates, c = -R^T t (metres), shape (3,)."""
+    return -np.asarray(R, float).T @ np.asarray(t, float)
+
+
+def light_centre(R: np.ndarray, t: np.ndarray, offset: np.ndarray) -> np.ndarray:
+    """World position (metres) of a light at ``offset`` in the camera's coordinates."""
+    R = np.asarray(R, float)
+    return R.T @ (np.asarray(offset, float) - np.asarray(t, float))
+
+
+def world_to_camera(X: np.ndarray, R: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Camera coordinates R X + t of world points ``X`` (..., 3), metres."""
+    return np.asarray(X, float) @ np.asarray(R, float).T + np.asarray(t, float)
+
+
+def look_at(
+    centre: np.ndarray, target: np.ndarray, down: np.ndarray = (0.0, 1.0, 0.0)
+) -> tuple[np.ndarray, np.ndarray]:
+    """Rotation and translation of a camera at ``centre`` looking at ``target``.
+
+    The camera's y axis (image rows, pointing down) is as close as possible to
+    the world direction ``down``.
+
+    Returns
+    -------
+    R : (3, 3) world-to-camera rotation.
+    t : (3,) translation (metres), so that ``R @ centre + t == 0``.
+    """
+    c = np.asarray(centre, float)
+    f = np.asarray(target, float) - c
+    f /= np.linalg.norm(f)
+    x = np.cross(np.asarray(down, float), f)
+    x /= np.linalg.norm(x)
+    y = np.cross(f, x)
+    R = np.stack([x, y, f])
+    return R, -R @ c
+
+
+def project(
+    X: np.ndarray, K: np.ndarray, dist: np.ndarray, R: np.ndarray, t: np.ndarray
+) -> np.ndarray:
+    """Project world points into pixels with the OpenCV camera model.
+
+    Parameters
+    ----------
+    X : (..., 3) world points, metres.
+    K, dist, R, t : camera intrinsics, distortion and world-to-camera pose.
+
+    Returns
+    -------
+    (..., 2) pixel coordinates (u, v). Points behind the camera get NaN.
+    """
+    X = np.asarray(X, float)
+    shape = X.shape[:-1]
+    pts = X.reshape(-1, 3)
+    rvec, _ = cv2.Rodrigues(np.asarray(R, float))
+    uv, _ = cv2.projectPoints(pts, rvec, np.asarray(t, float), np.asarray(K, float), _dist(dist))
+    uv = uv.reshape(-1, 2)
+    behind = world_to_camera(pts, R, t)[:, 2] <= 0
+    uv[behind] = np.nan
+    return uv.reshape(*shape, 2)
+
+
+def normalised_coordinates(uv: np.ndarray, K: np.ndarray, dist: np.ndarray) -> np.ndarray:
+    """Undistorted normalised image coordinates (x/z, y/z) of pixels ``uv`` (..., 2)."""
+    uv = np.asarray(uv, float)
+    shape = uv.shape[:-1]
+    pts = uv.reshape(-1, 1, 2)
+    xy = cv2.undistortPoints(pts, np.asarray(K, float), _dist(dist), criteria=_UNDISTORT_CRITERIA)
+    return xy.reshape(*shape, 2)
+
+
+def backproject(
+    uv: np.ndarray, K: np.ndarray, dist: np.ndarray, R: np.ndarray, t: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """World rays through pixels ``uv`` (..., 2).
+
+    Returns
+    -------
+    origin : (3,) camera centre, metres.
+    direction : (..., 3) unit ray directions in the world frame.
+    """
+    xy = normalised_coordinates(uv, K, dist)
+    d = np.concatenate([xy, np.ones(xy.shape[:-1] + (1,))], axis=-1)
+    d = d @ np.asarray(R, float)  # R^T d for row vectors
+    d /= np.linalg.norm(d, axis=-1, keepdims=True)
+    return camera_centre(R, t), d
+
+
+def pixel_grid(width: int, height: int, supersample: int = 1) -> np.ndarray:
+    """Pixel sample positions (height, width, s*s, 2) of an image.
+
+    ``supersample`` s places s x s samples on a regular grid inside each pixel
+    footprint (pixel centres are integers, a pixel spans +-0.5). With s = 1 the
+    single sample is the pixel centre.
+    """
+    s = int(supersample)
+    offs = (np.arange(s) + 0.5) / s - 0.5
+    ou, ov = np.meshgrid(offs, offs)
+    u, v = np.meshgrid(np.arange(width, dtype=float), np.arange(height, dtype=float))
+    grid = np.empty((height, width, s * s, 2))
+    grid[..., 0] = u[..., None] + ou.ravel()
+    grid[..., 1] = v[..., None] + ov.ravel()
+    return grid
+
+
+def ray_plane_intersection(
+    origins: np.ndarray, directions: np.ndarray, plane_point: np.ndarray, plane_normal: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Intersect rays o + s d with the plane through ``plane_point`` with ``plane_normal``.
+
+    Returns
+    -------
+    points : (..., 3) intersections (NaN where the ray is parallel to the plane).
+    s : (...,) ray parameters (metres for unit directions; negative = behind).
+    """
+    o = np.asarray(origins, float)
+    d = np.asarray(directions, float)
+    n = np.asarray(plane_normal, float)
+    denom = d @ n
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = ((np.asarray(plane_point, float) - o) @ n) / denom
+    s = np.where(np.abs(denom) < 1e-12, np.nan, s)
+    return o + s[..., None] * d, s
+
+
+def triangulate(uvs: np.ndarray, Ks, dists, Rs, ts) -> np.ndarray:
+    """Linear multi-view triangulation (DLT on undistorted coordinates).
+
+    Parameters
+    ----------
+    uvs : (V, N, 2) pixel observations of N points in V views; NaN where a
+        view does not see the point.
+    Ks, dists, Rs, ts : per-view camera parameters (sequences of length V).
+
+    Returns
+    -------
+    (N, 3) world points, metres; NaN where fewer than two views see a point.
+    """
+    uvs = np.asarray(uvs, float)
+    V, N = uvs.shape[:2]
+    A = np.zeros((N, 2 * V, 4))
+    seen = np.all(np.isfinite(uvs), axis=-1)  # (V, N)
+    for k in range(V):
+        xy = np.zeros((N, 2))
+        if seen[k].any():
+            xy[seen[k]] = normalised_coordinates(uvs[k, seen[k]], Ks[k], dists[k])
+        P = np.hstack([np.asarray(Rs[k], float), np.asarray(ts[k], float)[:, None]])
+        w = seen[k][:, None].astype(float)
+        A[:, 2 * k] = w * (xy[:, :1] * P[2] - P[0])
+        A[:, 2 * k + 1] = w * (xy[:, 1:] * P[2] - P[1])
+    _, _, vt = np.linalg.svd(A)
+    Xh = vt[:, -1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        X = Xh[:, :3] / Xh[:, 3:]
+    X[seen.sum(0) < 2] = np.nan
+    return X
+
+
+def fit_plane(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Least-squares plane through ``points`` (N, 3): (centroid, unit normal)."""
+    p = np.asarray(points, float)
+    c = p.mean(axis=0)
+    _, _, vt = np.linalg.svd(p - c)
+    return c, vt[-1]
+
+
+def _dist(dist) -> np.ndarray:
+    d = np.zeros(5) if dist is None else np.asarray(dist, float).ravel()
+    if d.size < 4:
+        d = np.concatenate([d, np.zeros(4 - d.size)])
+    return d

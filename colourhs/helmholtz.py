@@ -1,0 +1,91 @@
+"""The colour Helmholtz stereopsis constraint, equations (3) and (5).
+
+Pure numpy functions shared by the renderer's tests, photometric
+calibration and the reference (non-compiled) data term.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def sample_bilinear(image: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """Bilinearly interpolate ``image`` (H, W[, C]) at pixel positions ``uv`` (..., 2).
+
+    Pixel (0, 0) is the centre of the top-left pixel (OpenCV convention).
+    Positions outside [0, W-1] x [0, H-1] (or NaN) give NaN. Exact
+    double-precision weights (``cv2.remap`` quantises them to 1/32 pixel).
+    """
+    img = np.asarray(image)
+    H, W = img.shape[:2]
+    uv = np.asarray(uv, float)
+    u, v = uv[..., 0], uv[..., 1]
+    ok = np.isfinite(u) & np.isfinite(v) & (u >= 0) & (v >= 0) & (u <= W - 1) & (v <= H - 1)
+    u = np.where(ok, u, 0.0)
+    v = np.where(ok, v, 0.0)
+    u0 = np.minimum(np.floor(u).astype(int), W - 2)
+    v0 = np.minimum(np.floor(v).astype(int), H - 2)
+    a = u - u0
+    b = v - v0
+    if img.ndim == 3:
+        a, b = a[..., None], b[..., None]
+    out = (
+        (1 - a) * (1 - b) * img[v0, u0]
+        + a * (1 - b) * img[v0, u0 + 1]
+        + (1 - a) * b * img[v0 + 1, u0]
+        + a * b * img[v0 + 1, u0 + 1]
+    ).astype(float)
+    out[~ok] = np.nan
+    return out
+
+
+def constraint_vector(
+    x: np.ndarray,
+    c_a: np.ndarray,
+    c_b: np.ndarray,
+    i_a: np.ndarray,
+    i_b: np.ndarray,
+    mu_a: np.ndarray | float = 1.0,
+    mu_b: np.ndarray | float = 1.0,
+    p_ba: np.ndarray | float = 1.0,
+    p_ab: np.ndarray | float = 1.0,
+) -> np.ndarray:
+    """One row w of the colour HS constraint w . n = 0, equation (5).
+
+    ``w = p_ba mu_a i_a / |c_a - x|^2 v_a - p_ab mu_b i_b / |c_b - x|^2 v_b``
+    with v_k the unit vector from x towards Helmholtz camera k.
+
+    Parameters
+    ----------
+    x : (..., 3) surface points, metres.
+    c_a, c_b : (3,) or (..., 3) centres of the two Helmholtz cameras of the
+        reciprocal pair (camera and its collocated light), metres.
+    i_a : (...,) intensity recorded by camera a lit by camera b's light
+        (camera a's channel of b's light colour), linear units.
+    i_b : (...,) the reciprocal intensity: camera b lit by camera a's light.
+    mu_a, mu_b : radiance/sensitivity ratios of the two Helmholtz cameras
+        along their rays, eq. (2) (1 = uncalibrated).
+    p_ba : chromaticity seen by camera b under a's light colour, p_{b,a}.
+    p_ab : chromaticity seen by camera a under b's light colour, p_{a,b}.
+
+    Returns
+    -------
+    (..., 3) constraint vectors w; with white chromaticity and mu = 1 this
+    is the white-light constraint of equation (3).
+    """
+    x = np.asarray(x, float)
+    da = np.asarray(c_a, float) - x
+    db = np.asarray(c_b, float) - x
+    ra2 = np.sum(da**2, axis=-1)
+    rb2 = np.sum(db**2, axis=-1)
+    va = da / np.sqrt(ra2)[..., None]
+    vb = db / np.sqrt(rb2)[..., None]
+    sa = np.asarray(p_ba * mu_a * i_a, float) / ra2
+    sb = np.asarray(p_ab * mu_b * i_b, float) / rb2
+    return sa[..., None] * va - sb[..., None] * vb
+
+
+def constraint_residual(w: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """Normalised residual |w . n| / |w| of constraint rows ``w`` (..., 3) for normals ``n``."""
+    w = np.asarray(w, float)
+    return np.abs(np.sum(w * n, axis=-1)) / np.linalg.norm(w, axis=-1)

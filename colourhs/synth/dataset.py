@@ -1,0 +1,406 @@
+"""Render whole synthetic datasets in the capture format (``capture-format.md``).
+
+A dataset holds: board poses for photometric calibration, chromatic
+captures of the white reference and of every coloured object under red,
+green and blue light, the scenes ``plane`` (a held-out board pose),
+``statue``, ``toy`` and ``sheet`` (dynamic), ground-truth meshes per frame,
+silhouettes, the true mu maps (``gt/photometric.h5``) and, as optional
+extensions of the format, the full rig model (``gt/rig_model.json``), the
+true board poses (``gt/board_poses.json``) and true chromaticity maps
+(``scenes/<scene>/gt/chromaticity.h5``).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import h5py
+import numpy as np
+import open3d as o3d
+from tqdm import tqdm
+
+from colourhs.geometry import backproject, normalised_coordinates, pixel_grid, project
+from colourhs.synth import scenes as sc
+from colourhs.synth.render import (
+    camera_rays,
+    channel_signal,
+    light_transport,
+    raycasting_scene,
+    trace_camera,
+)
+from colourhs.synth.rig import COLOURS, Nuisances, RigModel, make_rig, sensor
+
+FORMAT = "colourhs-capture/1"
+
+
+def _board(markers: dict, length: float, size=(0.26, 0.2)) -> dict:
+    return {
+        "dictionary": "DICT_4X4_50",
+        "marker_length": length,
+        "size": list(size),
+        "markers": {str(k): list(v) for k, v in markers.items()},
+    }
+
+
+DEMO_BOARD = _board(
+    {0: (0.0275, 0.0275), 1: (0.13, 0.0275), 2: (0.2325, 0.0275),
+     3: (0.2325, 0.1725), 4: (0.13, 0.1725), 5: (0.0275, 0.1725)}, 0.035
+)  # fmt: skip
+TINY_BOARD = _board(
+    {0: (0.045, 0.045), 1: (0.215, 0.045), 2: (0.215, 0.155), 3: (0.045, 0.155)}, 0.07
+)
+
+
+@dataclass(frozen=True)
+class Preset:
+    """Size and content of a synthetic dataset."""
+
+    name: str
+    width: int
+    height: int
+    focal_px: float
+    supersample: int
+    n_poses: int = 7
+    sheet_frames: int = 12
+    statue_level: int = 6
+    board: dict = field(default_factory=lambda: DEMO_BOARD)
+    bit_depth: int = 16
+    black_level: int = 512
+
+
+PRESETS = {
+    "tiny": Preset("tiny", 160, 120, 312.5, 3, sheet_frames=3, statue_level=5, board=TINY_BOARD),
+    "demo": Preset("demo", 640, 480, 1250.0, 2, sheet_frames=12),
+    "paper": Preset("paper", 1280, 960, 2500.0, 2, sheet_frames=201),
+}
+
+PARTS = ("photometric", "chromatic", "scenes")
+
+
+def rotation_xyz(ax: float, ay: float, az: float) -> np.ndarray:
+    """Rotation Rz(az) Ry(ay) Rx(ax), angles in radians."""
+    cx, sx, cy, sy, cz, sz = np.cos(ax), np.sin(ax), np.cos(ay), np.sin(ay), np.cos(az), np.sin(az)
+    Rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
+    Ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
+    Rz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
+    return Rz @ Ry @ Rx
+
+
+def board_poses(
+    rig: RigModel, board: dict, n: int, rng: np.random.Generator, margin_px: float = 4.0
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Random hand-held-like board poses filling the working volume.
+
+    Depths are stratified over +-7 cm around the working distance, lateral
+    offsets up to +-5 cm, tilts up to +-25 degrees and roll up to +-15
+    degrees. A pose is kept only if every camera sees the whole board (with
+    ``margin_px``) from its white side at less than 60 degrees incidence.
+
+    Returns a list of (R_b, t_b), world X = R_b X_board + t_b.
+    """
+    corners = sc.board_corners(board["size"])
+    centre_b = corners.mean(axis=0)
+    depths = rng.permutation(np.linspace(-0.07, 0.07, n))
+    out = []
+    for z in depths:
+        for _ in range(1000):
+            R = rotation_xyz(*np.deg2rad(rng.uniform([-25, -25, -15], [25, 25, 15])))
+            c = np.array([*rng.uniform(-0.05, 0.05, 2), z])
+            t = c - R @ centre_b
+            if _board_visible(rig, corners @ R.T + t, R @ [0, 0, -1.0], margin_px):
+                out.append((R, t))
+                break
+        else:
+            raise RuntimeError("could not place a board pose visible to every camera")
+    return out
+
+
+def _board_visible(rig, corners_w, normal_w, margin):
+    for cam in rig.cameras:
+        uv = project(corners_w, cam.K, cam.dist, cam.R, cam.t)
+        if not np.all(np.isfinite(uv)):
+            return False
+        if np.any(uv < margin) or np.any(uv[:, 0] > rig.width - 1 - margin):
+            return False
+        if np.any(uv[:, 1] > rig.height - 1 - margin):
+            return False
+        view = cam.centre - corners_w.mean(axis=0)
+        if normal_w @ view / np.linalg.norm(view) < np.cos(np.deg2rad(60)):
+            return False
+    return True
+
+
+def rig_json(rig: RigModel, preset: Preset, board: dict) -> dict:
+    """The dataset's rig.json (capture format, version 1)."""
+    return {
+        "format": FORMAT,
+        "units": "m",
+        "image": {
+            "width": preset.width,
+            "height": preset.height,
+            "bit_depth": preset.bit_depth,
+            "black_level": preset.black_level,
+            "white_level": 2**preset.bit_depth - 1,
+        },
+        "cameras": [c.to_json() for c in rig.cameras],
+        "board": board,
+        "chromatic_light": {"position": rig.chromatic_lights["red"].position.tolist()},
+    }
+
+
+def true_mu_maps(rig: RigModel) -> dict[str, np.ndarray]:
+    """Ground-truth mu = rho / sigma (eq. 2) per Helmholtz camera, on pixel centres.
+
+    Keys are ``"<camera>/<channel colour>"`` for every channel that records
+    another camera's light; values are float32 (height, width).
+    """
+    grid = pixel_grid(rig.width, rig.height).reshape(-1, 2)
+    colours = [c.light_colour for c in rig.cameras]
+    out = {}
+    for i, cam in enumerate(rig.cameras):
+        origin, dirs = backproject(grid, cam.K, cam.dist, cam.R, cam.t)
+        xy = normalised_coordinates(grid, cam.K, cam.dist)
+        for colour in colours:
+            if colour == cam.light_colour:
+                continue
+            ch = COLOURS.index(colour)
+            mu = rig.helmholtz_mu(i, ch, xy, origin + 0.8 * dirs)
+            out[f"{cam.name}/{colour}"] = mu.reshape(rig.height, rig.width).astype(np.float32)
+    return out
+
+
+def _image_rng(seed: int, relpath: str) -> np.random.Generator:
+    digest = hashlib.sha256(f"{seed}:{relpath}".encode()).digest()
+    return np.random.default_rng(int.from_bytes(digest[:8], "little"))
+
+
+def write_png(path: Path, rgb: np.ndarray) -> None:
+    """Write an R, G, B image (H, W, 3) as PNG (OpenCV stores B, G, R)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if not cv2.imwrite(str(path), np.ascontiguousarray(rgb[..., ::-1])):
+        raise OSError(f"{path}: could not write PNG")
+
+
+def write_mesh(path: Path, geom: sc.SceneGeometry) -> None:
+    """Write the geometry's triangle mesh as PLY (world frame, metres)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    mesh = o3d.geometry.TriangleMesh(
+        o3d.utility.Vector3dVector(geom.vertices), o3d.utility.Vector3iVector(geom.triangles)
+    )
+    mesh.vertex_normals = o3d.utility.Vector3dVector(geom.vertex_normals)
+    if not o3d.io.write_triangle_mesh(str(path), mesh, write_ascii=False):
+        raise OSError(f"{path}: could not write PLY")
+
+
+@dataclass(frozen=True)
+class _Job:
+    """One geometry seen by every camera, and the images to make of it."""
+
+    geometry: object  # callable () -> SceneGeometry (built lazily)
+    frames: tuple[str, ...] = ()  # relpaths (without camera) of all-lights-on images
+    chromatic: str | None = None  # relpath prefix of red/green/blue chromatic captures
+    mask: str | None = None  # relpath prefix of silhouettes
+    gt_mesh: str | None = None  # relpath of the ground-truth mesh
+    gt_chroma: str | None = None  # relpath of the true chromaticity maps
+
+
+def _jobs(preset: Preset, poses, parts) -> list[_Job]:
+    board = preset.board
+    jobs = []
+    if "photometric" in parts:
+        for k, (R, t) in enumerate(poses[:-1]):
+            jobs.append(
+                _Job(lambda R=R, t=t: sc.board_geometry(board, R, t), (f"photometric/pose{k:02d}",))
+            )
+    if "chromatic" in parts:
+        jobs.append(_Job(sc.white_reference, chromatic="chromatic/white"))
+    if "scenes" in parts:
+        R, t = poses[-1]
+        jobs.append(
+            _Job(
+                lambda: sc.board_geometry(board, R, t, name="plane"),
+                ("scenes/plane/frames/000000",),
+                mask="scenes/plane/masks/000000",
+                gt_mesh="scenes/plane/gt/000000.ply",
+            )
+        )
+    for name, build in (
+        ("statue", lambda: sc.statue(preset.statue_level)),
+        ("toy", sc.toy),
+    ):
+        jobs.append(
+            _Job(
+                build,
+                ("scenes/" + name + "/frames/000000",) if "scenes" in parts else (),
+                chromatic=f"chromatic/{name}" if "chromatic" in parts else None,
+                mask=f"scenes/{name}/masks/000000" if "scenes" in parts else None,
+                gt_mesh=f"scenes/{name}/gt/000000.ply" if "scenes" in parts else None,
+                gt_chroma=f"scenes/{name}/gt/chromaticity.h5" if "scenes" in parts else None,
+            )
+        )
+    if "scenes" in parts:
+        n = preset.sheet_frames
+        for f in range(n):
+            jobs.append(
+                _Job(
+                    lambda f=f: sc.sheet(f / max(n - 1, 1)),
+                    (f"scenes/sheet/frames/{f:06d}",),
+                    mask=f"scenes/sheet/masks/{f:06d}",
+                    gt_mesh=f"scenes/sheet/gt/{f:06d}.ply",
+                )
+            )
+    return [j for j in jobs if j.frames or j.chromatic]
+
+
+SCENE_META = {
+    "plane": {"chromatic": None, "dynamic": False,
+              "description": "held-out pose of the white marker board"},
+    "statue": {"chromatic": "statue", "dynamic": False,
+               "description": "glossy white plaster monster head with smooth dirt"},
+    "toy": {"chromatic": "toy", "dynamic": False,
+            "description": "multi-coloured toy dog: pure colours, specular plastic, metal"},
+    "sheet": {"chromatic": None, "dynamic": True,
+              "description": "glossy white sheet folding and doming"},
+}  # fmt: skip
+
+
+def synthesise(
+    out: str | Path,
+    preset: str | Preset = "demo",
+    seed: int = 0,
+    nuisances: Nuisances | None = None,
+    parts: tuple[str, ...] = PARTS,
+    progress: bool = True,
+    overwrite: bool = False,
+) -> Path:
+    """Render a synthetic colour HS dataset into ``out`` (capture format v1).
+
+    The dataset is written to a sibling folder and moved into place at the
+    end, so an interrupted run leaves no partial dataset behind. The same
+    ``seed`` and preset give the same images, whatever ``parts`` are asked.
+
+    Parameters
+    ----------
+    out : dataset folder to create.
+    preset : ``"tiny"``, ``"demo"``, ``"paper"`` or a :class:`Preset`.
+    seed : seed of every random choice (rig, poses, noise).
+    nuisances : effects to simulate (default: all on, :class:`Nuisances`).
+    parts : subset of ``("photometric", "chromatic", "scenes")`` to render.
+    progress : show a progress bar.
+    overwrite : replace an existing ``out``.
+
+    Returns
+    -------
+    Path of the dataset.
+    """
+    out = Path(out)
+    p = PRESETS[preset] if isinstance(preset, str) else preset
+    nuis = Nuisances() if nuisances is None else nuisances
+    unknown = set(parts) - set(PARTS)
+    if unknown:
+        raise ValueError(f"unknown parts {sorted(unknown)}; choose from {PARTS}")
+    if out.exists() and not overwrite:
+        raise FileExistsError(f"{out}: already exists (pass overwrite=True to replace it)")
+    rng = np.random.default_rng(seed)
+    rig = make_rig(p.width, p.height, p.focal_px, rng, nuis)
+    poses = board_poses(rig, p.board, p.n_poses + 1, rng)
+    tmp = out.with_name(out.name + ".partial")
+    if tmp.exists():
+        shutil.rmtree(tmp)
+    tmp.mkdir(parents=True)
+    try:
+        _write_dataset(tmp, rig, p, poses, seed, nuis, parts, progress)
+        if out.exists():
+            shutil.rmtree(out)
+        os.replace(tmp, out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return out
+
+
+def _write_dataset(root, rig, p, poses, seed, nuis, parts, progress):
+    (root / "rig.json").write_text(json.dumps(rig_json(rig, p, p.board), indent=2))
+    gt = root / "gt"
+    gt.mkdir()
+    (gt / "rig_model.json").write_text(json.dumps(rig.to_json(), indent=1))
+    names = [f"pose{k:02d}" for k in range(len(poses) - 1)] + ["plane"]
+    (gt / "board_poses.json").write_text(
+        json.dumps(
+            {n: {"R": R.tolist(), "t": t.tolist()} for n, (R, t) in zip(names, poses, strict=True)}
+        )
+    )
+    with h5py.File(gt / "photometric.h5", "w") as f:
+        f.attrs["note"] = "mu = rho / sigma (eq. 2) on pixel centres; one scale per pair is free"
+        for key, mu in true_mu_maps(rig).items():
+            f.create_dataset(key, data=mu, compression="gzip")
+    if "scenes" in parts:
+        for name, meta in SCENE_META.items():
+            d = root / "scenes" / name
+            d.mkdir(parents=True, exist_ok=True)
+            (d / "scene.json").write_text(json.dumps(meta, indent=2))
+    jobs = _jobs(p, poses, parts)
+    rays = [camera_rays(c, p.width, p.height, p.supersample) for c in rig.cameras]
+    bar = tqdm(jobs, desc=f"synth {p.name}", unit="view", disable=not progress)
+    for job in bar:
+        _render_job(root, rig, rays, p, job, seed, nuis)
+
+
+def _render_job(root, rig, rays, p, job, seed, nuis):
+    geom = job.geometry()
+    scene = raycasting_scene(geom)
+    if job.gt_mesh:
+        write_mesh(root / job.gt_mesh, geom)
+    chroma_maps = {}
+    for cam, cam_rays in zip(rig.cameras, rays, strict=True):
+        hits = trace_camera(geom, scene, cam_rays)
+        if job.frames:
+            transports = {
+                light.colour: light.radiance(hits.points)
+                * light_transport(geom, scene, hits, light.position)
+                for light in rig.lights
+            }
+            signal = channel_signal(hits, cam, transports)
+            for rel in job.frames:
+                _write_image(root, f"{rel}/{cam.name}.png", signal, seed, nuis, p)
+        if job.chromatic:
+            base = light_transport(geom, scene, hits, rig.chromatic_lights["red"].position)
+            for colour, light in rig.chromatic_lights.items():
+                signal = channel_signal(hits, cam, {colour: light.radiance(hits.points) * base})
+                rel = f"{job.chromatic}/{colour}/{cam.name}.png"
+                _write_image(root, rel, signal, seed, nuis, p)
+        if job.mask:
+            mask = (hits.coverage() >= 0.5).astype(np.uint8) * 255
+            path = root / f"{job.mask}/{cam.name}.png"
+            path.parent.mkdir(parents=True, exist_ok=True)
+            cv2.imwrite(str(path), mask)
+        if job.gt_chroma:
+            cov = hits.coverage()
+            p_mean = hits.pixel_mean(hits.albedo / sc.WHITE_ALBEDO)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                p_map = p_mean / cov[..., None]
+            p_map[cov < 0.999] = np.nan
+            chroma_maps[cam.name] = p_map.astype(np.float32)
+    if job.gt_chroma:
+        path = root / job.gt_chroma
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with h5py.File(path, "w") as f:
+            f.attrs["note"] = (
+                "surface reflectance per light band relative to the white reference, "
+                "(1, 1, 1) = white; pixel mean over fully covered pixels, NaN elsewhere"
+            )
+            for name, m in chroma_maps.items():
+                f.create_dataset(name, data=m, compression="gzip")
+
+
+def _write_image(root, rel, signal, seed, nuis, p):
+    dn = sensor(signal, _image_rng(seed, rel), nuis, p.bit_depth, p.black_level)
+    if dn.dtype.kind == "f":
+        raise ValueError("datasets are written quantised: Nuisances.quantise must be on")
+    write_png(root / rel, dn)

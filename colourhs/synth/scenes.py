@@ -1,0 +1,377 @@
+"""Synthetic scene geometry: marker board, white reference, statue, toy, sheet.
+
+Each builder returns a :class:`SceneGeometry`: a triangle mesh in world
+coordinates (metres) with smooth vertex normals, a material (reciprocal BRDF)
+per triangle and a surface chromaticity (reflectance per light band R, G, B,
+the ``p`` of the paper's equation (4)) as a function of the surface point.
+The working volume is centred on the world origin; the rig looks along +z.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from colourhs.synth.brdf import Material
+
+WHITE_ALBEDO = 0.8  # reflectance of the board's white and of the white reference
+BLACK_ALBEDO = 0.04  # reflectance of the printed markers
+
+MATTE = Material(kd=1.0)
+
+
+@dataclass(frozen=True)
+class SceneGeometry:
+    """A renderable, closed-form scene.
+
+    Attributes
+    ----------
+    vertices : (V, 3) float64 world coordinates, metres.
+    triangles : (T, 3) int32 vertex indices, counter-clockwise seen from outside.
+    vertex_normals : (V, 3) unit outward normals, for smooth shading.
+    material_ids : (T,) int index into ``materials`` per triangle.
+    materials : tuple of :class:`~colourhs.synth.brdf.Material`.
+    albedo : callable (points (N, 3), triangle ids (N,)) -> (N, 3) reflectance in the
+        red, green and blue light bands (the chromaticity p times the BRDF scale).
+    """
+
+    name: str
+    vertices: np.ndarray
+    triangles: np.ndarray
+    vertex_normals: np.ndarray
+    material_ids: np.ndarray
+    materials: tuple[Material, ...]
+    albedo: Callable[[np.ndarray, np.ndarray], np.ndarray]
+
+
+def vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Area-weighted vertex normals (V, 3) of a triangle mesh."""
+    v = vertices[triangles]
+    fn = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+    vn = np.zeros_like(vertices)
+    for k in range(3):
+        np.add.at(vn, triangles[:, k], fn)
+    return vn / np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-30)
+
+
+def grid_mesh(nu: int, nv: int, wrap_u: bool = False) -> np.ndarray:
+    """Triangles (T, 3) of an nu x nv vertex grid (row-major, u fastest)."""
+    cols = nu if wrap_u else nu - 1
+    iu, iv = np.meshgrid(np.arange(cols), np.arange(nv - 1))
+    a = iv * nu + iu
+    b = iv * nu + (iu + 1) % nu
+    c = a + nu
+    d = b + nu
+    tris = np.concatenate([np.stack([a, c, b], -1), np.stack([b, c, d], -1)]).reshape(-1, 3)
+    return tris.astype(np.int32)
+
+
+def merge(name, parts, materials, albedo) -> SceneGeometry:
+    """Concatenate parts ``(vertices, triangles, material_id)`` into one scene."""
+    verts, tris, mids, off = [], [], [], 0
+    for v, t, m in parts:
+        verts.append(v)
+        tris.append(t + off)
+        mids.append(np.full(len(t), m))
+        off += len(v)
+    v = np.concatenate(verts)
+    t = np.concatenate(tris).astype(np.int32)
+    return SceneGeometry(
+        name, v, t, vertex_normals(v, t), np.concatenate(mids), tuple(materials), albedo
+    )
+
+
+def _outward(vertices, triangles):
+    """Flip the winding of a closed part whose signed volume is negative."""
+    v = vertices[triangles]
+    vol = np.einsum("ij,ij->i", v[:, 0], np.cross(v[:, 1], v[:, 2])).sum()
+    return triangles[:, ::-1].copy() if vol < 0 else triangles
+
+
+# --------------------------------------------------------------------------- board
+def board_corners(size) -> np.ndarray:
+    """Board outline (4, 3) in board coordinates: TL, TR, BR, BL, z = 0."""
+    w, h = size
+    return np.array([[0, 0, 0], [w, 0, 0], [w, h, 0], [0, h, 0]], float)
+
+
+def marker_bits(dictionary: str, marker_id: int) -> np.ndarray:
+    """The marker's cells (n+2, n+2) as booleans, True = white, border included."""
+    d = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, dictionary))
+    n = d.markerSize + 2
+    return cv2.aruco.generateImageMarker(d, int(marker_id), n) > 127
+
+
+def board_reflectance(board: dict, xy_board: np.ndarray) -> np.ndarray:
+    """Reflectance (N,) of the board at board-frame points (N, 2), metres.
+
+    White calibration surface everywhere but the printed ArUco markers.
+    """
+    out = np.full(len(xy_board), WHITE_ALBEDO)
+    L = board["marker_length"]
+    for mid, centre in board["markers"].items():
+        bits = marker_bits(board["dictionary"], int(mid))
+        n = bits.shape[0]
+        rel = (xy_board - (np.asarray(centre) - L / 2)) / L * n
+        inside = np.all((rel >= 0) & (rel < n), axis=1)
+        cells = np.floor(rel[inside]).astype(int)
+        out[inside] = np.where(bits[cells[:, 1], cells[:, 0]], WHITE_ALBEDO, BLACK_ALBEDO)
+    return out
+
+
+def board_geometry(board: dict, R_b: np.ndarray, t_b: np.ndarray, name="board") -> SceneGeometry:
+    """The white marker board at pose (R_b, t_b): world X = R_b X_board + t_b.
+
+    ``board`` is rig.json's board entry (dictionary, marker_length, size,
+    markers). The white face looks along the board's -z axis.
+    """
+    corners = board_corners(board["size"]) @ R_b.T + t_b
+    tris = np.array([[0, 1, 2], [0, 2, 3]], np.int32)  # normal along board -z (y down)
+
+    def albedo(points, _tri):
+        xy = ((points - t_b) @ R_b)[:, :2]
+        return np.repeat(board_reflectance(board, xy)[:, None], 3, axis=1)
+
+    return merge(name, [(corners, tris, 0)], [MATTE], albedo)
+
+
+def white_reference(size_m: float = 0.6, z_m: float = 0.0) -> SceneGeometry:
+    """A large white matte plane facing the rig, for the chromatic reference."""
+    h = size_m / 2
+    v = np.array([[-h, -h, z_m], [h, -h, z_m], [h, h, z_m], [-h, h, z_m]])
+    tris = np.array([[0, 1, 2], [0, 2, 3]], np.int32)
+    return merge("white", [(v, tris, 0)], [MATTE], lambda p, _t: np.full((len(p), 3), WHITE_ALBEDO))
+
+
+# --------------------------------------------------------------------------- statue
+def _icosphere(level: int) -> tuple[np.ndarray, np.ndarray]:
+    """Unit icosphere by repeated 4-to-1 subdivision."""
+    p = (1 + 5**0.5) / 2
+    v = np.array(
+        [[-1, p, 0], [1, p, 0], [-1, -p, 0], [1, -p, 0], [0, -1, p], [0, 1, p],
+         [0, -1, -p], [0, 1, -p], [p, 0, -1], [p, 0, 1], [-p, 0, -1], [-p, 0, 1]], float
+    )  # fmt: skip
+    f = np.array(
+        [[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4],
+         [11, 10, 2], [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8],
+         [3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]]
+    )  # fmt: skip
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    for _ in range(level):
+        edges = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
+        uniq, inv = np.unique(edges, axis=0, return_inverse=True)
+        mid = v[uniq].mean(axis=1)
+        mid /= np.linalg.norm(mid, axis=1, keepdims=True)
+        m = inv.reshape(3, -1).T + len(v)  # midpoints of edges 01, 12, 20
+        v = np.concatenate([v, mid])
+        a, b, c = f.T
+        f = np.concatenate(
+            [np.stack(x, 1) for x in
+             ([a, m[:, 0], m[:, 2]], [b, m[:, 1], m[:, 0]], [c, m[:, 2], m[:, 1]], m.T)]
+        )  # fmt: skip
+    return v, f.astype(np.int32)
+
+
+def _bumps(u: np.ndarray, features) -> np.ndarray:
+    """Sum of Gaussian bumps on the unit sphere: a * exp(-angle^2 / (2 s^2))."""
+    r = np.zeros(len(u))
+    for direction, amp, sigma in features:
+        d = np.asarray(direction, float)
+        d /= np.linalg.norm(d)
+        ang = np.arccos(np.clip(u @ d, -1, 1))
+        r += amp * np.exp(-(ang**2) / (2 * sigma**2))
+    return r
+
+
+STATUE_FEATURES = (  # (direction, relative amplitude, angular width rad): a monster head
+    ((0.0, 0.05, -1.0), 0.22, 0.16),  # snout
+    ((0.33, -0.28, -0.9), -0.14, 0.13),  # eye sockets (concave)
+    ((-0.33, -0.28, -0.9), -0.14, 0.13),
+    ((0.0, -0.45, -0.9), 0.08, 0.25),  # brow
+    ((0.12, 0.42, -0.9), -0.1, 0.09),  # mouth (concave groove)
+    ((0.0, 0.44, -0.9), -0.11, 0.09),
+    ((-0.12, 0.42, -0.9), -0.1, 0.09),
+    ((0.45, -0.9, -0.2), 0.35, 0.16),  # horns
+    ((-0.45, -0.9, -0.2), 0.35, 0.16),
+    ((1.0, -0.1, -0.1), 0.15, 0.2),  # ears
+    ((-1.0, -0.1, -0.1), 0.15, 0.2),
+)
+
+
+def statue(level: int = 6, radius_m: float = 0.085, seed: int = 7) -> SceneGeometry:
+    """A closed monster-head statue of glossy white plaster with smooth dirt.
+
+    A star-shaped closed surface r(u) = radius (1 + bumps(u) + wrinkles(u)) on
+    an icosphere of the given subdivision ``level``, stretched to a head
+    shape; eye sockets and mouth are concave. Material: diffuse plaster with a
+    Blinn-Phong gloss lobe. Chromaticity: white with smooth brownish dirt.
+    """
+    u, tris = _icosphere(level)
+    elev = np.arcsin(np.clip(-u[:, 1], -1, 1))
+    wrinkles = 0.012 * np.sin(40 * elev) * np.exp(-(((elev - 0.5) / 0.2) ** 2)) * (u[:, 2] < 0)
+    r = radius_m * (1 + _bumps(u, STATUE_FEATURES) + wrinkles)
+    v = u * r[:, None] * np.array([1.0, 1.15, 0.9])
+    tris = _outward(v, tris)
+    rng = np.random.default_rng(seed)
+    blobs = rng.normal(0, radius_m, (10, 3))
+    widths = rng.uniform(0.3, 0.7, 10) * radius_m
+    weights = rng.uniform(0.3, 0.8, 10)
+    tint = np.array([0.22, 0.32, 0.45])  # dirt absorbs more blue than red
+
+    def albedo(points, _tri):
+        d2 = ((points[:, None, :] - blobs[None]) ** 2).sum(-1)
+        dirt = np.clip((weights * np.exp(-d2 / (2 * widths**2))).sum(-1), 0, 1)
+        return 0.82 * (1 - dirt[:, None] * tint)
+
+    gloss = Material(kd=1.0, specular="blinn_phong", ks=0.25, shininess=30.0)
+    return merge("statue", [(v, tris, 0)], [gloss], albedo)
+
+
+# --------------------------------------------------------------------------- toy
+def ellipsoid(centre, radii, level: int = 4) -> tuple[np.ndarray, np.ndarray]:
+    """A closed ellipsoid mesh (icosphere of subdivision ``level``), outward winding."""
+    v, t = _icosphere(level)
+    v = v * np.asarray(radii, float) + np.asarray(centre, float)
+    return v, _outward(v, t)
+
+
+def helix_tube(
+    start_x, length, coil_radius, tube_radius, turns, centre_yz=(0.0, 0.0), nu=16, nv=700
+):
+    """A closed tube along a helix about the x axis (the toy's spring torso).
+
+    The tube radius tapers to zero at both ends, closing the surface.
+    """
+    s = np.linspace(0, 1, nv)
+    phi = np.linspace(0, 2 * np.pi, nu, endpoint=False)
+    ang = 2 * np.pi * turns * s
+    c = np.stack(
+        [start_x + length * s, centre_yz[0] + coil_radius * np.cos(ang),
+         centre_yz[1] + coil_radius * np.sin(ang)], -1
+    )  # fmt: skip
+    tangent = np.gradient(c, axis=0)
+    tangent /= np.linalg.norm(tangent, axis=1, keepdims=True)
+    radial = c - np.array([c[0, 0], *centre_yz]) * [0, 1, 1]
+    radial[:, 0] = 0
+    radial -= (radial * tangent).sum(1, keepdims=True) * tangent
+    radial /= np.linalg.norm(radial, axis=1, keepdims=True)
+    binormal = np.cross(tangent, radial)
+    taper = np.clip(np.minimum(s, 1 - s) / 0.01, 0, 1) ** 0.5
+    rr = tube_radius * taper
+    v = (
+        c[:, None]
+        + rr[:, None, None]
+        * (
+            np.cos(phi)[None, :, None] * radial[:, None]
+            + np.sin(phi)[None, :, None] * binormal[:, None]
+        )
+    ).reshape(-1, 3)
+    t = grid_mesh(nu, nv, wrap_u=True)
+    return v, _outward(v, t), s
+
+
+TOY_COLOURS = {
+    "red": (0.85, 0.06, 0.04),
+    "yellow": (0.85, 0.72, 0.05),
+    "green": (0.06, 0.65, 0.1),
+    "blue": (0.05, 0.12, 0.8),
+    "magenta": (0.75, 0.08, 0.6),
+    "brown": (0.55, 0.32, 0.15),
+    "metal": (0.92, 0.9, 0.86),
+}
+
+
+def toy() -> SceneGeometry:
+    """A multi-coloured toy dog like the paper's Slinky.
+
+    Parts: a spring-like helix torso in cycling pure colours (high-frequency
+    geometry), specular plastic chest, hips and legs in pure colours, a brown
+    head with a fine fur texture and dark eyes, and a mirror-like metal disc on
+    a hind leg. Plastics: Lambertian + GGX (roughness 0.35, F0 0.05); metal:
+    GGX (roughness 0.15, F0 0.9) with almost no diffuse part.
+    """
+    parts, colour_of = [], []
+    spring_v, spring_t, spring_s = helix_tube(-0.05, 0.09, 0.034, 0.0055, 7.0)
+    parts.append((spring_v, spring_t, 0))
+    colour_of.append("spring")
+    for centre, radii, colour, mat in [
+        ((0.075, 0.0, 0.0), (0.03, 0.036, 0.036), "red", 0),  # chest
+        ((-0.075, 0.0, 0.0), (0.03, 0.036, 0.036), "blue", 0),  # hips
+        ((0.118, -0.03, -0.005), (0.04, 0.034, 0.034), "brown", 0),  # head
+        ((0.075, 0.05, -0.02), (0.012, 0.03, 0.012), "green", 0),  # legs
+        ((0.075, 0.05, 0.02), (0.012, 0.03, 0.012), "yellow", 0),
+        ((-0.075, 0.05, -0.02), (0.012, 0.03, 0.012), "yellow", 0),
+        ((-0.075, 0.05, 0.02), (0.012, 0.03, 0.012), "green", 0),
+        ((-0.075, 0.045, -0.033), (0.014, 0.014, 0.003), "metal", 1),  # mirror disc
+    ]:
+        v, t = ellipsoid(centre, radii, level=5 if max(radii) > 0.02 else 4)
+        parts.append((v, t, mat))
+        colour_of.append(colour)
+    # Triangle id ranges of each part, to look up its colour.
+    bounds = np.cumsum([0] + [len(t) for _, t, _ in parts])
+    ring = ("red", "yellow", "green", "blue", "magenta")
+    eyes = np.array([[0.13, -0.045, -0.033], [0.105, -0.045, -0.037]])
+    nv_spring = len(spring_s)
+
+    def albedo(points, tri):
+        part = np.searchsorted(bounds, tri, side="right") - 1
+        out = np.empty((len(points), 3))
+        for k, name in enumerate(colour_of):
+            sel = part == k
+            if not sel.any():
+                continue
+            if name == "spring":
+                # Colour cycles along the helix, one colour per turn.
+                row = (tri[sel] // 2) // 16 % (nv_spring - 1)
+                turn = (7.0 * spring_s[np.minimum(row * 16 // 16, nv_spring - 1)]).astype(int)
+                out[sel] = np.array([TOY_COLOURS[ring[i % len(ring)]] for i in turn])
+            else:
+                out[sel] = TOY_COLOURS[name]
+            if name == "brown":
+                p = points[sel]
+                fur = 1 + 0.25 * np.sin(2 * np.pi * p[:, 0] / 0.004) * np.sin(
+                    2 * np.pi * p[:, 1] / 0.005
+                )
+                out[sel] *= fur[:, None]
+                d = np.min(np.linalg.norm(p[:, None] - eyes[None], axis=-1), axis=1)
+                out[sel] = np.where((d < 0.008)[:, None], 0.06, out[sel])
+        return out
+
+    plastic = Material(kd=1.0, specular="ggx", ks=1.0, roughness=0.35, f0=0.05)
+    metal = Material(kd=0.05, specular="ggx", ks=1.0, roughness=0.15, f0=0.9)
+    return merge("toy", parts, [plastic, metal], albedo)
+
+
+# --------------------------------------------------------------------------- sheet
+def sheet(phase: float, size=(0.26, 0.2), n=(131, 101)) -> SceneGeometry:
+    """A glossy white laminated sheet folding and doming, at ``phase`` in [0, 1].
+
+    A height field facing the rig: a dome that rises and falls
+    (3 cm peak at mid-sequence), a rounded fold whose crease rotates and
+    deepens, and a gentle travelling wave. Material: white diffuse with a
+    Ward gloss lobe (alpha 0.12).
+    """
+    w, h = size
+    x, y = np.meshgrid(np.linspace(-w / 2, w / 2, n[0]), np.linspace(-h / 2, h / 2, n[1]))
+    t = float(phase)
+    dome = -0.03 * np.sin(np.pi * t) * np.exp(-((x - 0.03) ** 2 + (y + 0.01) ** 2) / (2 * 0.045**2))
+    ang = 0.3 + 0.6 * t
+    d = x * np.cos(ang) + y * np.sin(ang) + 0.04
+    fold_amp = 0.35 * t**2 * (3 - 2 * t)
+    fold = fold_amp * (np.sqrt(d**2 + 0.012**2) - 0.012) * (d > 0)
+    wave = 0.004 * np.sin(2 * np.pi * (x / 0.12 + 0.5 * t))
+    z = dome + fold + wave - 0.01
+    v = np.stack([x, y, z], -1).reshape(-1, 3)
+    tris = grid_mesh(n[0], n[1])
+    # Tilt the whole sheet a little, as if held.
+    c, s = np.cos(0.15), np.sin(0.15)
+    v = v @ np.array([[1, 0, 0], [0, c, -s], [0, s, c]]).T
+    gloss = Material(kd=1.0, specular="ward", ks=0.3, alpha=0.12)
+    geom = merge("sheet", [(v, tris, 0)], [gloss], lambda p, _t: np.full((len(p), 3), 0.85))
+    # The sheet faces the rig (-z): make sure its normals do too.
+    if geom.vertex_normals[:, 2].mean() > 0:
+        geom = merge("sheet", [(v, tris[:, ::-1].copy(), 0)], [gloss], geom.albedo)
+    return geom
