@@ -89,3 +89,54 @@ def constraint_residual(w: np.ndarray, n: np.ndarray) -> np.ndarray:
     """Normalised residual |w . n| / |w| of constraint rows ``w`` (..., 3) for normals ``n``."""
     w = np.asarray(w, float)
     return np.abs(np.sum(w * n, axis=-1)) / np.linalg.norm(w, axis=-1)
+
+
+def pair_rows(
+    points: np.ndarray,
+    images: dict,
+    cameras: dict,
+    pairs,
+    mu: dict | None = None,
+    chromaticity=None,
+) -> np.ndarray:
+    """Constraint rows (N, P, 3) of every reciprocal pair at world ``points`` (N, 3), eq. (5).
+
+    Parameters
+    ----------
+    points : (N, 3) world points, metres.
+    images : camera name -> (H, W, 3) linear image, channels R, G, B.
+    cameras : camera name -> :class:`colourhs.capture.Camera`.
+    pairs : reciprocal pairs (:meth:`colourhs.capture.Rig.reciprocal_pairs`).
+    mu : optional ``"<camera>/<colour>"`` -> (H, W) mu map (eq. 2); 1 if absent.
+    chromaticity : optional callable (camera name, pixel positions (N, 2)) ->
+        (N, 3) chromaticity p per light band; white if absent.
+
+    Returns
+    -------
+    (N, P, 3) rows w, NaN where a point projects outside an image.
+    """
+    from colourhs.capture import COLOURS
+    from colourhs.geometry import project
+
+    rows = []
+    for pr in pairs:
+        ca, cb = cameras[pr.cam_a], cameras[pr.cam_b]
+        uva = project(points, ca.K, ca.dist, ca.R, ca.t)
+        uvb = project(points, cb.K, cb.dist, cb.R, cb.t)
+        i_a = sample_bilinear(images[pr.cam_a][..., pr.channel_a], uva)
+        i_b = sample_bilinear(images[pr.cam_b][..., pr.channel_b], uvb)
+        mu_a = mu_b = 1.0
+        if mu is not None:
+            mu_a = sample_bilinear(mu[f"{pr.cam_a}/{COLOURS[pr.channel_a]}"], uva)
+            mu_b = sample_bilinear(mu[f"{pr.cam_b}/{COLOURS[pr.channel_b]}"], uvb)
+        p_ba = p_ab = 1.0
+        if chromaticity is not None:
+            # p_{b,a}: camera b under a's light colour, which is b's channel_b.
+            p_ba = chromaticity(pr.cam_b, uvb)[:, pr.channel_b]
+            p_ab = chromaticity(pr.cam_a, uva)[:, pr.channel_a]
+        rows.append(
+            constraint_vector(
+                points, ca.light_centre, cb.light_centre, i_a, i_b, mu_a, mu_b, p_ba, p_ab
+            )
+        )
+    return np.stack(rows, axis=1)

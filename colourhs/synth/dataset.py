@@ -14,8 +14,10 @@ from __future__ import annotations
 
 import hashlib
 import json
+import multiprocessing
 import os
 import shutil
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -278,6 +280,7 @@ def synthesise(
     parts: tuple[str, ...] = PARTS,
     progress: bool = True,
     overwrite: bool = False,
+    workers: int | None = None,
 ) -> Path:
     """Render a synthetic colour HS dataset into ``out`` (capture format v1).
 
@@ -294,6 +297,7 @@ def synthesise(
     parts : subset of ``("photometric", "chromatic", "scenes")`` to render.
     progress : show a progress bar.
     overwrite : replace an existing ``out``.
+    workers : processes rendering views in parallel (default: CPU count).
 
     Returns
     -------
@@ -307,6 +311,7 @@ def synthesise(
         raise ValueError(f"unknown parts {sorted(unknown)}; choose from {PARTS}")
     if out.exists() and not overwrite:
         raise FileExistsError(f"{out}: already exists (pass overwrite=True to replace it)")
+    workers = (os.cpu_count() or 1) if workers is None else int(workers)
     rng = np.random.default_rng(seed)
     rig = make_rig(p.width, p.height, p.focal_px, rng, nuis)
     poses = board_poses(rig, p.board, p.n_poses + 1, rng)
@@ -315,7 +320,7 @@ def synthesise(
         shutil.rmtree(tmp)
     tmp.mkdir(parents=True)
     try:
-        _write_dataset(tmp, rig, p, poses, seed, nuis, parts, progress)
+        _write_dataset(tmp, rig, p, poses, seed, nuis, parts, progress, workers)
         if out.exists():
             shutil.rmtree(out)
         os.replace(tmp, out)
@@ -325,7 +330,7 @@ def synthesise(
     return out
 
 
-def _write_dataset(root, rig, p, poses, seed, nuis, parts, progress):
+def _write_dataset(root, rig, p, poses, seed, nuis, parts, progress, workers):
     (root / "rig.json").write_text(json.dumps(rig_json(rig, p, p.board), indent=2))
     gt = root / "gt"
     gt.mkdir()
@@ -347,9 +352,29 @@ def _write_dataset(root, rig, p, poses, seed, nuis, parts, progress):
             (d / "scene.json").write_text(json.dumps(meta, indent=2))
     jobs = _jobs(p, poses, parts)
     rays = [camera_rays(c, p.width, p.height, p.supersample) for c in rig.cameras]
-    bar = tqdm(jobs, desc=f"synth {p.name}", unit="view", disable=not progress)
-    for job in bar:
-        _render_job(root, rig, rays, p, job, seed, nuis)
+    args = [(root, rig, rays, p, job, seed, nuis) for job in jobs]
+    bar = tqdm(total=len(jobs), desc=f"synth {p.name}", unit="view", disable=not progress)
+    if workers <= 1:
+        for a in args:
+            _render_job(*a)
+            bar.update()
+    else:
+        # Jobs hold closures, so workers are forked rather than spawned.
+        global _ARGS
+        _ARGS = args
+        ctx = multiprocessing.get_context("fork")
+        with ProcessPoolExecutor(workers, mp_context=ctx) as pool:
+            for _ in pool.map(_render_indexed, range(len(args))):
+                bar.update()
+        _ARGS = None
+    bar.close()
+
+
+_ARGS = None
+
+
+def _render_indexed(k: int) -> None:
+    _render_job(*_ARGS[k])
 
 
 def _render_job(root, rig, rays, p, job, seed, nuis):

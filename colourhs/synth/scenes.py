@@ -352,7 +352,7 @@ def sheet(phase: float, size=(0.26, 0.2), n=(131, 101)) -> SceneGeometry:
     A height field facing the rig: a dome that rises and falls
     (3 cm peak at mid-sequence), a rounded fold whose crease rotates and
     deepens, and a gentle travelling wave. Material: white diffuse with a
-    Ward gloss lobe (alpha 0.12).
+    Ward gloss lobe (alpha 0.18).
     """
     w, h = size
     x, y = np.meshgrid(np.linspace(-w / 2, w / 2, n[0]), np.linspace(-h / 2, h / 2, n[1]))
@@ -369,7 +369,7 @@ def sheet(phase: float, size=(0.26, 0.2), n=(131, 101)) -> SceneGeometry:
     # Tilt the whole sheet a little, as if held.
     c, s = np.cos(0.15), np.sin(0.15)
     v = v @ np.array([[1, 0, 0], [0, c, -s], [0, s, c]]).T
-    gloss = Material(kd=1.0, specular="ward", ks=0.3, alpha=0.12)
+    gloss = Material(kd=1.0, specular="ward", ks=0.15, alpha=0.18)
     geom = merge("sheet", [(v, tris, 0)], [gloss], lambda p, _t: np.full((len(p), 3), 0.85))
     # The sheet faces the rig (-z): make sure its normals do too.
     if geom.vertex_normals[:, 2].mean() > 0:

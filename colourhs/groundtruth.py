@@ -1,0 +1,73 @@
+"""Ground-truth surface samples from a dataset's meshes (``scenes/<s>/gt/<f>.ply``)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import open3d as o3d
+
+from colourhs.capture import Camera, CaptureFormatError
+from colourhs.geometry import backproject, pixel_grid
+
+SHADOW_EPS_M = 2e-5
+
+
+def load_mesh(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Vertices (V, 3), triangles (T, 3) and unit vertex normals (V, 3) of a PLY mesh."""
+    mesh = o3d.io.read_triangle_mesh(str(path))
+    if len(mesh.triangles) == 0:
+        raise CaptureFormatError(path, "not a triangle mesh (no faces read)")
+    if not mesh.has_vertex_normals():
+        mesh.compute_vertex_normals()
+    return np.asarray(mesh.vertices), np.asarray(mesh.triangles), np.asarray(mesh.vertex_normals)
+
+
+def surface_points(
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    normals: np.ndarray,
+    reference: Camera,
+    cameras: tuple[Camera, ...],
+    width: int,
+    height: int,
+    min_cos: float = 0.1,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Surface points seen at the reference camera's pixel centres.
+
+    Casts one ray per pixel centre of ``reference`` onto the mesh and keeps
+    the hits that every camera sees and every collocated light lights
+    (unoccluded, at more than ``min_cos`` incidence).
+
+    Returns
+    -------
+    points : (N, 3) world points on the mesh, metres.
+    normals : (N, 3) interpolated unit normals facing the reference camera.
+    pixels : (N,) flat pixel indices (row * width + column) in the reference camera.
+    """
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(
+        o3d.core.Tensor(vertices.astype(np.float32)), o3d.core.Tensor(triangles.astype(np.uint32))
+    )
+    grid = pixel_grid(width, height).reshape(-1, 2)
+    origin, dirs = backproject(grid, reference.K, reference.dist, reference.R, reference.t)
+    rays = np.concatenate([np.broadcast_to(origin, dirs.shape), dirs], axis=1)
+    ans = scene.cast_rays(o3d.core.Tensor(rays.astype(np.float32)))
+    hit = np.isfinite(ans["t_hit"].numpy())
+    tri = ans["primitive_ids"].numpy()[hit].astype(np.int64)
+    uv = ans["primitive_uvs"].numpy()[hit].astype(float)
+    bary = np.stack([1 - uv[:, 0] - uv[:, 1], uv[:, 0], uv[:, 1]], axis=1)
+    points = np.einsum("mk,mkj->mj", bary, vertices[triangles[tri]])
+    n = np.einsum("mk,mkj->mj", bary, normals[triangles[tri]])
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    n *= np.sign(np.sum(n * (origin - points), axis=1))[:, None]
+    keep = np.ones(len(points), bool)
+    for cam in cameras:
+        for centre in (cam.centre, cam.light_centre):
+            d = centre - points
+            dist = np.linalg.norm(d, axis=1)
+            d /= dist[:, None]
+            keep &= np.sum(d * n, axis=1) > min_cos
+            r = np.concatenate([points + SHADOW_EPS_M * d, d], axis=1).astype(np.float32)
+            keep &= ~scene.test_occlusions(o3d.core.Tensor(r), tfar=float(dist.min())).numpy()
+    return points[keep], n[keep], np.flatnonzero(hit)[keep]
