@@ -1144,3 +1144,76 @@ def _read_scene_json(path: Path, objects: tuple[str, ...]) -> dict[str, Any]:
     if obj.get("description") is not None:
         meta["description"] = _as_str(obj["description"], "description", path)
     return meta
+
+
+def all_images(ds: Dataset) -> list[Path]:
+    """Every image and silhouette the dataset lists, in a stable order."""
+    cams = ds.rig.camera_names
+    paths = [ds.photometric_image(p, c) for p in ds.poses for c in cams]
+    paths += [
+        ds.chromatic_image(o, col, c) for o in ds.chromatic_objects for col in COLOURS for c in cams
+    ]
+    for name, scene in sorted(ds.scenes.items()):
+        for f in scene.frames:
+            paths += [ds.frame_image(name, f, c) for c in cams]
+            if scene.has_masks:
+                paths += [ds.mask_image(name, f, c) for c in cams]
+    return paths
+
+
+def validate(dataset: str | Path, summary_json: str | Path | None = None) -> dict:
+    """Validate a whole dataset, decoding every image, and summarise it.
+
+    Parameters
+    ----------
+    dataset : the dataset folder (capture format, version 1).
+    summary_json : optional path of a JSON summary to write (written only
+        when the dataset is valid, atomically).
+
+    Returns
+    -------
+    dict summary: cameras with their light colours, reciprocal pairs, board
+    poses, chromatic objects, scenes with their frame counts, image count and
+    the fraction of saturated pixels.
+
+    Raises
+    ------
+    CaptureFormatError naming the first offending file.
+    """
+    ds = open_dataset(dataset)
+    masks = {ds.mask_image(s, f, c) for s, sc in ds.scenes.items() if sc.has_masks
+             for f in sc.frames for c in ds.rig.camera_names}  # fmt: skip
+    n_pixels = n_saturated = 0
+    paths = all_images(ds)
+    for path in paths:
+        if path in masks:
+            read_mask(path, ds.rig.image)
+            continue
+        _, saturated = read_image(path, ds.rig.image)
+        n_pixels += saturated.size
+        n_saturated += int(saturated.sum())
+    summary = {
+        "dataset": str(Path(dataset).resolve()),
+        "format": FORMAT,
+        "image": {"width": ds.rig.image.width, "height": ds.rig.image.height,
+                  "bit_depth": ds.rig.image.bit_depth},
+        "cameras": {c.name: c.light_colour for c in ds.rig.cameras},
+        "reciprocal_pairs": [
+            [p.cam_a, COLOURS[p.channel_a], p.cam_b, COLOURS[p.channel_b]]
+            for p in ds.rig.reciprocal_pairs()
+        ],
+        "poses": list(ds.poses),
+        "chromatic_objects": list(ds.chromatic_objects),
+        "scenes": {n: {"frames": len(s.frames), "dynamic": s.dynamic, "chromatic": s.chromatic,
+                       "masks": s.has_masks, "ground_truth": s.has_gt}
+                   for n, s in sorted(ds.scenes.items())},
+        "images": len(paths),
+        "saturated_fraction": n_saturated / max(n_pixels, 1),
+    }  # fmt: skip
+    if summary_json is not None:
+        out = Path(summary_json)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        tmp = out.with_name(out.name + ".tmp")
+        tmp.write_text(json.dumps(summary, indent=2))
+        tmp.replace(out)
+    return summary

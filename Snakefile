@@ -1,0 +1,27 @@
+"""colourhs: the Colour Helmholtz Stereopsis workflow.
+
+Stages (one rule file each under workflow/rules/):
+raw captures -> validation -> (later issues) marker poses -> photometric maps
+-> chromaticity maps -> per-frame depth/normal -> meshes -> evaluation -> reports.
+"""
+
+from snakemake.utils import min_version, validate
+
+min_version("9.0")
+
+
+configfile: "config.yaml"
+
+
+validate(config, "workflow/schemas/config.schema.yaml")
+
+
+include: "workflow/rules/common.smk"
+include: "workflow/rules/synth.smk"
+include: "workflow/rules/capture.smk"
+
+
+rule all:
+    default_target: True
+    input:
+        expand("results/{name}/capture/summary.json", name=DATASETS),

@@ -1,0 +1,20 @@
+# Synthetic datasets: rendered into data/synthetic/<name> only when absent.
+
+
+rule synth_dataset:
+    output:
+        directory("data/synthetic/{name}"),
+    log:
+        "logs/synth/{name}.log",
+    benchmark:
+        "benchmarks/snakemake/synth/{name}.tsv"
+    threads: 2
+    resources:
+        mem_mb=4000,
+        runtime=30,
+    params:
+        preset=lambda w: synth_settings(w.name)["preset"],
+        seed=lambda w: synth_settings(w.name).get("seed", 0),
+    shell:
+        "{PYTHON} -m colourhs synth --preset {params.preset} --seed {params.seed} "
+        "--workers {threads} {output} 2> {log}"
