@@ -94,13 +94,19 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--name", default=None, help="results name (default: the folder's name)")
     r.add_argument("--cores", type=int, default=2)
     r.add_argument("--directory", default=".", help="where results/ and reports/ go")
-    r.add_argument("snakemake_args", nargs=argparse.REMAINDER, help="passed on to snakemake")
     r.set_defaults(func=_run)
+    r.epilog = "Arguments after `--` are passed on to snakemake."
     return p
 
 
 def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    extra = []
+    if "--" in argv:
+        k = argv.index("--")
+        argv, extra = argv[:k], argv[k + 1 :]
     args = build_parser().parse_args(argv)
+    args.snakemake_args = extra
     return args.func(args)
 
 

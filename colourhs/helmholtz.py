@@ -86,9 +86,13 @@ def constraint_vector(
 
 
 def constraint_residual(w: np.ndarray, n: np.ndarray) -> np.ndarray:
-    """Normalised residual |w . n| / |w| of constraint rows ``w`` (..., 3) for normals ``n``."""
+    """Normalised residual |w . n| / |w| of constraint rows ``w`` (..., 3) for normals ``n``.
+
+    NaN where a row is NaN or zero (no measurement).
+    """
     w = np.asarray(w, float)
-    return np.abs(np.sum(w * n, axis=-1)) / np.linalg.norm(w, axis=-1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.abs(np.sum(w * n, axis=-1)) / np.linalg.norm(w, axis=-1)
 
 
 def pair_rows(

@@ -36,7 +36,8 @@ from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
-from colourhs.geometry import camera_centre, light_centre, look_at
+from colourhs.capture import Camera
+from colourhs.geometry import look_at
 
 COLOURS = ("red", "green", "blue")
 
@@ -118,30 +119,15 @@ def light_profile(d_light: np.ndarray, mx: float, my: float, skew=(0.0, 0.0)) ->
     return np.where(d_light[..., 2] > 0, np.clip(prof, 0.0, None), 0.0)
 
 
-@dataclass(frozen=True)
-class CameraModel:
-    """One camera of the rig with its collocated light's colour."""
+@dataclass(frozen=True, eq=False)
+class CameraModel(Camera):
+    """A camera of the rig (geometry as in rig.json) and its photometric model."""
 
-    name: str
-    K: np.ndarray
-    dist: np.ndarray
-    R: np.ndarray
-    t: np.ndarray
-    light_colour: str
-    light_offset: np.ndarray
     gains: np.ndarray  # (3,) channel gains g_c
     vignetting: np.ndarray  # (3,) fractional loss k_c at the image corner
     vignetting_centre: np.ndarray  # (3, 2) per-channel centre offset, normalised coords
     crosstalk: np.ndarray  # (3, 3) X[channel, light colour]
     corner_radius: float  # normalised radius of the image corner
-
-    @property
-    def centre(self) -> np.ndarray:
-        return camera_centre(self.R, self.t)
-
-    @property
-    def light_position(self) -> np.ndarray:
-        return light_centre(self.R, self.t, self.light_offset)
 
     def sensitivity(self, xy: np.ndarray) -> np.ndarray:
         """Per-channel sensitivity sigma_c (..., 3) at normalised image coordinates ``xy``."""
@@ -276,7 +262,7 @@ def make_rig(
             mx = rng.uniform(*n.light_exponent_x)
             my = rng.uniform(*n.light_exponent_y)
             skew = tuple(rng.uniform(-n.light_skew, n.light_skew, 2))
-        lights.append(LightModel(cams[-1].light_position, R, light_colours[i], 1.0, mx, my, skew))
+        lights.append(LightModel(cams[-1].light_centre, R, light_colours[i], 1.0, mx, my, skew))
     # Exposure: a white Lambertian surface at the origin, facing the light,
     # reads `exposure` of full scale in the channels that record each light.
     lights = [

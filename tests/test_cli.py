@@ -1,0 +1,82 @@
+"""The command line and the Snakemake workflow on the tiny preset."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import yaml
+
+from colourhs.cli import PROJECT_ROOT, main
+
+
+def test_synth_refuses_to_overwrite(tmp_path, capsys):
+    out = tmp_path / "ds"
+    out.mkdir()
+    assert main(["synth", "--preset", "tiny", str(out)]) == 1
+    assert "already exists" in capsys.readouterr().err
+
+
+def test_validate_reports_good_and_bad_datasets(tiny_dataset, tmp_path, capsys):
+    summary = tmp_path / "summary.json"
+    assert main(["validate", str(tiny_dataset), "--summary", str(summary)]) == 0
+    data = json.loads(summary.read_text())
+    assert data["cameras"] == {"cam1": "blue", "cam2": "red", "cam3": "green"}
+    assert data["reciprocal_pairs"][0] == ["cam1", "red", "cam2", "blue"]
+    assert data["scenes"]["sheet"]["frames"] == 3
+    assert 0 < data["saturated_fraction"] < 0.01
+    bad = tmp_path / "bad"
+    shutil.copytree(tiny_dataset, bad)
+    target = bad / "chromatic" / "toy" / "green" / "cam3.png"
+    target.write_bytes(target.read_bytes()[:200])  # truncated PNG
+    capsys.readouterr()
+    assert main(["validate", str(bad), "--summary", str(tmp_path / "bad.json")]) == 1
+    err = capsys.readouterr().err
+    assert str(target) in err
+    assert not (tmp_path / "bad.json").exists()
+
+
+def test_run_validates_a_dataset_through_snakemake(tiny_dataset, tmp_path):
+    cmd = [sys.executable, "-m", "colourhs", "run", str(tiny_dataset), "--name", "t"]
+    cmd += ["--cores", "1", "--directory", str(tmp_path)]
+    done = subprocess.run(cmd, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr[-2000:]
+    summary = json.loads((tmp_path / "results" / "t" / "capture" / "summary.json").read_text())
+    # 7 poses x 3 cameras + 3 chromatic objects x 3 colours x 3 + 6 frames x 3 + 18 masks.
+    assert summary["images"] == 21 + 27 + 18 + 18
+    # A second run does nothing.
+    again = subprocess.run(cmd, capture_output=True, text=True)
+    assert again.returncode == 0
+    assert "Nothing to be done" in again.stdout + again.stderr
+
+
+def test_invalid_config_names_the_key(tmp_path):
+    config = yaml.safe_load((PROJECT_ROOT / "config.yaml").read_text())
+    config["datasets"]["demo"]["synth"]["preset"] = "huge"
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(yaml.safe_dump(config))
+    done = subprocess.run(
+        [sys.executable, "-m", "snakemake", "-n", "--cores", "1", "--snakefile",
+         str(PROJECT_ROOT / "Snakefile"), "--directory", str(tmp_path), "--configfile", str(bad)],
+        capture_output=True, text=True,
+    )  # fmt: skip
+    assert done.returncode != 0
+    assert "huge" in done.stdout + done.stderr
+    assert "preset" in done.stdout + done.stderr
+
+
+def test_missing_dataset_is_a_clear_error(tmp_path, capsys):
+    assert main(["run", str(tmp_path / "nowhere")]) == 2
+    assert "rig.json" in capsys.readouterr().out
+
+
+def test_readme_commands_exist():
+    readme = (PROJECT_ROOT / "README.md").read_text()
+    assert "bash scripts/setup.sh && .venv/bin/snakemake --cores 2" in readme
+    assert "bash scripts/setup.sh && .venv/bin/python -m pytest" in readme
+    ci = (PROJECT_ROOT / ".ci" / "run").read_text()
+    assert "bash scripts/setup.sh && .venv/bin/python -m pytest" in ci
+    assert Path(PROJECT_ROOT / "scripts" / "setup.sh").exists()
