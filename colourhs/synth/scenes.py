@@ -19,6 +19,7 @@ from colourhs.synth.brdf import Material
 
 WHITE_ALBEDO = 0.8  # reflectance of the board's white and of the white reference
 BLACK_ALBEDO = 0.04  # reflectance of the printed markers
+SHEET_ALBEDO = 0.7  # the laminated sheet: glossy, so a little darker than the board
 
 MATTE = Material(kd=1.0)
 
@@ -370,7 +371,7 @@ def sheet(phase: float, size=(0.26, 0.2), n=(131, 101)) -> SceneGeometry:
     c, s = np.cos(0.15), np.sin(0.15)
     v = v @ np.array([[1, 0, 0], [0, c, -s], [0, s, c]]).T
     gloss = Material(kd=1.0, specular="ward", ks=0.15, alpha=0.18)
-    geom = merge("sheet", [(v, tris, 0)], [gloss], lambda p, _t: np.full((len(p), 3), 0.85))
+    geom = merge("sheet", [(v, tris, 0)], [gloss], lambda p, _t: np.full((len(p), 3), SHEET_ALBEDO))
     # The sheet faces the rig (-z): make sure its normals do too.
     if geom.vertex_normals[:, 2].mean() > 0:
         geom = merge("sheet", [(v, tris[:, ::-1].copy(), 0)], [gloss], geom.albedo)
