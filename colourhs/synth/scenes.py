@@ -285,6 +285,10 @@ TOY_COLOURS = {
 }
 
 
+SPRING_TURNS = 7.0
+SPRING_NU = 16  # vertices around the spring's tube
+
+
 def toy() -> SceneGeometry:
     """A multi-coloured toy dog like the paper's Slinky.
 
@@ -295,7 +299,9 @@ def toy() -> SceneGeometry:
     GGX (roughness 0.15, F0 0.9) with almost no diffuse part.
     """
     parts, colour_of = [], []
-    spring_v, spring_t, spring_s = helix_tube(-0.05, 0.09, 0.034, 0.0055, 7.0)
+    spring_v, spring_t, spring_s = helix_tube(
+        -0.05, 0.09, 0.034, 0.0055, SPRING_TURNS, nu=SPRING_NU
+    )
     parts.append((spring_v, spring_t, 0))
     colour_of.append("spring")
     for centre, radii, colour, mat in [
@@ -326,8 +332,9 @@ def toy() -> SceneGeometry:
                 continue
             if name == "spring":
                 # Colour cycles along the helix, one colour per turn.
-                row = (tri[sel] // 2) // 16 % (nv_spring - 1)
-                turn = (7.0 * spring_s[np.minimum(row * 16 // 16, nv_spring - 1)]).astype(int)
+                # grid_mesh lists one triangle of every quad, then the other.
+                row = (tri[sel] % ((nv_spring - 1) * SPRING_NU)) // SPRING_NU
+                turn = np.floor(SPRING_TURNS * spring_s[row]).astype(int)
                 out[sel] = np.array([TOY_COLOURS[ring[i % len(ring)]] for i in turn])
             else:
                 out[sel] = TOY_COLOURS[name]
