@@ -27,7 +27,7 @@ import numpy as np
 import open3d as o3d
 from tqdm import tqdm
 
-from colourhs.geometry import backproject, normalised_coordinates, pixel_grid, project
+from colourhs.geometry import project
 from colourhs.synth import scenes as sc
 from colourhs.synth.render import (
     camera_rays,
@@ -162,17 +162,15 @@ def true_mu_maps(rig: RigModel) -> dict[str, np.ndarray]:
     Keys are ``"<camera>/<channel colour>"`` for every channel that records
     another camera's light; values are float32 (height, width).
     """
-    grid = pixel_grid(rig.width, rig.height).reshape(-1, 2)
     colours = [c.light_colour for c in rig.cameras]
     out = {}
     for i, cam in enumerate(rig.cameras):
-        origin, dirs = backproject(grid, cam.K, cam.dist, cam.R, cam.t)
-        xy = normalised_coordinates(grid, cam.K, cam.dist)
+        rays = camera_rays(cam, rig.width, rig.height, supersample=1)
         for colour in colours:
             if colour == cam.light_colour:
                 continue
             ch = COLOURS.index(colour)
-            mu = rig.helmholtz_mu(i, ch, xy, origin + 0.8 * dirs)
+            mu = rig.helmholtz_mu(i, ch, rays.xy, rays.origin + 0.8 * rays.directions)
             out[f"{cam.name}/{colour}"] = mu.reshape(rig.height, rig.width).astype(np.float32)
     return out
 
