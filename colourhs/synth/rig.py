@@ -12,8 +12,10 @@ light falloff          anisotropic LED-like radiance of each point light,     ex
                        (1 + s_x theta_x + s_y theta_y), angles off the        skew +-0.4/rad
                        light's axis (its camera's optical axis)
 vignetting             per-channel camera sensitivity                         8..16 % at the
-                       sigma_c = g_c (1 - k_c r^2 / r_corner^2), centre       corner, gains
-                       shifted per channel, gains g_c differ per camera       +-6 %
+                       sigma_c = g_c (1 - k_c r^2 / r_corner^2): a lens       corner, +-2 %
+                       falloff k common to the channels plus a per-channel    colour shading,
+                       colour shading, centre shifted per channel, gains g_c  gains +-6 %
+                       differ per camera
 cross-talk             3x3 matrix X[channel, light colour] per camera,        off-diagonal
                        diagonal 1; includes the camera's own light leaking    3..8 %
                        from its own-colour channel into the other two
@@ -52,6 +54,7 @@ class Nuisances:
     light_skew: float = 0.4  # 1/rad, linear asymmetry of the beam
     vignetting: bool = True
     vignetting_corner: tuple[float, float] = (0.08, 0.16)  # fractional loss at the corner
+    colour_shading: float = 0.02  # per-channel deviation of that loss
     gain_spread: float = 0.06  # per-camera, per-channel sensitivity spread
     crosstalk: bool = True
     crosstalk_range: tuple[float, float] = (0.03, 0.08)
@@ -240,7 +243,9 @@ def make_rig(
         if n.crosstalk:
             X = X + (1 - np.eye(3)) * rng.uniform(*n.crosstalk_range, (3, 3))
         gains = 1 + rng.uniform(-n.gain_spread, n.gain_spread, 3) if n.gain_spread else np.ones(3)
-        vig = rng.uniform(*n.vignetting_corner, 3) if n.vignetting else np.zeros(3)
+        vig = np.zeros(3)
+        if n.vignetting:
+            vig = rng.uniform(*n.vignetting_corner) + rng.uniform(-1, 1, 3) * n.colour_shading
         cams.append(
             CameraModel(
                 name=f"cam{i + 1}",
@@ -252,7 +257,7 @@ def make_rig(
                 light_offset=np.zeros(3),
                 gains=gains,
                 vignetting=vig,
-                vignetting_centre=rng.normal(0, 0.02, (3, 2)),
+                vignetting_centre=rng.normal(0, 0.01, (3, 2)),
                 crosstalk=X,
                 corner_radius=corner,
             )
