@@ -19,9 +19,11 @@ validate(config, "workflow/schemas/config.schema.yaml")
 include: "workflow/rules/common.smk"
 include: "workflow/rules/synth.smk"
 include: "workflow/rules/capture.smk"
+include: "workflow/rules/calibration.smk"
 
 
 rule all:
     default_target: True
     input:
         expand("results/{name}/capture/summary.json", name=DATASETS),
+        [t for name in DATASETS for t in calibration_targets(name)],

@@ -69,6 +69,70 @@ def _run(args) -> int:
     return subprocess.call(cmd)
 
 
+def _markers(args) -> int:
+    from colourhs.markers import marker_poses
+
+    try:
+        table = marker_poses(args.dataset, args.out, min_markers=args.min_markers)
+    except ValueError as e:  # CaptureFormatError is a ValueError
+        print(f"colourhs markers: {e}", file=sys.stderr)
+        return 1
+    print(f"wrote {args.out}: {len(table)} board poses, rms <= {table['rms_px'].max():.3f} px")
+    return 0
+
+
+def _crosstalk(args) -> int:
+    from colourhs.crosstalk import calibrate_crosstalk
+
+    try:
+        result = calibrate_crosstalk(args.dataset, args.out)
+    except ValueError as e:  # CaptureFormatError is a ValueError
+        print(f"colourhs crosstalk: {e}", file=sys.stderr)
+        return 1
+    print(json.dumps(result, indent=2))
+    return 0
+
+
+def _photometric(args) -> int:
+    from colourhs.photometric import photometric_maps
+
+    params = {k: v for k, v in vars(args).items() if k in PHOTOMETRIC_PARAMS and v is not None}
+    try:
+        result = photometric_maps(
+            args.dataset, args.poses, args.out, args.crosstalk, args.figure, **params
+        )
+    except ValueError as e:
+        print(f"colourhs photometric: {e}", file=sys.stderr)
+        return 1
+    for key, n in result["counts"].items():
+        rms = result["residual_rms"][key]
+        print(f"{key}: {n} eq. (7) constraints, residual RMS {rms:.4f} (log mu)")
+    print(f"wrote {args.out}")
+    return 0
+
+
+def _chromaticity(args) -> int:
+    import numpy as np
+
+    from colourhs.chromaticity import chromaticity_maps
+
+    try:
+        maps = chromaticity_maps(
+            args.dataset, args.object, args.out, figure_png=args.figure, min_signal=args.min_signal
+        )
+    except ValueError as e:  # CaptureFormatError is a ValueError
+        print(f"colourhs chromaticity: {e}", file=sys.stderr)
+        return 1
+    for camera, p in maps.items():
+        print(f"{camera}: {int(np.isfinite(p[..., 0]).sum())} pixels with a chromaticity")
+    print(f"wrote {args.out}")
+    return 0
+
+
+PHOTOMETRIC_PARAMS = ("grid_spacing_px", "step_px", "smoothness", "coupling", "margin_m",
+                      "min_cos", "min_signal")  # fmt: skip
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="colourhs", description=__doc__)
     sub = p.add_subparsers(dest="command", required=True)
@@ -88,6 +152,43 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("dataset", type=Path)
     v.add_argument("--summary", type=Path, default=None, help="write a JSON summary here")
     v.set_defaults(func=_validate)
+
+    m = sub.add_parser("markers", help="board poses and calibration planes from the ArUco markers")
+    m.add_argument("dataset", type=Path, help="dataset folder (capture format)")
+    m.add_argument("out", type=Path, help="CSV to write (one row per usable board pose)")
+    m.add_argument(
+        "--min-markers", type=int, default=3, help="markers seen by >= 2 cameras a pose needs"
+    )
+    m.set_defaults(func=_markers)
+
+    x = sub.add_parser("crosstalk", help="calibrate each camera's channel mixing matrix")
+    x.add_argument("dataset", type=Path)
+    x.add_argument("out", type=Path, help="JSON file to write")
+    x.set_defaults(func=_crosstalk)
+
+    ph = sub.add_parser("photometric", help="mu maps of the Helmholtz cameras (eqs. 6-8)")
+    ph.add_argument("dataset", type=Path)
+    ph.add_argument("poses", type=Path, help="marker poses table (colourhs markers)")
+    ph.add_argument("out", type=Path, help="photometric.h5 to write")
+    ph.add_argument("--crosstalk", type=Path, default=None, help="unmix with this calibration")
+    ph.add_argument("--figure", type=Path, default=None, help="also write the heat maps PNG")
+    for name in PHOTOMETRIC_PARAMS:
+        kind = int if name == "step_px" else float
+        ph.add_argument("--" + name.replace("_", "-"), dest=name, type=kind, default=None)
+    ph.set_defaults(func=_photometric)
+
+    c = sub.add_parser("chromaticity", help="surface chromaticity maps of a chromatic object")
+    c.add_argument("dataset", type=Path, help="dataset folder (capture format)")
+    c.add_argument("object", help="chromatic object: a folder under chromatic/ (e.g. toy)")
+    c.add_argument("out", type=Path, help="HDF5 file to write (one dataset per camera)")
+    c.add_argument("--figure", type=Path, default=None, help="also write this PNG figure")
+    c.add_argument(
+        "--min-signal",
+        type=float,
+        default=0.01,
+        help="smallest usable intensity, fraction of full scale (default 0.01)",
+    )
+    c.set_defaults(func=_chromaticity)
 
     r = sub.add_parser("run", help="run the whole workflow on a dataset")
     r.add_argument("dataset", type=Path)
