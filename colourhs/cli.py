@@ -10,7 +10,7 @@ from pathlib import Path
 
 import yaml
 
-from colourhs.capture import CaptureFormatError, validate
+from colourhs.capture import validate
 
 PROJECT_ROOT = Path(__file__).resolve().parents[1]
 SNAKEFILE = PROJECT_ROOT / "Snakefile"
@@ -25,28 +25,20 @@ def _synth(args) -> int:
         print(f"colourhs synth: unknown preset {args.preset!r}; choose from {sorted(PRESETS)}")
         return 2
     nuisances = Nuisances().without(*args.off)
-    try:
-        synthesise(
-            args.out,
-            args.preset,
-            seed=args.seed,
-            nuisances=nuisances,
-            overwrite=args.overwrite,
-            workers=args.workers,
-        )
-    except FileExistsError as e:
-        print(f"colourhs synth: {e}", file=sys.stderr)
-        return 1
+    synthesise(
+        args.out,
+        args.preset,
+        seed=args.seed,
+        nuisances=nuisances,
+        overwrite=args.overwrite,
+        workers=args.workers,
+    )
     print(f"wrote {args.out}")
     return 0
 
 
 def _validate(args) -> int:
-    try:
-        summary = validate(args.dataset, args.summary)
-    except CaptureFormatError as e:
-        print(f"colourhs validate: invalid dataset: {e}", file=sys.stderr)
-        return 1
+    summary = validate(args.dataset, args.summary)
     print(json.dumps(summary, indent=2))
     return 0
 
@@ -72,11 +64,7 @@ def _run(args) -> int:
 def _markers(args) -> int:
     from colourhs.markers import marker_poses
 
-    try:
-        table = marker_poses(args.dataset, args.out, min_markers=args.min_markers)
-    except ValueError as e:  # CaptureFormatError is a ValueError
-        print(f"colourhs markers: {e}", file=sys.stderr)
-        return 1
+    table = marker_poses(args.dataset, args.out, min_markers=args.min_markers)
     print(f"wrote {args.out}: {len(table)} board poses, rms <= {table['rms_px'].max():.3f} px")
     return 0
 
@@ -84,11 +72,7 @@ def _markers(args) -> int:
 def _crosstalk(args) -> int:
     from colourhs.crosstalk import calibrate_crosstalk
 
-    try:
-        result = calibrate_crosstalk(args.dataset, args.out)
-    except ValueError as e:  # CaptureFormatError is a ValueError
-        print(f"colourhs crosstalk: {e}", file=sys.stderr)
-        return 1
+    result = calibrate_crosstalk(args.dataset, args.out)
     print(json.dumps(result, indent=2))
     return 0
 
@@ -97,13 +81,9 @@ def _photometric(args) -> int:
     from colourhs.photometric import photometric_maps
 
     params = {k: v for k, v in vars(args).items() if k in PHOTOMETRIC_PARAMS and v is not None}
-    try:
-        result = photometric_maps(
-            args.dataset, args.poses, args.out, args.crosstalk, args.figure, **params
-        )
-    except ValueError as e:
-        print(f"colourhs photometric: {e}", file=sys.stderr)
-        return 1
+    result = photometric_maps(
+        args.dataset, args.poses, args.out, args.crosstalk, args.figure, **params
+    )
     for key, n in result["counts"].items():
         rms = result["residual_rms"][key]
         print(f"{key}: {n} eq. (7) constraints, residual RMS {rms:.4f} (log mu)")
@@ -116,13 +96,9 @@ def _chromaticity(args) -> int:
 
     from colourhs.chromaticity import chromaticity_maps
 
-    try:
-        maps = chromaticity_maps(
-            args.dataset, args.object, args.out, figure_png=args.figure, min_signal=args.min_signal
-        )
-    except ValueError as e:  # CaptureFormatError is a ValueError
-        print(f"colourhs chromaticity: {e}", file=sys.stderr)
-        return 1
+    maps = chromaticity_maps(
+        args.dataset, args.object, args.out, figure_png=args.figure, min_signal=args.min_signal
+    )
     for camera, p in maps.items():
         print(f"{camera}: {int(np.isfinite(p[..., 0]).sum())} pixels with a chromaticity")
     print(f"wrote {args.out}")
@@ -208,7 +184,11 @@ def main(argv: list[str] | None = None) -> int:
         argv, extra = argv[:k], argv[k + 1 :]
     args = build_parser().parse_args(argv)
     args.snakemake_args = extra
-    return args.func(args)
+    try:
+        return args.func(args)
+    except (ValueError, FileExistsError) as e:  # CaptureFormatError is a ValueError
+        print(f"colourhs {args.command}: {e}", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":
