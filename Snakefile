@@ -20,6 +20,7 @@ include: "workflow/rules/common.smk"
 include: "workflow/rules/synth.smk"
 include: "workflow/rules/capture.smk"
 include: "workflow/rules/calibration.smk"
+include: "workflow/rules/reconstruct.smk"
 
 
 rule all:
@@ -27,3 +28,4 @@ rule all:
     input:
         expand("results/{name}/capture/summary.json", name=DATASETS),
         [t for name in DATASETS for t in calibration_targets(name)],
+        lambda w: [t for name in DATASETS for t in reconstruction_targets(name)],

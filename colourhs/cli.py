@@ -105,6 +105,24 @@ def _chromaticity(args) -> int:
     return 0
 
 
+def _reconstruct(args) -> int:
+    from colourhs.reconstruct.frame import reconstruct_frame
+
+    params = {k: v for k, v in vars(args).items() if k in RECONSTRUCT_PARAMS and v is not None}
+    result = reconstruct_frame(
+        args.dataset, args.scene, args.frame, args.out, args.method, args.crosstalk,
+        args.photometric, args.chromaticity, **params,
+    )  # fmt: skip
+    info = result.info
+    print(f"{args.scene}/{args.frame} {args.method}: {info['valid_pixels']} of {info['pixels']} "
+          f"pixels, energy {info.get('energy', '-')}; wrote {args.out}")  # fmt: skip
+    return 0
+
+
+RECONSTRUCT_PARAMS = {"reference": str, "n_labels": int, "alpha": float, "tau": float,
+                      "working_radius_m": float, "data_weight": float, "max_cost": float,
+                      "cost_scale": float}  # fmt: skip
+
 PHOTOMETRIC_PARAMS = ("grid_spacing_px", "step_px", "smoothness", "coupling", "margin_m",
                       "min_cos", "min_signal")  # fmt: skip
 
@@ -165,6 +183,19 @@ def build_parser() -> argparse.ArgumentParser:
         help="smallest usable intensity, fraction of full scale (default 0.01)",
     )
     c.set_defaults(func=_chromaticity)
+
+    rc = sub.add_parser("reconstruct", help="depth and normals of one frame (ML or Bayesian HS)")
+    rc.add_argument("dataset", type=Path)
+    rc.add_argument("scene")
+    rc.add_argument("frame", help="6-digit frame index")
+    rc.add_argument("out", type=Path, help="depth HDF5 to write")
+    rc.add_argument("--method", choices=("ml", "bayes"), default="bayes")
+    rc.add_argument("--crosstalk", type=Path, default=None, help="unmix with this calibration")
+    rc.add_argument("--photometric", type=Path, default=None, help="mu maps (photometric.h5)")
+    rc.add_argument("--chromaticity", type=Path, default=None, help="chromaticity maps (.h5)")
+    for name, kind in RECONSTRUCT_PARAMS.items():
+        rc.add_argument("--" + name.replace("_", "-"), dest=name, type=kind, default=None)
+    rc.set_defaults(func=_reconstruct)
 
     r = sub.add_parser("run", help="run the whole workflow on a dataset")
     r.add_argument("dataset", type=Path)

@@ -71,3 +71,35 @@ def surface_points(
             r = np.concatenate([points + SHADOW_EPS_M * d, d], axis=1).astype(np.float32)
             keep &= ~scene.test_occlusions(o3d.core.Tensor(r), tfar=float(dist.min())).numpy()
     return points[keep], n[keep], np.flatnonzero(hit)[keep]
+
+
+def render_depth_normals(
+    vertices: np.ndarray, triangles: np.ndarray, normals: np.ndarray, camera: Camera,
+    width: int, height: int,
+) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """Ground truth in a camera: z-depth (H, W) in metres and world unit normals (H, W, 3).
+
+    Ray casts the mesh from every pixel centre; NaN where a ray misses.
+    Normals are the mesh's interpolated vertex normals, facing the camera.
+    """
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(
+        o3d.core.Tensor(vertices.astype(np.float32)), o3d.core.Tensor(triangles.astype(np.uint32))
+    )
+    grid = pixel_grid(width, height).reshape(-1, 2)
+    origin, dirs = backproject(grid, camera.K, camera.dist, camera.R, camera.t)
+    rays = np.concatenate([np.broadcast_to(origin, dirs.shape), dirs], axis=1)
+    ans = scene.cast_rays(o3d.core.Tensor(rays.astype(np.float32)))
+    hit = np.isfinite(ans["t_hit"].numpy())
+    tri = ans["primitive_ids"].numpy()[hit].astype(np.int64)
+    uv = ans["primitive_uvs"].numpy()[hit].astype(float)
+    bary = np.stack([1 - uv[:, 0] - uv[:, 1], uv[:, 0], uv[:, 1]], axis=1)
+    points = np.einsum("mk,mkj->mj", bary, vertices[triangles[tri]])
+    n = np.einsum("mk,mkj->mj", bary, normals[triangles[tri]])
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    n *= np.sign(np.sum(n * (origin - points), axis=1))[:, None]
+    depth = np.full(width * height, np.nan)
+    depth[hit] = (points @ np.asarray(camera.R, float).T + np.asarray(camera.t, float))[:, 2]
+    nrm = np.full((width * height, 3), np.nan)
+    nrm[hit] = n
+    return depth.reshape(height, width), nrm.reshape(height, width, 3)

@@ -1,3 +1,4 @@
+import json
 import sys
 from pathlib import Path
 
@@ -106,4 +107,76 @@ def calibration_targets(name):
     out += [
         f"results/{name}/calib/chromaticity/{obj}.h5" for obj in chromatic_objects(name)
     ]
+    return out
+
+
+# The paper's ablation (Figure 7) with the results contract's ids; `vh` comes
+# with the surfaces stage.
+VARIANTS = {
+    "ml_full": {"method": "ml", "photometric": True, "chromaticity": True},
+    "bayes_nocalib": {"method": "bayes", "photometric": False, "chromaticity": False},
+    "bayes_ph": {"method": "bayes", "photometric": True, "chromaticity": False},
+    "bayes_full": {"method": "bayes", "photometric": True, "chromaticity": True},
+}
+
+
+def scene_info(name):
+    """scene -> (frames, chromatic object) of a dataset, waiting for synthesis if needed."""
+    root = Path(dataset_path(name))
+    if "synth" in config["datasets"][name]:
+        root = Path(checkpoints.synth_dataset.get(name=name).output[0])
+    out = {}
+    for sdir in sorted((root / "scenes").iterdir()):
+        if not (sdir / "frames").is_dir():
+            continue
+        meta = {}
+        if (sdir / "scene.json").exists():
+            meta = json.loads((sdir / "scene.json").read_text())
+        frames = sorted(p.name for p in (sdir / "frames").iterdir() if p.is_dir())
+        out[sdir.name] = (frames, meta.get("chromatic"))
+    return out
+
+
+def selected_scenes(name):
+    wanted = config.get("reconstruction", {}).get("scenes")
+    info = scene_info(name)
+    return {s: v for s, v in info.items() if not wanted or s in wanted}
+
+
+def variant_calibration(name, scene, variant):
+    """Calibration files a variant reads (inputs, so reruns follow their changes)."""
+    v = VARIANTS[variant]
+    out = {}
+    if v["photometric"]:
+        out["photometric"] = f"results/{name}/calib/photometric.h5"
+        if unmix_crosstalk(name):
+            out["crosstalk"] = f"results/{name}/calib/crosstalk.json"
+    obj = scene_info(name)[scene][1]
+    if v["chromaticity"] and obj:
+        out["chromaticity"] = f"results/{name}/calib/chromaticity/{obj}.h5"
+    return out
+
+
+def reconstruct_options(name, scene, variant):
+    """Command-line options of `colourhs reconstruct` (plain values)."""
+    opts = [f"--method {VARIANTS[variant]['method']}"]
+    for key, path in variant_calibration(name, scene, variant).items():
+        opts.append(f"--{key} {path}")
+    for key, value in sorted(
+        config.get("reconstruction", {}).get("params", {}).items()
+    ):
+        if value is not None:
+            opts.append(f"--{key.replace('_', '-')} {value}")
+    return " ".join(opts)
+
+
+def reconstruction_targets(name):
+    variants = config.get("reconstruction", {}).get("variants") or list(VARIANTS)
+    out = []
+    for scene, (frames, _) in selected_scenes(name).items():
+        for variant in variants:
+            if variant in VARIANTS:
+                out += [
+                    f"results/{name}/{scene}/{variant}/depth/{f}.h5" for f in frames
+                ]
     return out

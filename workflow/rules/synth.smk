@@ -1,7 +1,7 @@
 # Synthetic datasets: rendered into data/synthetic/<name> only when absent.
 
 
-rule synth_dataset:
+checkpoint synth_dataset:
     output:
         directory("data/synthetic/{name}"),
     log:

@@ -1,0 +1,85 @@
+"""Speed and memory of the reconstruction stage (never a timed test).
+
+Run after the calibration stages (``.venv/bin/snakemake --cores 2``):
+``.venv/bin/python benchmarks/bench_reconstruct.py [--scene plane]``. Writes
+``benchmarks/results/reconstruct_demo.json``: data-term throughput (pixel
+hypotheses per second, over the foreground and over the whole frame), the
+wall time of a whole Bayesian frame at 640x480 with 192 labels, and the
+peak resident memory of the process. Targets (issue 4): at least 60 million
+pixel-hypotheses per second and a whole frame in at most 10 s and 2 GB on
+2 cores.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import time
+from pathlib import Path
+
+import numba
+import numpy as np
+
+from colourhs.reconstruct.dataterm import data_term, pair_arrays, prepare_images
+from colourhs.reconstruct.frame import load_frame, reconstruct, reference_rays, working_depth
+
+HERE = Path(__file__).parent
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--dataset", default="data/synthetic/demo")
+    ap.add_argument("--scene", default="plane")
+    ap.add_argument("--labels", type=int, default=192)
+    args = ap.parse_args()
+    name = Path(args.dataset).name
+    cal = Path("results") / name / "calib"
+    frame = load_frame(args.dataset, args.scene, "000000", cal / "crosstalk.json",
+                       cal / "photometric.h5")  # fmt: skip
+    rig = frame.rig
+    ref = rig.cameras[0]
+    W, H = rig.image.width, rig.image.height
+    rays = reference_rays(ref, W, H)
+    zc = working_depth(rig, ref)
+    depths = np.linspace(zc - 0.15, zc + 0.15, args.labels)
+    pairs = pair_arrays(rig)
+    prepared = prepare_images(frame.images, frame.saturated, pairs, frame.mu, None, None)
+    data_term(rays[:64], ref.centre, depths, rig.cameras, prepared, pairs)  # JIT warm-up
+    chunk = rays[: 16384 * 4]
+    t = time.perf_counter()
+    data_term(chunk, ref.centre, depths, rig.cameras, prepared, pairs)
+    whole = len(chunk) * len(depths) / (time.perf_counter() - t)
+    fg = prepare_images(frame.images, frame.saturated, pairs, frame.mu, None, frame.silhouettes)
+    sil = frame.silhouettes[0].ravel() if frame.silhouettes is not None else np.ones(H * W, bool)
+    sel = rays[sil][: 16384 * 4]
+    t = time.perf_counter()
+    data_term(sel, ref.centre, depths, rig.cameras, fg, pairs)
+    fg_rate = len(sel) * len(depths) / (time.perf_counter() - t)
+    reconstruct(frame, "bayes", n_labels=args.labels)  # warm-up of every kernel
+    t = time.perf_counter()
+    res = reconstruct(frame, "bayes", n_labels=args.labels)
+    frame_s = time.perf_counter() - t
+    result = {
+        "dataset": args.dataset,
+        "scene": args.scene,
+        "image": [W, H],
+        "labels": args.labels,
+        "threads": numba.get_num_threads(),
+        "cpu_count": os.cpu_count(),
+        "dataterm_mhyp_per_s_rows_of_frame": round(whole / 1e6, 1),
+        "dataterm_mhyp_per_s_foreground": round(fg_rate / 1e6, 1),
+        "bayes_frame_s": round(frame_s, 2),
+        "bayes_frame_pixels": res.info["pixels"],
+        "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
+    }
+    (HERE / "results").mkdir(exist_ok=True)
+    (HERE / "results" / f"reconstruct_{Path(args.dataset).name}.json").write_text(
+        json.dumps(result, indent=2)
+    )
+    print(json.dumps(result, indent=2))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,1 @@
+"""Depth reconstruction: MRF optimisation for Bayesian Helmholtz stereopsis."""

@@ -1,0 +1,411 @@
+"""Per-frame colour HS reconstruction: ML and Bayesian HS to depth/normal HDF5.
+
+- ML HS (Zickler et al.): per pixel the hypothesis of lowest data cost,
+  then a parabola through the cost around it (sub-label depth).
+- Bayesian HS (Roubtsova and Guillemaut; paper section III-E): the MAP
+  labelling of alpha * E_data + (1 - alpha) * E_prior with the depth-normal
+  consistency prior, optimised by semi-global aggregation along 8 directions
+  (:mod:`colourhs.reconstruct.mrf`), then sub-label refinement: a parabola
+  through the aggregated cost, and a continuous least-squares refinement of
+  the same energy's quadratic approximation (each neighbour's point on the
+  tangent plane of the pixel's normal, plus a weak pull towards the
+  discrete solution), truncated at depth edges.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import h5py
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.linalg import cg
+
+from colourhs.capture import COLOURS, Camera, Rig, open_dataset, read_image, read_mask
+from colourhs.crosstalk import load_crosstalk, unmix
+from colourhs.geometry import normalised_coordinates, pixel_grid
+from colourhs.reconstruct.dataterm import INVALID_COST, data_term, pair_arrays, prepare_images
+
+METHODS = ("ml", "bayes")
+CHUNK = 16384  # pixels per data-term call (bounds the float32 normals buffer)
+
+
+@dataclass
+class Frame:
+    """Everything the data term needs of one frame (arrays in camera order)."""
+
+    rig: Rig
+    images: np.ndarray  # (C, 3, H, W) float32, unmixed when calibrated
+    saturated: np.ndarray  # (C, H, W) bool
+    silhouettes: np.ndarray | None  # (C, H, W) bool
+    mu: np.ndarray | None  # (P, 2, H, W) float32
+    chroma: np.ndarray | None  # (C, 3, H, W) float32
+    inputs: list = field(default_factory=list)  # files read, for provenance
+
+
+def load_frame(
+    dataset_dir,
+    scene: str,
+    frame: str,
+    crosstalk_json=None,
+    photometric_h5=None,
+    chromaticity_h5=None,
+    use_masks: bool = True,
+) -> Frame:
+    """Read a frame's images and the calibrations that apply to it."""
+    ds = open_dataset(dataset_dir, check_images=False)
+    rig = ds.rig
+    mixing = load_crosstalk(crosstalk_json) if crosstalk_json else {}
+    imgs, sats, sils, inputs = [], [], [], []
+    sc = ds.scenes[scene]
+    for cam in rig.camera_names:
+        path = ds.frame_image(scene, frame, cam)
+        img, sat = read_image(path, rig.image)
+        imgs.append((unmix(img, mixing[cam]) if cam in mixing else img).transpose(2, 0, 1))
+        sats.append(sat)
+        inputs.append(path)
+        if use_masks and sc.has_masks:
+            sils.append(read_mask(ds.mask_image(scene, frame, cam), rig.image))
+    mu = None
+    pair_cams, pair_ch = pair_arrays(rig)
+    if photometric_h5:
+        from colourhs.photometric import read_mu_maps
+
+        maps = read_mu_maps(photometric_h5)
+        names = rig.camera_names
+        mu = np.stack(
+            [[maps[f"{names[a]}/{COLOURS[ca]}"], maps[f"{names[b]}/{COLOURS[cb]}"]]
+             for (a, b), (ca, cb) in zip(pair_cams, pair_ch, strict=True)]
+        ).astype(np.float32)  # fmt: skip
+    chroma = None
+    if chromaticity_h5:
+        with h5py.File(chromaticity_h5) as f:
+            chroma = np.stack([f[cam][()].transpose(2, 0, 1) for cam in rig.camera_names])
+    for extra in (crosstalk_json, photometric_h5, chromaticity_h5):
+        if extra:
+            inputs.append(Path(extra))
+    return Frame(
+        rig,
+        np.stack(imgs).astype(np.float32),
+        np.stack(sats),
+        np.stack(sils) if sils else None,
+        mu,
+        None if chroma is None else chroma.astype(np.float32),
+        inputs,
+    )
+
+
+def reference_rays(camera: Camera, width: int, height: int) -> np.ndarray:
+    """World rays (H*W, 3) of a camera's pixel centres, scaled to unit z-depth."""
+    xy = normalised_coordinates(pixel_grid(width, height).reshape(-1, 2), camera.K, camera.dist)
+    return np.concatenate([xy, np.ones((len(xy), 1))], axis=1) @ np.asarray(camera.R, float)
+
+
+def working_depth(rig: Rig, ref: Camera) -> float:
+    """z-depth (in ``ref``) of the point closest to every camera's optical axis."""
+    A, b = np.zeros((3, 3)), np.zeros(3)
+    for cam in rig.cameras:
+        d = np.asarray(cam.R, float)[2]
+        P = np.eye(3) - np.outer(d, d)
+        A += P
+        b += P @ cam.centre
+    x = np.linalg.solve(A, b)
+    return float((np.asarray(ref.R, float) @ x + np.asarray(ref.t, float))[2])
+
+
+def foreground(frame: Frame, ref: int, threshold: float = 0.02) -> np.ndarray:
+    """Pixels (H, W) of the reference camera to reconstruct.
+
+    The silhouette when the dataset has masks, otherwise pixels brighter than
+    ``threshold`` (fraction of full scale) in some channel, since the rig has
+    no ambient light; in both cases without the pixels too dark to measure in
+    either reciprocal channel of the reference camera (black markers,
+    shadows), dilated by one pixel, since their rows carry no signal.
+    """
+    img = frame.images[ref]
+    own = frame.rig.cameras[ref].light_channel
+    recip = [c for c in range(3) if c != own]
+    fg = img.max(axis=0) > threshold
+    if frame.silhouettes is not None:
+        fg = frame.silhouettes[ref].astype(bool)
+    dark = np.min(img[recip], axis=0) <= threshold
+    dark = (
+        dark
+        | np.roll(dark, 1, 0)
+        | np.roll(dark, -1, 0)
+        | np.roll(dark, 1, 1)
+        | np.roll(dark, -1, 1)
+    )
+    return fg & ~dark
+
+
+@dataclass
+class DepthResult:
+    """A reconstructed frame in the reference camera."""
+
+    depth: np.ndarray  # (H, W) float32 z-depth, metres, NaN = none
+    normal: np.ndarray  # (H, W, 3) float32 world unit normals, NaN = none
+    confidence: np.ndarray  # (H, W) float32 in [0, 1]
+    mask: np.ndarray  # (H, W) bool
+    info: dict
+
+
+def _parabola(c_m, c_0, c_p):
+    """Offset in (-0.5, 0.5) of the vertex of the parabola through (-1, c_m), (0, c_0), (1, c_p)."""
+    den = c_m - 2 * c_0 + c_p
+    with np.errstate(invalid="ignore", divide="ignore"):
+        off = np.where(den > 0, 0.5 * (c_m - c_p) / den, 0.0)
+    return np.clip(np.nan_to_num(off), -0.5, 0.5)
+
+
+def _subpixel(volume: np.ndarray, labels: np.ndarray) -> np.ndarray:
+    K = volume.shape[1]
+    idx = np.arange(len(labels))
+    lm = np.clip(labels - 1, 0, K - 1)
+    lp = np.clip(labels + 1, 0, K - 1)
+    off = _parabola(volume[idx, lm], volume[idx, labels], volume[idx, lp])
+    inside = (labels > 0) & (labels < K - 1)
+    return labels + np.where(inside, off, 0.0)
+
+
+def _depth_at(depths: np.ndarray, fractional: np.ndarray) -> np.ndarray:
+    return depths[0] + fractional * (depths[1] - depths[0])
+
+
+def refine_depth(
+    z0: np.ndarray,
+    normals: np.ndarray,
+    rays: np.ndarray,
+    mask: np.ndarray,
+    shape: tuple[int, int],
+    data_weight: float = 0.05,
+    edge_m: float = 0.004,
+    maxiter: int = 400,
+) -> np.ndarray:
+    """Continuous depth refinement with the depth-normal consistency prior.
+
+    Minimises, over the depths z of the masked pixels,
+    ``sum_(p,q) (n_p . (X_q - X_p))^2 + data_weight^2 sum_p (z_p - z0_p)^2``
+    (X = c + z r; the camera centre cancels), over 4-neighbours whose
+    discrete depths differ by less than ``edge_m`` beyond what p's tangent
+    plane predicts (the truncation that keeps depth edges). Conjugate
+    gradients on the normal equations, started from ``z0``.
+
+    Parameters
+    ----------
+    z0 : (N,) discrete-solution depths of all pixels (N = H*W), metres.
+    normals : (N, 3) unit normals of the discrete solution.
+    rays : (N, 3) rays with unit z-depth.
+    mask : (N,) pixels to refine.
+    shape : (H, W).
+
+    Returns
+    -------
+    (N,) refined depths (unchanged outside ``mask``).
+    """
+    H, W = shape
+    idx = np.full(H * W, -1)
+    pix = np.flatnonzero(mask)
+    idx[pix] = np.arange(len(pix))
+    grid = np.arange(H * W).reshape(H, W)
+    rows, cols, vals = [], [], []
+    r = 0
+    for p_arr, q_arr in ((grid[:, :-1], grid[:, 1:]), (grid[:-1], grid[1:])):
+        for p, q in ((p_arr.ravel(), q_arr.ravel()), (q_arr.ravel(), p_arr.ravel())):
+            ok = mask[p] & mask[q]
+            p, q = p[ok], q[ok]
+            n = normals[p]
+            a_q = np.sum(n * rays[q], axis=1)
+            a_p = np.sum(n * rays[p], axis=1)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                pred = z0[p] * a_p / a_q
+            keep = np.isfinite(pred) & (np.abs(pred - z0[q]) < edge_m)
+            p, q, a_p, a_q = p[keep], q[keep], a_p[keep], a_q[keep]
+            m = len(p)
+            rows += [np.arange(r, r + m), np.arange(r, r + m)]
+            cols += [idx[q], idx[p]]
+            vals += [a_q, -a_p]
+            r += m
+    A = sp.csr_matrix(
+        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(r, len(pix))
+    )
+    N = (A.T @ A + data_weight**2 * sp.identity(len(pix))).tocsr()
+    b = data_weight**2 * z0[pix]
+    diag = N.diagonal()
+    precond = sp.diags(1.0 / np.where(diag > 0, diag, 1.0))
+    z, _ = cg(N, b, x0=z0[pix], M=precond, maxiter=maxiter, rtol=1e-10)
+    out = z0.copy()
+    out[pix] = z
+    return out
+
+
+def reconstruct(
+    frame: Frame,
+    method: str = "bayes",
+    reference: str | None = None,
+    n_labels: int = 192,
+    depth_range: tuple[float, float] | None = None,
+    working_radius_m: float = 0.15,
+    alpha: float = 0.35,
+    tau: float = 30.0,
+    refine: bool = True,
+    data_weight: float = 0.05,
+    max_cost: float = 0.5,
+    cost_scale: float = 0.05,
+) -> DepthResult:
+    """Reconstruct one frame with ML or Bayesian colour HS.
+
+    Parameters
+    ----------
+    frame : inputs from :func:`load_frame`.
+    method : ``"ml"`` or ``"bayes"``.
+    reference : reference camera name (default: the first camera).
+    n_labels : number of depth hypotheses.
+    depth_range : (near, far) z-depth range in metres; default the working
+        depth (where the optical axes meet) +- ``working_radius_m``.
+    alpha : weight of the data term in the Bayesian energy.
+    tau : truncation of the depth-normal prior, in labels.
+    refine : continuous refinement after the Bayesian labelling.
+    data_weight : weight of the discrete solution in that refinement.
+    max_cost : pixels whose chosen hypothesis costs more are left out.
+    cost_scale : the Bayesian data term is ``min(cost / cost_scale, 1 / cost_scale)``
+        (sigma_3 / sigma_2 in units of its typical noise level).
+    """
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+    rig = frame.rig
+    names = list(rig.camera_names)
+    ref_i = names.index(reference) if reference else 0
+    ref = rig.cameras[ref_i]
+    H, W = rig.image.height, rig.image.width
+    if depth_range is None:
+        zc = working_depth(rig, ref)
+        depth_range = (zc - working_radius_m, zc + working_radius_m)
+    depths = np.linspace(depth_range[0], depth_range[1], n_labels)
+    rays = reference_rays(ref, W, H)
+    fg = foreground(frame, ref_i).ravel()
+    pix = np.flatnonzero(fg)
+    if len(pix) == 0:
+        raise ValueError("no foreground pixels in the reference camera: nothing to reconstruct")
+    pairs = pair_arrays(rig)
+    prepared = prepare_images(
+        frame.images, frame.saturated, pairs, frame.mu, frame.chroma, frame.silhouettes
+    )
+    cost = np.empty((len(pix), n_labels), np.float32)
+    normals = np.empty((len(pix), n_labels, 3), np.float16)  # half the memory
+    for s in range(0, len(pix), CHUNK):
+        sel = pix[s : s + CHUNK]
+        c, n = data_term(rays[sel], ref.centre, depths, rig.cameras, prepared, pairs)
+        cost[s : s + len(sel)] = c
+        normals[s : s + len(sel)] = n
+    info = {"method": method, "reference": ref.name, "n_labels": n_labels,
+            "depth_range_m": [float(depths[0]), float(depths[-1])], "alpha": alpha, "tau": tau,
+            "pixels": int(len(pix))}  # fmt: skip
+    if method == "ml":
+        labels = np.argmin(cost, axis=1)
+        frac = _subpixel(cost, labels)
+        chosen = cost[np.arange(len(pix)), labels]
+    else:
+        from colourhs.reconstruct.mrf import labelling_energy, sgm_depth_normal
+
+        full_cost = np.full((H * W, n_labels), INVALID_COST / cost_scale, np.float32)
+        full_cost[pix] = cost / cost_scale
+        full_n = np.zeros((H * W, n_labels, 3), np.float16)
+        full_n[pix] = normals
+        del normals
+        lab, S = sgm_depth_normal(
+            full_cost.reshape(H, W, n_labels), full_n.reshape(H, W, n_labels, 3),
+            rays.reshape(H, W, 3).astype(np.float32), depths.astype(np.float32), alpha, tau,
+        )  # fmt: skip
+        info["energy"] = float(
+            labelling_energy(lab, full_cost.reshape(H, W, n_labels),
+                             full_n.reshape(H, W, n_labels, 3), rays.reshape(H, W, 3),
+                             depths, alpha, tau)
+        )  # fmt: skip
+        lab = lab.ravel()
+        frac_all = _subpixel(S.reshape(H * W, n_labels), lab)
+        labels = lab[pix]
+        frac = frac_all[pix]
+        normals = full_n[pix]
+        del S
+        chosen = cost[np.arange(len(pix)), labels]
+    valid = chosen < max_cost
+    n_sel = normals[np.arange(len(pix)), labels].astype(float)
+    n_sel /= np.maximum(np.linalg.norm(n_sel, axis=1, keepdims=True), 1e-12)
+    z = np.full(H * W, np.nan)
+    z[pix] = _depth_at(depths, frac)
+    nrm = np.zeros((H * W, 3))
+    nrm[pix] = n_sel
+    ok = np.zeros(H * W, bool)
+    ok[pix] = valid
+    if method == "bayes" and refine and ok.sum() > 10:
+        z = refine_depth(np.nan_to_num(z), nrm, rays, ok, (H, W), data_weight)
+        # The normals at the refined depths.
+        for s in range(0, len(pix), CHUNK):
+            sel = pix[s : s + CHUNK]
+            c, n = data_term(rays[sel] * z[sel][:, None], ref.centre, np.ones(1), rig.cameras,
+                             prepared, pairs)  # fmt: skip
+            good = c[:, 0] < INVALID_COST  # else keep the discrete solution's normal
+            nrm[sel[good]] = n[good, 0]
+    z[~ok] = np.nan
+    nrm[~ok] = np.nan
+    conf = np.zeros(H * W, np.float32)
+    conf[pix] = np.clip(1.0 - chosen, 0, 1) * valid
+    return DepthResult(
+        z.reshape(H, W).astype(np.float32),
+        nrm.reshape(H, W, 3).astype(np.float32),
+        conf.reshape(H, W),
+        ok.reshape(H, W),
+        info | {"valid_pixels": int(ok.sum())},
+    )
+
+
+def _hash(paths) -> str:
+    h = hashlib.sha256()
+    for p in paths:
+        h.update(Path(p).read_bytes())
+    return h.hexdigest()[:16]
+
+
+def write_depth(path, result: DepthResult, camera: Camera, attrs: dict) -> None:
+    """Write the results contract's depth HDF5 atomically."""
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_name(out.name + ".tmp")
+    with h5py.File(tmp, "w") as f:
+        f.create_dataset("depth", data=result.depth, compression="gzip")
+        f.create_dataset("normal", data=result.normal, compression="gzip")
+        f.create_dataset("confidence", data=result.confidence, compression="gzip")
+        f.create_dataset("mask", data=result.mask, compression="gzip")
+        f.attrs["camera"] = camera.name
+        f.attrs["K"] = np.asarray(camera.K, float)
+        f.attrs["R"] = np.asarray(camera.R, float)
+        f.attrs["t"] = np.asarray(camera.t, float)
+        f.attrs["units"] = "metres; depth is z along the reference camera"
+        for key, value in attrs.items():
+            f.attrs[key] = value if isinstance(value, str | int | float) else json.dumps(value)
+    tmp.replace(out)
+
+
+def reconstruct_frame(
+    dataset_dir, scene, frame, out_h5, method="bayes", crosstalk_json=None,
+    photometric_h5=None, chromaticity_h5=None, **params,
+) -> DepthResult:  # fmt: skip
+    """Load, reconstruct and write one frame (the Snakemake rule's function)."""
+    fr = load_frame(dataset_dir, scene, frame, crosstalk_json, photometric_h5, chromaticity_h5)
+    result = reconstruct(fr, method, **params)
+    ref = fr.rig.camera(result.info["reference"])
+    calib = {"crosstalk": crosstalk_json, "photometric": photometric_h5,
+             "chromaticity": chromaticity_h5}  # fmt: skip
+    attrs = {
+        "method": method,
+        "params": result.info,
+        "calibration": {k: str(v) if v else None for k, v in calib.items()},
+        "calibration_sha256": {k: _hash([v]) for k, v in calib.items() if v},
+        "inputs_sha256": _hash(fr.inputs),
+    }
+    write_depth(out_h5, result, ref, attrs)
+    return result
