@@ -23,6 +23,31 @@ def load_mesh(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return np.asarray(mesh.vertices), np.asarray(mesh.triangles), np.asarray(mesh.vertex_normals)
 
 
+def _cast_pixels(vertices, triangles, normals, camera, width, height):
+    """Ray cast a mesh from every pixel centre of a camera.
+
+    Returns the open3d scene, the hit mask (H*W,), the hit points (M, 3) on
+    the mesh and their interpolated unit normals facing the camera.
+    """
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(
+        o3d.core.Tensor(vertices.astype(np.float32)), o3d.core.Tensor(triangles.astype(np.uint32))
+    )
+    grid = pixel_grid(width, height).reshape(-1, 2)
+    origin, dirs = backproject(grid, camera.K, camera.dist, camera.R, camera.t)
+    rays = np.concatenate([np.broadcast_to(origin, dirs.shape), dirs], axis=1)
+    ans = scene.cast_rays(o3d.core.Tensor(rays.astype(np.float32)))
+    hit = np.isfinite(ans["t_hit"].numpy())
+    tri = ans["primitive_ids"].numpy()[hit].astype(np.int64)
+    uv = ans["primitive_uvs"].numpy()[hit].astype(float)
+    bary = np.stack([1 - uv[:, 0] - uv[:, 1], uv[:, 0], uv[:, 1]], axis=1)
+    points = np.einsum("mk,mkj->mj", bary, vertices[triangles[tri]])
+    n = np.einsum("mk,mkj->mj", bary, normals[triangles[tri]])
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    n *= np.sign(np.sum(n * (origin - points), axis=1))[:, None]
+    return scene, hit, points, n
+
+
 def surface_points(
     vertices: np.ndarray,
     triangles: np.ndarray,
@@ -45,22 +70,7 @@ def surface_points(
     normals : (N, 3) interpolated unit normals facing the reference camera.
     pixels : (N,) flat pixel indices (row * width + column) in the reference camera.
     """
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(
-        o3d.core.Tensor(vertices.astype(np.float32)), o3d.core.Tensor(triangles.astype(np.uint32))
-    )
-    grid = pixel_grid(width, height).reshape(-1, 2)
-    origin, dirs = backproject(grid, reference.K, reference.dist, reference.R, reference.t)
-    rays = np.concatenate([np.broadcast_to(origin, dirs.shape), dirs], axis=1)
-    ans = scene.cast_rays(o3d.core.Tensor(rays.astype(np.float32)))
-    hit = np.isfinite(ans["t_hit"].numpy())
-    tri = ans["primitive_ids"].numpy()[hit].astype(np.int64)
-    uv = ans["primitive_uvs"].numpy()[hit].astype(float)
-    bary = np.stack([1 - uv[:, 0] - uv[:, 1], uv[:, 0], uv[:, 1]], axis=1)
-    points = np.einsum("mk,mkj->mj", bary, vertices[triangles[tri]])
-    n = np.einsum("mk,mkj->mj", bary, normals[triangles[tri]])
-    n /= np.linalg.norm(n, axis=1, keepdims=True)
-    n *= np.sign(np.sum(n * (origin - points), axis=1))[:, None]
+    scene, hit, points, n = _cast_pixels(vertices, triangles, normals, reference, width, height)
     keep = np.ones(len(points), bool)
     for cam in cameras:
         for centre in (cam.centre, cam.light_centre):
@@ -82,22 +92,7 @@ def render_depth_normals(
     Ray casts the mesh from every pixel centre; NaN where a ray misses.
     Normals are the mesh's interpolated vertex normals, facing the camera.
     """
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(
-        o3d.core.Tensor(vertices.astype(np.float32)), o3d.core.Tensor(triangles.astype(np.uint32))
-    )
-    grid = pixel_grid(width, height).reshape(-1, 2)
-    origin, dirs = backproject(grid, camera.K, camera.dist, camera.R, camera.t)
-    rays = np.concatenate([np.broadcast_to(origin, dirs.shape), dirs], axis=1)
-    ans = scene.cast_rays(o3d.core.Tensor(rays.astype(np.float32)))
-    hit = np.isfinite(ans["t_hit"].numpy())
-    tri = ans["primitive_ids"].numpy()[hit].astype(np.int64)
-    uv = ans["primitive_uvs"].numpy()[hit].astype(float)
-    bary = np.stack([1 - uv[:, 0] - uv[:, 1], uv[:, 0], uv[:, 1]], axis=1)
-    points = np.einsum("mk,mkj->mj", bary, vertices[triangles[tri]])
-    n = np.einsum("mk,mkj->mj", bary, normals[triangles[tri]])
-    n /= np.linalg.norm(n, axis=1, keepdims=True)
-    n *= np.sign(np.sum(n * (origin - points), axis=1))[:, None]
+    _, hit, points, n = _cast_pixels(vertices, triangles, normals, camera, width, height)
     depth = np.full(width * height, np.nan)
     depth[hit] = (points @ np.asarray(camera.R, float).T + np.asarray(camera.t, float))[:, 2]
     nrm = np.full((width * height, 3), np.nan)
