@@ -22,7 +22,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.linalg import cg
+from scipy.sparse.linalg import spsolve
 
 from colourhs.capture import COLOURS, Camera, Rig, open_dataset, read_image, read_mask
 from colourhs.crosstalk import load_crosstalk, unmix
@@ -183,7 +183,6 @@ def refine_depth(
     shape: tuple[int, int],
     data_weight: float = 0.05,
     edge_m: float = 0.004,
-    maxiter: int = 400,
 ) -> np.ndarray:
     """Continuous depth refinement with the depth-normal consistency prior.
 
@@ -191,8 +190,8 @@ def refine_depth(
     ``sum_(p,q) (n_p . (X_q - X_p))^2 + data_weight^2 sum_p (z_p - z0_p)^2``
     (X = c + z r; the camera centre cancels), over 4-neighbours whose
     discrete depths differ by less than ``edge_m`` beyond what p's tangent
-    plane predicts (the truncation that keeps depth edges). Conjugate
-    gradients on the normal equations, started from ``z0``.
+    plane predicts (the truncation that keeps depth edges). A sparse
+    direct solve of the normal equations.
 
     Parameters
     ----------
@@ -234,12 +233,23 @@ def refine_depth(
     )
     N = (A.T @ A + data_weight**2 * sp.identity(len(pix))).tocsr()
     b = data_weight**2 * z0[pix]
-    diag = N.diagonal()
-    precond = sp.diags(1.0 / np.where(diag > 0, diag, 1.0))
-    z, _ = cg(N, b, x0=z0[pix], M=precond, maxiter=maxiter, rtol=1e-10)
+    z = spsolve(N.tocsc(), b)
     out = z0.copy()
     out[pix] = z
     return out
+
+
+def _large_components(mask: np.ndarray, min_size: int) -> np.ndarray:
+    """``mask`` without its 4-connected components smaller than ``min_size`` pixels."""
+    from scipy.ndimage import label
+
+    lab, n = label(mask)
+    if n == 0:
+        return mask
+    sizes = np.bincount(lab.ravel())
+    keep = sizes >= min_size
+    keep[0] = False
+    return keep[lab]
 
 
 def reconstruct(
@@ -252,9 +262,12 @@ def reconstruct(
     alpha: float = 0.35,
     tau: float = 30.0,
     refine: bool = True,
-    data_weight: float = 0.05,
+    data_weight: float = 0.01,
     max_cost: float = 0.5,
     cost_scale: float = 0.05,
+    edge_m: float = 0.02,
+    refine_passes: int = 3,
+    min_component: int | None = None,
 ) -> DepthResult:
     """Reconstruct one frame with ML or Bayesian colour HS.
 
@@ -271,6 +284,12 @@ def reconstruct(
     refine : continuous refinement after the Bayesian labelling.
     data_weight : weight of the discrete solution in that refinement.
     max_cost : pixels whose chosen hypothesis costs more are left out.
+    edge_m, refine_passes : the continuous refinement's edge threshold
+        (metres) and number of passes (each re-evaluates the normals at the
+        refined depths).
+    min_component : connected groups of valid pixels smaller than this (e.g.
+        the white cells inside a marker, cut off by its black ones) are left
+        out of the Bayesian result; default 0.2 % of the image.
     cost_scale : the Bayesian data term is ``min(cost / cost_scale, 1 / cost_scale)``
         (sigma_3 / sigma_2 in units of its typical noise level).
     """
@@ -342,14 +361,18 @@ def reconstruct(
     ok = np.zeros(H * W, bool)
     ok[pix] = valid
     if method == "bayes" and refine and ok.sum() > 10:
-        z = refine_depth(np.nan_to_num(z), nrm, rays, ok, (H, W), data_weight)
-        # The normals at the refined depths.
-        for s in range(0, len(pix), CHUNK):
-            sel = pix[s : s + CHUNK]
-            c, n = data_term(rays[sel] * z[sel][:, None], ref.centre, np.ones(1), rig.cameras,
-                             prepared, pairs)  # fmt: skip
-            good = c[:, 0] < INVALID_COST  # else keep the discrete solution's normal
-            nrm[sel[good]] = n[good, 0]
+        min_px = int(min_component or 0.002 * H * W)
+        ok &= _large_components(ok.reshape(H, W), min_px).ravel()
+        z = np.nan_to_num(z)
+        for _ in range(refine_passes):
+            z = refine_depth(z, nrm, rays, ok, (H, W), data_weight, edge_m)
+            # Re-evaluate the HS normals at the refined depths (they depend on depth).
+            for s in range(0, len(pix), CHUNK):
+                sel = pix[s : s + CHUNK]
+                c, n = data_term(rays[sel] * z[sel][:, None], ref.centre, np.ones(1),
+                                 rig.cameras, prepared, pairs)  # fmt: skip
+                good = c[:, 0] < INVALID_COST  # else keep the previous normal
+                nrm[sel[good]] = n[good, 0]
     z[~ok] = np.nan
     nrm[~ok] = np.nan
     conf = np.zeros(H * W, np.float32)
