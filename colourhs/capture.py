@@ -1211,9 +1211,7 @@ def validate(dataset: str | Path, summary_json: str | Path | None = None) -> dic
         "saturated_fraction": n_saturated / max(n_pixels, 1),
     }  # fmt: skip
     if summary_json is not None:
-        out = Path(summary_json)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        tmp = out.with_name(out.name + ".tmp")
-        tmp.write_text(json.dumps(summary, indent=2))
-        tmp.replace(out)
+        from colourhs.io import write_json
+
+        write_json(summary_json, summary)
     return summary

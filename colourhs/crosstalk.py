@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from colourhs.capture import COLOURS, open_dataset, read_image
+from colourhs.io import write_json
 
 
 def crosstalk_matrix(
@@ -87,11 +88,7 @@ def calibrate_crosstalk(dataset_dir: str | Path, out_json: str | Path | None = N
         M, spread = crosstalk_matrix(imgs, sats)
         out["cameras"][cam] = {"M": M.tolist(), "spread": spread.tolist()}
     if out_json is not None:
-        path = Path(out_json)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(path.name + ".tmp")
-        tmp.write_text(json.dumps(out, indent=2))
-        tmp.replace(path)
+        write_json(out_json, out)
     return out
 
 

@@ -26,7 +26,6 @@ the camera is given) and intersects adjacent lines.
 
 from __future__ import annotations
 
-import os
 import re
 import warnings
 from collections.abc import Mapping
@@ -41,6 +40,7 @@ from scipy.optimize import least_squares
 
 from colourhs.capture import Board, Camera, Rig, open_dataset, read_image
 from colourhs.geometry import normalised_coordinates, project, triangulate
+from colourhs.io import atomic_output
 
 __all__ = [
     "BoardPose",
@@ -551,13 +551,8 @@ def marker_poses(
             "seen by two or more cameras)"
         )
     table = pd.DataFrame(rows, columns=csv_columns(rig.camera_names))
-    out_csv.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out_csv.with_name(f".{out_csv.name}.{os.getpid()}.tmp")
-    try:
+    with atomic_output(out_csv) as tmp:
         table.to_csv(tmp, index=False)
-        os.replace(tmp, out_csv)
-    finally:
-        tmp.unlink(missing_ok=True)
     return table
 
 

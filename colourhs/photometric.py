@@ -44,6 +44,7 @@ from colourhs.capture import COLOURS, Board, Camera, Rig, open_dataset, read_ima
 from colourhs.crosstalk import load_crosstalk, unmix
 from colourhs.geometry import backproject, pixel_grid, project, ray_plane_intersection
 from colourhs.helmholtz import sample_bilinear
+from colourhs.io import atomic_output
 
 
 def kappa(
@@ -479,13 +480,10 @@ def photometric_maps(
     """
     rig, views = load_views(dataset_dir, poses_csv, crosstalk_json)
     result = calibrate(rig, views, **params)
-    out = Path(out_h5)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(out.name + ".tmp")
     ds = open_dataset(dataset_dir, check_images=False)
     inputs = [ds.photometric_image(v.name, c) for v in views for c in rig.camera_names]
     inputs += [Path(poses_csv)] + ([Path(crosstalk_json)] if crosstalk_json else [])
-    with h5py.File(tmp, "w") as f:
+    with atomic_output(out_h5) as tmp, h5py.File(tmp, "w") as f:
         for key, mu in result["maps"].items():
             f.create_dataset(key, data=mu, compression="gzip")
             f.create_dataset(f"grid/{key}", data=result["grids"][key].astype(np.float32))
@@ -500,7 +498,6 @@ def photometric_maps(
         f.attrs["poses"] = json.dumps([v.name for v in views])
         f.attrs["inputs_sha256"] = _hash_files(inputs)
         f.attrs["crosstalk_unmixed"] = bool(crosstalk_json)
-    tmp.replace(out)
     if figure_png is not None:
         from colourhs.figures import mu_maps_figure
 

@@ -27,6 +27,7 @@ from scipy.sparse.linalg import spsolve
 from colourhs.capture import COLOURS, Camera, Rig, open_dataset, read_image, read_mask
 from colourhs.crosstalk import load_crosstalk, unmix
 from colourhs.geometry import normalised_coordinates, pixel_grid
+from colourhs.io import atomic_output
 from colourhs.reconstruct.dataterm import INVALID_COST, data_term, pair_arrays, prepare_images
 
 METHODS = ("ml", "bayes")
@@ -395,10 +396,7 @@ def _hash(paths) -> str:
 
 def write_depth(path, result: DepthResult, camera: Camera, attrs: dict) -> None:
     """Write the results contract's depth HDF5 atomically."""
-    out = Path(path)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(out.name + ".tmp")
-    with h5py.File(tmp, "w") as f:
+    with atomic_output(path) as tmp, h5py.File(tmp, "w") as f:
         f.create_dataset("depth", data=result.depth, compression="gzip")
         f.create_dataset("normal", data=result.normal, compression="gzip")
         f.create_dataset("confidence", data=result.confidence, compression="gzip")
@@ -410,7 +408,6 @@ def write_depth(path, result: DepthResult, camera: Camera, attrs: dict) -> None:
         f.attrs["units"] = "metres; depth is z along the reference camera"
         for key, value in attrs.items():
             f.attrs[key] = value if isinstance(value, str | int | float) else json.dumps(value)
-    tmp.replace(out)
 
 
 def reconstruct_frame(
