@@ -121,7 +121,8 @@ def _reconstruct(args) -> int:
 
 RECONSTRUCT_PARAMS = {"reference": str, "n_labels": int, "alpha": float, "tau": float,
                       "working_radius_m": float, "data_weight": float, "max_cost": float,
-                      "cost_scale": float}  # fmt: skip
+                      "cost_scale": float, "erode_px": int, "edge_m": float,
+                      "refine_passes": int, "min_component": int}  # fmt: skip
 
 PHOTOMETRIC_PARAMS = ("grid_spacing_px", "step_px", "smoothness", "coupling", "margin_m",
                       "min_cos", "min_signal")  # fmt: skip

@@ -269,6 +269,7 @@ def reconstruct(
     edge_m: float = 0.02,
     refine_passes: int = 3,
     min_component: int | None = None,
+    erode_px: int | None = None,
 ) -> DepthResult:
     """Reconstruct one frame with ML or Bayesian colour HS.
 
@@ -291,6 +292,8 @@ def reconstruct(
     min_component : connected groups of valid pixels smaller than this (e.g.
         the white cells inside a marker, cut off by its black ones) are left
         out of the Bayesian result; default 0.2 % of the image.
+    erode_px : the Bayesian result's mask is eroded by this many pixels;
+        default 1 per 320 pixels of image width (at least 1).
     cost_scale : the Bayesian data term is ``min(cost / cost_scale, 1 / cost_scale)``
         (sigma_3 / sigma_2 in units of its typical noise level).
     """
@@ -374,6 +377,13 @@ def reconstruct(
                                  rig.cameras, prepared, pairs)  # fmt: skip
                 good = c[:, 0] < INVALID_COST  # else keep the previous normal
                 nrm[sel[good]] = n[good, 0]
+    erode_px = max(1, round(W / 320)) if erode_px is None else erode_px
+    if method == "bayes" and erode_px > 0:
+        from scipy.ndimage import binary_erosion
+
+        # Pixels next to where nothing was reconstructed (board edges, marker
+        # rims, silhouettes) mix surfaces within their footprint: leave them out.
+        ok &= binary_erosion(ok.reshape(H, W), iterations=erode_px).ravel()
     z[~ok] = np.nan
     nrm[~ok] = np.nan
     conf = np.zeros(H * W, np.float32)
