@@ -31,3 +31,13 @@ def write_json(path: str | Path, data) -> None:
     """Write ``data`` as indented JSON, atomically."""
     with atomic_output(path) as tmp:
         tmp.write_text(json.dumps(data, indent=2))
+
+
+def sha256_files(paths) -> str:
+    """Short (16 hex digit) SHA-256 of the concatenated contents of ``paths``, for provenance."""
+    import hashlib
+
+    h = hashlib.sha256()
+    for p in paths:
+        h.update(Path(p).read_bytes())
+    return h.hexdigest()[:16]

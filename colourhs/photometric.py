@@ -29,7 +29,6 @@ cross-talk calibration is given.
 
 from __future__ import annotations
 
-import hashlib
 import json
 from dataclasses import dataclass
 from pathlib import Path
@@ -44,7 +43,7 @@ from colourhs.capture import COLOURS, Board, Camera, Rig, open_dataset, read_ima
 from colourhs.crosstalk import load_crosstalk, unmix
 from colourhs.geometry import backproject, pixel_grid, project, ray_plane_intersection
 from colourhs.helmholtz import sample_bilinear
-from colourhs.io import atomic_output
+from colourhs.io import atomic_output, sha256_files
 
 
 def kappa(
@@ -460,13 +459,6 @@ def mu_map_errors(result: dict, truth: dict[str, np.ndarray], rig: Rig) -> pd.Da
     return pd.DataFrame(rows)
 
 
-def _hash_files(paths) -> str:
-    h = hashlib.sha256()
-    for p in paths:
-        h.update(Path(p).read_bytes())
-    return h.hexdigest()[:16]
-
-
 def photometric_maps(
     dataset_dir, poses_csv, out_h5, crosstalk_json=None, figure_png=None, **params
 ) -> dict:
@@ -496,7 +488,7 @@ def photometric_maps(
         f.attrs["constraints"] = json.dumps(result["counts"])
         f.attrs["residual_rms_log"] = json.dumps(result["residual_rms"])
         f.attrs["poses"] = json.dumps([v.name for v in views])
-        f.attrs["inputs_sha256"] = _hash_files(inputs)
+        f.attrs["inputs_sha256"] = sha256_files(inputs)
         f.attrs["crosstalk_unmixed"] = bool(crosstalk_json)
     if figure_png is not None:
         from colourhs.figures import mu_maps_figure

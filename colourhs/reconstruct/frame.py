@@ -14,7 +14,6 @@
 
 from __future__ import annotations
 
-import hashlib
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -27,7 +26,7 @@ from scipy.sparse.linalg import spsolve
 from colourhs.capture import COLOURS, Camera, Rig, open_dataset, read_image, read_mask
 from colourhs.crosstalk import load_crosstalk, unmix
 from colourhs.geometry import normalised_coordinates, pixel_grid
-from colourhs.io import atomic_output
+from colourhs.io import atomic_output, sha256_files
 from colourhs.reconstruct.dataterm import INVALID_COST, data_term, pair_arrays, prepare_images
 
 METHODS = ("ml", "bayes")
@@ -397,13 +396,6 @@ def reconstruct(
     )
 
 
-def _hash(paths) -> str:
-    h = hashlib.sha256()
-    for p in paths:
-        h.update(Path(p).read_bytes())
-    return h.hexdigest()[:16]
-
-
 def write_depth(path, result: DepthResult, camera: Camera, attrs: dict) -> None:
     """Write the results contract's depth HDF5 atomically."""
     with atomic_output(path) as tmp, h5py.File(tmp, "w") as f:
@@ -434,8 +426,8 @@ def reconstruct_frame(
         "method": method,
         "params": result.info,
         "calibration": {k: str(v) if v else None for k, v in calib.items()},
-        "calibration_sha256": {k: _hash([v]) for k, v in calib.items() if v},
-        "inputs_sha256": _hash(fr.inputs),
+        "calibration_sha256": {k: sha256_files([v]) for k, v in calib.items() if v},
+        "inputs_sha256": sha256_files(fr.inputs),
     }
     write_depth(out_h5, result, ref, attrs)
     return result
