@@ -333,25 +333,32 @@ def reconstruct(
     else:
         from colourhs.reconstruct.mrf import labelling_energy, sgm_depth_normal
 
-        full_cost = np.full((H * W, n_labels), INVALID_COST / cost_scale, np.float32)
-        full_cost[pix] = cost / cost_scale
-        full_n = np.zeros((H * W, n_labels, 3), np.float16)
-        full_n[pix] = normals
+        # The MRF runs over the foreground's bounding box (plus a margin): the
+        # background carries no data, only path length.
+        rows, cols = np.divmod(pix, W)
+        r0, r1 = max(rows.min() - 2, 0), min(rows.max() + 3, H)
+        c0, c1 = max(cols.min() - 2, 0), min(cols.max() + 3, W)
+        h, w = r1 - r0, c1 - c0
+        local = (rows - r0) * w + (cols - c0)
+        box_cost = np.full((h * w, n_labels), INVALID_COST / cost_scale, np.float32)
+        box_cost[local] = cost / cost_scale
+        box_n = np.zeros((h * w, n_labels, 3), np.float16)
+        box_n[local] = normals
         del normals
+        box_rays = rays.reshape(H, W, 3)[r0:r1, c0:c1]
         lab, S = sgm_depth_normal(
-            full_cost.reshape(H, W, n_labels), full_n.reshape(H, W, n_labels, 3),
-            rays.reshape(H, W, 3).astype(np.float32), depths.astype(np.float32), alpha, tau,
+            box_cost.reshape(h, w, n_labels), box_n.reshape(h, w, n_labels, 3),
+            box_rays.astype(np.float32), depths.astype(np.float32), alpha, tau,
         )  # fmt: skip
         info["energy"] = float(
-            labelling_energy(lab, full_cost.reshape(H, W, n_labels),
-                             full_n.reshape(H, W, n_labels, 3), rays.reshape(H, W, 3),
-                             depths, alpha, tau)
+            labelling_energy(lab, box_cost.reshape(h, w, n_labels),
+                             box_n.reshape(h, w, n_labels, 3), box_rays, depths, alpha, tau)
         )  # fmt: skip
+        info["mrf_box"] = [int(r0), int(r1), int(c0), int(c1)]
         lab = lab.ravel()
-        frac_all = _subpixel(S.reshape(H * W, n_labels), lab)
-        labels = lab[pix]
-        frac = frac_all[pix]
-        normals = full_n[pix]
+        labels = lab[local]
+        frac = _subpixel(S.reshape(h * w, n_labels)[local], labels)
+        normals = box_n[local]
         del S
         chosen = cost[np.arange(len(pix)), labels]
     valid = chosen < max_cost
