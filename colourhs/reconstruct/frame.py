@@ -316,20 +316,25 @@ def reconstruct(
     prepared = prepare_images(
         frame.images, frame.saturated, pairs, frame.mu, frame.chroma, frame.silhouettes
     )
-    cost = np.empty((len(pix), n_labels), np.float32)
-    normals = np.empty((len(pix), n_labels, 3), np.float16)  # half the memory
-    for s in range(0, len(pix), CHUNK):
-        sel = pix[s : s + CHUNK]
-        c, n = data_term(rays[sel], ref.centre, depths, rig.cameras, prepared, pairs)
-        cost[s : s + len(sel)] = c
-        normals[s : s + len(sel)] = n
+
+    def evaluate(pixel_rays, hypotheses, normal_dtype):
+        """The data term in chunks of pixels (bounds its float32 normals buffer)."""
+        cost = np.empty((len(pixel_rays), len(hypotheses)), np.float32)
+        normals = np.empty((len(pixel_rays), len(hypotheses), 3), normal_dtype)
+        for s in range(0, len(pixel_rays), CHUNK):
+            c, n = data_term(pixel_rays[s : s + CHUNK], ref.centre, hypotheses, rig.cameras,
+                             prepared, pairs)  # fmt: skip
+            cost[s : s + len(c)] = c
+            normals[s : s + len(c)] = n
+        return cost, normals
+
+    cost, normals = evaluate(rays[pix], depths, np.float16)  # float16: half the memory
     info = {"method": method, "reference": ref.name, "n_labels": n_labels,
             "depth_range_m": [float(depths[0]), float(depths[-1])], "alpha": alpha, "tau": tau,
             "pixels": int(len(pix))}  # fmt: skip
     if method == "ml":
         labels = np.argmin(cost, axis=1)
         frac = _subpixel(cost, labels)
-        chosen = cost[np.arange(len(pix)), labels]
     else:
         from colourhs.reconstruct.mrf import labelling_energy, sgm_depth_normal
 
@@ -360,7 +365,7 @@ def reconstruct(
         frac = _subpixel(S.reshape(h * w, n_labels)[local], labels)
         normals = box_n[local]
         del S
-        chosen = cost[np.arange(len(pix)), labels]
+    chosen = cost[np.arange(len(pix)), labels]
     valid = chosen < max_cost
     n_sel = normals[np.arange(len(pix)), labels].astype(float)
     n_sel /= np.maximum(np.linalg.norm(n_sel, axis=1, keepdims=True), 1e-12)
@@ -377,12 +382,9 @@ def reconstruct(
         for _ in range(refine_passes):
             z = refine_depth(z, nrm, rays, ok, (H, W), data_weight, edge_m)
             # Re-evaluate the HS normals at the refined depths (they depend on depth).
-            for s in range(0, len(pix), CHUNK):
-                sel = pix[s : s + CHUNK]
-                c, n = data_term(rays[sel] * z[sel][:, None], ref.centre, np.ones(1),
-                                 rig.cameras, prepared, pairs)  # fmt: skip
-                good = c[:, 0] < INVALID_COST  # else keep the previous normal
-                nrm[sel[good]] = n[good, 0]
+            c, n = evaluate(rays[pix] * z[pix][:, None], np.ones(1), np.float32)
+            good = c[:, 0] < INVALID_COST  # else keep the previous normal
+            nrm[pix[good]] = n[good, 0]
     erode_px = max(1, round(W / 320)) if erode_px is None else erode_px
     if method == "bayes" and erode_px > 0:
         from scipy.ndimage import binary_erosion
