@@ -396,6 +396,7 @@ def reconstruct(
     nrm[~ok] = np.nan
     conf = np.zeros(H * W, np.float32)
     conf[pix] = np.clip(1.0 - chosen, 0, 1) * valid
+    conf[~ok] = 0.0
     return DepthResult(
         z.reshape(H, W).astype(np.float32),
         nrm.reshape(H, W, 3).astype(np.float32),
@@ -416,6 +417,7 @@ def write_depth(path, result: DepthResult, camera: Camera, attrs: dict) -> None:
         f.attrs["K"] = np.asarray(camera.K, float)
         f.attrs["R"] = np.asarray(camera.R, float)
         f.attrs["t"] = np.asarray(camera.t, float)
+        f.attrs["dist"] = np.asarray(camera.dist, float)
         f.attrs["units"] = "metres; depth is z along the reference camera"
         for key, value in attrs.items():
             f.attrs[key] = value if isinstance(value, str | int | float) else json.dumps(value)
