@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 from pathlib import Path
 
 import matplotlib
@@ -12,7 +13,26 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-__all__ = ["chromaticity_figure", "chromaticity_rgb"]
+from colourhs.geometry import vertex_normals  # noqa: E402
+
+__all__ = [
+    "chromaticity_figure",
+    "chromaticity_rgb",
+    "depth_map_figure",
+    "error_map_figure",
+    "mu_maps_figure",
+    "normal_map_figure",
+    "render_grid_figure",
+    "shaded_render",
+    "value_colours",
+    "write_animation",
+    "write_coloured_ply",
+]
+
+#: Colour of pixels with no value (NaN) in the image figures and renders.
+BACKGROUND = (1.0, 1.0, 1.0)
+#: Colour of vertices with no value in :func:`value_colours`.
+NO_VALUE_GREY = 0.5
 
 
 def chromaticity_rgb(p: np.ndarray) -> np.ndarray:
@@ -131,3 +151,404 @@ def mu_maps_figure(
     finally:
         plt.close(fig)
     return out_png
+
+
+def value_colours(
+    values: np.ndarray, vmin: float, vmax: float, cmap: str = "viridis"
+) -> np.ndarray:
+    """Colours of scalar values under a matplotlib colormap (e.g. per-vertex error on a mesh).
+
+    Parameters
+    ----------
+    values : array_like, shape (N,)
+        Scalars; NaN (or inf) where unknown.
+    vmin, vmax : float
+        Values mapped to the colormap's two ends; values outside are clipped.
+    cmap : str
+        Matplotlib colormap name.
+
+    Returns
+    -------
+    ndarray of float64, shape (N, 3)
+        RGB in [0, 1]; non-finite values are grey (0.5, 0.5, 0.5).
+    """
+    values = np.asarray(values, dtype=np.float64).reshape(-1)
+    span = float(vmax) - float(vmin)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        s = (values - float(vmin)) / span if span > 0 else values * 0.0
+    finite = np.isfinite(s)
+    s = np.clip(np.where(finite, s, 0.0), 0.0, 1.0)
+    rgb = np.asarray(matplotlib.colormaps[cmap](s)[:, :3], dtype=np.float64)
+    rgb[~finite] = NO_VALUE_GREY
+    return rgb
+
+
+def _finite_or_raise(a: np.ndarray, what: str) -> np.ndarray:
+    """The finite values of ``a``; ValueError when there are none."""
+    finite = a[np.isfinite(a)]
+    if finite.size == 0:
+        raise ValueError(f"{what}: no finite values to show (all NaN or empty)")
+    return finite
+
+
+def _save_png(fig, path: str | Path, dpi: int = 100) -> Path:
+    """Save ``fig`` as a PNG at ``path`` atomically and close it."""
+    from colourhs.io import atomic_output
+
+    path = Path(path)
+    try:
+        with atomic_output(path) as tmp:
+            fig.savefig(tmp, dpi=dpi, format="png", facecolor="white")
+    finally:
+        plt.close(fig)
+    return path
+
+
+def _image_axes(h: int, w: int, title: str, colourbar: bool):
+    """Figure with one image axes sized to an h x w image (plus room for a colour bar/title)."""
+    panel_w = 5.0
+    panel_h = panel_w * h / w
+    fig_w = panel_w + (1.3 if colourbar else 0.2)
+    fig_h = panel_h + (0.5 if title else 0.15)
+    fig = plt.figure(figsize=(fig_w, fig_h))
+    top = 1.0 - (0.45 if title else 0.075) / fig_h
+    bottom = 0.075 / fig_h
+    ax = fig.add_axes((0.1 / fig_w, bottom, panel_w / fig_w, top - bottom))
+    ax.set_axis_off()
+    if title:
+        ax.set_title(title)
+    cax = (
+        fig.add_axes(((panel_w + 0.25) / fig_w, bottom, 0.2 / fig_w, top - bottom))
+        if colourbar
+        else None
+    )
+    return fig, ax, cax
+
+
+def _scalar_map_figure(img, path, title, cmap, vmin, vmax, label) -> Path:
+    h, w = img.shape
+    fig, ax, cax = _image_axes(h, w, title, colourbar=True)
+    cm = matplotlib.colormaps[cmap].with_extremes(bad=BACKGROUND)
+    im = ax.imshow(
+        np.ma.masked_invalid(img), cmap=cm, vmin=vmin, vmax=vmax, interpolation="nearest"
+    )
+    fig.colorbar(im, cax=cax, label=label)
+    return _save_png(fig, path)
+
+
+def depth_map_figure(depth_m: np.ndarray, path: str | Path, title: str = "") -> Path:
+    """A depth map in millimetres with a colour bar; NaN pixels show as background.
+
+    Parameters
+    ----------
+    depth_m : ndarray, shape (H, W)
+        Depth in metres (z along the camera), NaN where none.
+    path : str or Path
+        PNG file to write (atomically).
+    title : str
+        Figure title.
+
+    The colour range spans the 1st to 99th percentile of the finite depths
+    (so a few outliers do not wash out the map).
+    """
+    depth_mm = np.asarray(depth_m, dtype=np.float64) * 1000.0
+    if depth_mm.ndim != 2:
+        raise ValueError(f"depth map must be 2-D (H, W), got shape {depth_mm.shape}")
+    lo, hi = np.percentile(_finite_or_raise(depth_mm, "depth map"), [1.0, 99.0])
+    if hi <= lo:
+        lo, hi = lo - 0.5, hi + 0.5
+    return _scalar_map_figure(depth_mm, path, title, "viridis", lo, hi, "depth (mm)")
+
+
+def normal_map_figure(normal: np.ndarray, path: str | Path, title: str = "") -> Path:
+    """World-frame unit normals shown as RGB ``(n + 1) / 2``; NaN pixels show as background.
+
+    Parameters
+    ----------
+    normal : ndarray, shape (H, W, 3)
+        Unit normals in the world frame, NaN where none.
+    path : str or Path
+        PNG file to write (atomically).
+    title : str
+        Figure title.
+    """
+    normal = np.asarray(normal, dtype=np.float64)
+    if normal.ndim != 3 or normal.shape[2] != 3:
+        raise ValueError(f"normal map must be (H, W, 3), got shape {normal.shape}")
+    valid = np.all(np.isfinite(normal), axis=-1)
+    _finite_or_raise(normal[valid], "normal map")
+    rgb = np.clip((np.nan_to_num(normal) + 1.0) / 2.0, 0.0, 1.0)
+    rgb[~valid] = BACKGROUND
+    h, w = valid.shape
+    fig, ax, _ = _image_axes(h, w, title, colourbar=False)
+    ax.imshow(rgb, interpolation="nearest")
+    return _save_png(fig, path)
+
+
+def error_map_figure(
+    error: np.ndarray,
+    path: str | Path,
+    title: str,
+    unit: str = "mm",
+    vmax: float | None = None,
+) -> Path:
+    """Heat map of a per-pixel error with a colour bar; NaN pixels show as background.
+
+    Parameters
+    ----------
+    error : ndarray, shape (H, W)
+        Non-negative error, already in ``unit``; NaN where none.
+    path : str or Path
+        PNG file to write (atomically).
+    title : str
+        Figure title.
+    unit : str
+        Unit of ``error`` for the colour bar label (e.g. ``"mm"``, ``"deg"``).
+    vmax : float, optional
+        Top of the colour range (0 is the bottom); default the 95th percentile
+        of the finite errors.
+    """
+    error = np.asarray(error, dtype=np.float64)
+    if error.ndim != 2:
+        raise ValueError(f"error map must be 2-D (H, W), got shape {error.shape}")
+    finite = _finite_or_raise(error, "error map")
+    if vmax is None:
+        vmax = float(np.percentile(finite, 95.0))
+    if not vmax > 0:
+        vmax = float(max(finite.max(), 1e-12))
+    return _scalar_map_figure(error, path, title, "inferno", 0.0, vmax, f"error ({unit})")
+
+
+def shaded_render(
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    K: np.ndarray,
+    R: np.ndarray,
+    t: np.ndarray,
+    width: int,
+    height: int,
+    vertex_rgb: np.ndarray | None = None,
+    dist: np.ndarray | None = None,
+    ambient: float = 0.1,
+) -> np.ndarray:
+    """Shaded image of a triangle mesh seen by a pinhole camera (ray cast, no OpenGL).
+
+    One ray per pixel centre (open3d ``RaycastingScene``, via
+    :func:`colourhs.groundtruth._cast_pixels`); Lambertian shading from a
+    headlight at the camera centre, ``ambient + (1 - ambient) |n . ray|``
+    with the interpolated (area-weighted) vertex normal ``n``.
+
+    Parameters
+    ----------
+    vertices : ndarray, shape (V, 3)
+        World points, metres.
+    triangles : ndarray of int, shape (T, 3)
+        Vertex indices.
+    K, R, t : ndarray
+        Intrinsics (3, 3), world-to-camera rotation (3, 3) and translation (3,), metres.
+    width, height : int
+        Image size, pixels.
+    vertex_rgb : ndarray, shape (V, 3), optional
+        Per-vertex albedo, floats in [0, 1] or uint8; interpolated with the
+        hit's barycentric coordinates. Default light grey.
+    dist : ndarray, optional
+        OpenCV distortion coefficients; default none.
+    ambient : float
+        Ambient term in [0, 1].
+
+    Returns
+    -------
+    ndarray of uint8, shape (height, width, 3)
+        The render, white where no ray hits the mesh.
+    """
+    from colourhs.capture import Camera
+    from colourhs.groundtruth import _cast_pixels
+
+    vertices = np.asarray(vertices, dtype=np.float64)
+    triangles = np.asarray(triangles, dtype=np.int64)
+    camera = Camera(
+        name="render", K=np.asarray(K, float),
+        dist=np.zeros(5) if dist is None else np.asarray(dist, float),
+        R=np.asarray(R, float), t=np.asarray(t, float).reshape(3),
+        light_colour="red", light_offset=np.zeros(3),
+    )  # fmt: skip
+    normals = vertex_normals(vertices, triangles)
+    scene, hit, points, n = _cast_pixels(vertices, triangles, normals, camera, width, height)
+    ray = points - camera.centre
+    ray /= np.linalg.norm(ray, axis=1, keepdims=True)
+    cos = np.nan_to_num(np.abs(np.sum(n * ray, axis=1)), nan=1.0)
+    shade = ambient + (1.0 - ambient) * np.clip(cos, 0.0, 1.0)
+    if vertex_rgb is None:
+        albedo = np.full((len(points), 3), 0.8)
+    else:
+        rgb = np.asarray(vertex_rgb)
+        rgb = rgb / 255.0 if np.issubdtype(rgb.dtype, np.integer) else rgb.astype(np.float64)
+        if rgb.shape != vertices.shape:
+            raise ValueError(f"vertex_rgb must be (V, 3) = {vertices.shape}, got {rgb.shape}")
+        # Triangle and barycentric coordinates of each hit (the hit points lie on the mesh).
+        closest = scene.compute_closest_points(_o3d_tensor(points))
+        tri = closest["primitive_ids"].numpy().astype(np.int64)
+        uv = closest["primitive_uvs"].numpy().astype(np.float64)
+        bary = np.stack([1.0 - uv[:, 0] - uv[:, 1], uv[:, 0], uv[:, 1]], axis=1)
+        albedo = np.einsum("mk,mkj->mj", bary, rgb[triangles[tri]])
+    image = np.empty((height * width, 3))
+    image[:] = BACKGROUND
+    image[hit] = np.clip(albedo, 0.0, 1.0) * shade[:, None]
+    return np.round(image.reshape(height, width, 3) * 255.0).astype(np.uint8)
+
+
+def _o3d_tensor(a: np.ndarray):
+    """A float32 open3d tensor of ``a``."""
+    import open3d as o3d
+
+    return o3d.core.Tensor(np.ascontiguousarray(a, dtype=np.float32))
+
+
+def render_grid_figure(
+    images: Mapping[str, np.ndarray] | Mapping[str, Mapping[str, np.ndarray]],
+    path: str | Path,
+    title: str = "",
+    ncols: int | None = None,
+) -> Path:
+    """The paper's Figure 7: shaded renders side by side, labelled by variant.
+
+    Parameters
+    ----------
+    images : dict
+        Either label (variant id) -> image (H, W, 3), shown in one row (or
+        wrapped after ``ncols`` panels); or row label (scene) -> {variant ->
+        image}, shown as a scenes x variants grid whose columns are the union
+        of the variants in first-seen order (a missing image leaves its cell
+        empty; ``ncols`` is then ignored).
+    path : str or Path
+        PNG file to write (atomically).
+    title : str
+        Figure title.
+    """
+    if not images:
+        raise ValueError("render_grid_figure: no images")
+    first = next(iter(images.values()))
+    if isinstance(first, Mapping):
+        rows = {str(r): dict(v) for r, v in images.items()}
+        cols: list[str] = []
+        for row in rows.values():
+            cols += [c for c in row if c not in cols]
+        cells = [
+            [(row.get(c), c if i == 0 else None) for c in cols]
+            for i, row in enumerate(rows.values())
+        ]
+        row_labels: list[str | None] = list(rows)
+    else:
+        items = list(images.items())
+        n = ncols or len(items)
+        cells = [[(img, label) for label, img in items[i : i + n]] for i in range(0, len(items), n)]
+        row_labels = [None] * len(cells)
+    shown = [c[0] for row in cells for c in row if c[0] is not None]
+    if not shown:
+        raise ValueError("render_grid_figure: no images")
+    h, w = np.asarray(shown[0]).shape[:2]
+    nr, nc = len(cells), max(len(r) for r in cells)
+    cell_w = 3.0
+    fig, axes = plt.subplots(
+        nr, nc, figsize=(cell_w * nc + 0.2, (cell_w * h / w + 0.35) * nr + (0.4 if title else 0.0)),
+        squeeze=False,
+    )  # fmt: skip
+    for r, row in enumerate(cells):
+        for c in range(nc):
+            ax = axes[r, c]
+            ax.set_xticks([])
+            ax.set_yticks([])
+            for spine in ax.spines.values():
+                spine.set_visible(False)
+            img, label = row[c] if c < len(row) else (None, None)
+            if img is not None:
+                ax.imshow(np.asarray(img), interpolation="nearest")
+            if label is not None and (row_labels[r] is None or r == 0):
+                ax.set_title(label)
+            if c == 0 and row_labels[r] is not None:
+                ax.set_ylabel(row_labels[r])
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    return _save_png(fig, path)
+
+
+def write_animation(images: list[np.ndarray], path: str | Path, fps: float = 8) -> Path:
+    """An animated GIF (looping) of a dynamic scene's frames.
+
+    Parameters
+    ----------
+    images : list of ndarray of uint8, shape (H, W, 3)
+        The frames, all the same shape.
+    path : str or Path
+        GIF file to write (atomically).
+    fps : float
+        Frames per second.
+
+    Notes
+    -----
+    Pillow merges consecutive identical frames into one longer frame, so the
+    GIF can hold fewer frames than ``images`` (its timing stays right).
+    """
+    from PIL import Image
+
+    from colourhs.io import atomic_output
+
+    if len(images) == 0:
+        raise ValueError("write_animation: no frames")
+    frames = [np.asarray(im) for im in images]
+    shape = frames[0].shape
+    if len(shape) != 3 or shape[2] != 3:
+        raise ValueError(f"write_animation: frames must be (H, W, 3), got {shape}")
+    for i, f in enumerate(frames):
+        if f.shape != shape:
+            raise ValueError(f"write_animation: frame {i} has shape {f.shape}, frame 0 {shape}")
+        if f.dtype != np.uint8:
+            raise ValueError(f"write_animation: frame {i} is {f.dtype}, expected uint8")
+    pil = [Image.fromarray(f, mode="RGB") for f in frames]
+    path = Path(path)
+    with atomic_output(path) as tmp:
+        pil[0].save(
+            tmp, format="GIF", save_all=True, append_images=pil[1:],
+            duration=max(1, round(1000.0 / fps)), loop=0,
+        )  # fmt: skip
+    return path
+
+
+def write_coloured_ply(
+    vertices: np.ndarray, triangles: np.ndarray, vertex_rgb: np.ndarray, path: str | Path
+) -> Path:
+    """A binary PLY triangle mesh with per-vertex colours (open3d), written atomically.
+
+    Parameters
+    ----------
+    vertices : ndarray, shape (V, 3)
+        World points, metres.
+    triangles : ndarray of int, shape (T, 3)
+        Vertex indices.
+    vertex_rgb : ndarray, shape (V, 3)
+        Colours, floats in [0, 1] or uint8.
+    path : str or Path
+        PLY file to write.
+    """
+    import open3d as o3d
+
+    from colourhs.io import atomic_output
+
+    vertices = np.asarray(vertices, dtype=np.float64)
+    rgb = np.asarray(vertex_rgb)
+    rgb = rgb / 255.0 if np.issubdtype(rgb.dtype, np.integer) else rgb.astype(np.float64)
+    if rgb.shape != vertices.shape or vertices.ndim != 2 or vertices.shape[1] != 3:
+        raise ValueError(
+            f"vertices {vertices.shape} and vertex_rgb {rgb.shape} must both be (V, 3)"
+        )
+    mesh = o3d.geometry.TriangleMesh(
+        o3d.utility.Vector3dVector(vertices),
+        o3d.utility.Vector3iVector(np.asarray(triangles, dtype=np.int32).reshape(-1, 3)),
+    )
+    mesh.vertex_colors = o3d.utility.Vector3dVector(np.clip(rgb, 0.0, 1.0))
+    path = Path(path)
+    with atomic_output(path) as tmp:  # keeps the .ply suffix open3d chooses the format by
+        if not o3d.io.write_triangle_mesh(str(tmp), mesh, write_ascii=False):
+            raise OSError(f"{path}: open3d could not write the mesh")
+    return path

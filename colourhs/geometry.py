@@ -184,6 +184,17 @@ def fit_plane(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return c, vt[-1]
 
 
+def vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Area-weighted unit vertex normals (V, 3) of a triangle mesh (0 for unused vertices)."""
+    tv = vertices[triangles]
+    face = np.cross(tv[:, 1] - tv[:, 0], tv[:, 2] - tv[:, 0])
+    n = np.zeros_like(vertices, dtype=float)
+    for k in range(3):
+        np.add.at(n, triangles[:, k], face)
+    norm = np.linalg.norm(n, axis=1, keepdims=True)
+    return np.divide(n, norm, out=np.zeros_like(n), where=norm > 0)
+
+
 def _dist(dist) -> np.ndarray:
     d = np.zeros(5) if dist is None else np.asarray(dist, float).ravel()
     if d.size < 4:

@@ -14,12 +14,13 @@ def atomic_output(path: str | Path) -> Iterator[Path]:
     """Write to a temporary sibling of ``path`` and move it into place on success.
 
     Yields the temporary path (a hidden file in the same folder, so the
-    final rename is atomic); on any error the temporary file is removed and
-    ``path`` is left as it was.
+    final rename is atomic, with the same suffix, so writers that choose the
+    format by extension, such as open3d's, work); on any error the temporary
+    file is removed and ``path`` is left as it was.
     """
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")
+    tmp = out.with_name(f".{out.stem}.{os.getpid()}.tmp{out.suffix}")
     try:
         yield tmp
         os.replace(tmp, out)

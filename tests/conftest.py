@@ -26,3 +26,30 @@ def clean_dataset(tmp_path_factory):
         nuisances=Nuisances().without("noise", "crosstalk"),
         progress=False,
     )
+
+
+# The demo preset's rig, board poses and seed, rendering only the board captures,
+# the white reference and the plane: the plane frame is the demo dataset's own.
+PLANE_PRESET = Preset("demo", 640, 480, 1250.0, 2, sheet_frames=1)
+
+
+@pytest.fixture(scope="session")
+def plane_calibrated(tmp_path_factory):
+    """The demo plane with every nuisance on, and the pipeline's own calibration.
+
+    Returns the dataset path and the calibration files (cross-talk JSON,
+    photometric HDF5) made by the marker, cross-talk and photometric stages.
+    """
+    from colourhs.crosstalk import calibrate_crosstalk
+    from colourhs.markers import marker_poses
+    from colourhs.photometric import photometric_maps
+
+    root = tmp_path_factory.mktemp("plane")
+    data = synthesise(root / "data", PLANE_PRESET, scenes=("plane",), progress=False)
+    marker_poses(data, root / "marker_poses.csv")
+    calibrate_crosstalk(data, root / "crosstalk.json")
+    photometric_maps(
+        data, root / "marker_poses.csv", root / "photometric.h5", root / "crosstalk.json"
+    )
+    return data, {"crosstalk_json": root / "crosstalk.json",
+                  "photometric_h5": root / "photometric.h5"}  # fmt: skip

@@ -175,6 +175,56 @@ def _depth_at(depths: np.ndarray, fractional: np.ndarray) -> np.ndarray:
     return depths[0] + fractional * (depths[1] - depths[0])
 
 
+def surface_links(
+    z: np.ndarray,
+    normals: np.ndarray,
+    rays: np.ndarray,
+    mask: np.ndarray,
+    shape: tuple[int, int],
+    edge_m: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Directed 4-neighbour links (p, q) of one continuous surface.
+
+    q is linked to p when both are in ``mask`` and q's depth is within
+    ``edge_m`` (metres) of what p's tangent plane (its normal) predicts; the
+    other links are depth edges, where the depth-normal prior is cut.
+
+    Returns
+    -------
+    p, q : (L,) pixel indices. a_p, a_q : (L,) ``n_p . r_p`` and ``n_p . r_q``.
+    """
+    H, W = shape
+    grid = np.arange(H * W).reshape(H, W)
+    out = [[], [], [], []]
+    for p_arr, q_arr in ((grid[:, :-1], grid[:, 1:]), (grid[:-1], grid[1:])):
+        for p, q in ((p_arr.ravel(), q_arr.ravel()), (q_arr.ravel(), p_arr.ravel())):
+            ok = mask[p] & mask[q]
+            p, q = p[ok], q[ok]
+            n = normals[p]
+            a_q = np.sum(n * rays[q], axis=1)
+            a_p = np.sum(n * rays[p], axis=1)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                pred = z[p] * a_p / a_q
+            keep = np.isfinite(pred) & (np.abs(pred - z[q]) < edge_m)
+            for lst, arr in zip(out, (p, q, a_p, a_q), strict=True):
+                lst.append(arr[keep])
+    return tuple(np.concatenate(lst) for lst in out)
+
+
+def surface_components(p: np.ndarray, q: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Label (N,) of each masked pixel's surface (linked by :func:`surface_links`); -1 outside."""
+    from scipy.sparse.csgraph import connected_components
+
+    pix = np.flatnonzero(mask)
+    idx = np.full(len(mask), -1)
+    idx[pix] = np.arange(len(pix))
+    g = sp.coo_matrix((np.ones(len(p)), (idx[p], idx[q])), shape=(len(pix), len(pix)))
+    _, lab = connected_components(g, directed=False)
+    out = np.full(len(mask), -1)
+    out[pix] = lab
+    return out
+
+
 def refine_depth(
     z0: np.ndarray,
     normals: np.ndarray,
@@ -209,33 +259,49 @@ def refine_depth(
     idx = np.full(H * W, -1)
     pix = np.flatnonzero(mask)
     idx[pix] = np.arange(len(pix))
-    grid = np.arange(H * W).reshape(H, W)
-    rows, cols, vals = [], [], []
-    r = 0
-    for p_arr, q_arr in ((grid[:, :-1], grid[:, 1:]), (grid[:-1], grid[1:])):
-        for p, q in ((p_arr.ravel(), q_arr.ravel()), (q_arr.ravel(), p_arr.ravel())):
-            ok = mask[p] & mask[q]
-            p, q = p[ok], q[ok]
-            n = normals[p]
-            a_q = np.sum(n * rays[q], axis=1)
-            a_p = np.sum(n * rays[p], axis=1)
-            with np.errstate(invalid="ignore", divide="ignore"):
-                pred = z0[p] * a_p / a_q
-            keep = np.isfinite(pred) & (np.abs(pred - z0[q]) < edge_m)
-            p, q, a_p, a_q = p[keep], q[keep], a_p[keep], a_q[keep]
-            m = len(p)
-            rows += [np.arange(r, r + m), np.arange(r, r + m)]
-            cols += [idx[q], idx[p]]
-            vals += [a_q, -a_p]
-            r += m
+    p, q, a_p, a_q = surface_links(z0, normals, rays, mask, shape, edge_m)
+    r = len(p)
+    rows = [np.arange(r), np.arange(r)]
+    cols = [idx[q], idx[p]]
+    vals = [a_q, -a_p]
     A = sp.csr_matrix(
-        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(r, len(pix))
+        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+        shape=(r, len(pix)),
     )
     N = (A.T @ A + data_weight**2 * sp.identity(len(pix))).tocsr()
     b = data_weight**2 * z0[pix]
     z = spsolve(N.tocsc(), b)
     out = z0.copy()
     out[pix] = z
+    return out
+
+
+def align_components(z: np.ndarray, z0: np.ndarray, labels: np.ndarray) -> np.ndarray:
+    """Scale each connected surface along the rays onto the discrete solution.
+
+    The refinement with a weak data weight takes a smooth surface's shape from
+    its HS normals (the discrete labelling, anchored by a weak data term, can
+    tilt); its depth is then taken from the discrete solution, as the median
+    of ``z0 / z`` over each surface (``labels`` from :func:`surface_components`).
+
+    Parameters
+    ----------
+    z, z0 : (N,) refined and discrete depths, metres.
+    labels : (N,) surface label of each pixel, -1 for none.
+
+    Returns
+    -------
+    (N,) depths.
+    """
+    out = z.copy()
+    sel = labels >= 0
+    lab = labels[sel]
+    ratio = z0[sel] / z[sel]
+    order = np.lexsort((ratio, lab))
+    starts = np.searchsorted(lab[order], np.arange(lab.max() + 1))
+    counts = np.bincount(lab, minlength=lab.max() + 1)
+    med = ratio[order][np.minimum(starts + counts // 2, len(order) - 1)]
+    out[sel] = z[sel] * med[lab]
     return out
 
 
@@ -269,6 +335,9 @@ def reconstruct(
     refine_passes: int = 3,
     min_component: int | None = None,
     erode_px: int | None = None,
+    align: bool = True,
+    shape_weight: float = 0.003,
+    link_m: float = 0.002,
 ) -> DepthResult:
     """Reconstruct one frame with ML or Bayesian colour HS.
 
@@ -379,8 +448,20 @@ def reconstruct(
         min_px = int(min_component or 0.002 * H * W)
         ok &= _large_components(ok.reshape(H, W), min_px).ravel()
         z = np.nan_to_num(z)
-        for _ in range(refine_passes):
-            z = refine_depth(z, nrm, rays, ok, (H, W), data_weight, edge_m)
+        z0 = z.copy()
+        weights = [shape_weight if align else data_weight] * refine_passes
+        for i, weight in enumerate(weights):
+            z = refine_depth(z, nrm, rays, ok, (H, W), weight, edge_m)
+            if i == len(weights) - 1:
+                # Pieces of surface that the prior did not link to a large one
+                # (a rim between a marker and an edge, a speck) are left out.
+                links = surface_links(z, nrm, rays, ok, (H, W), link_m)
+                labels = surface_components(links[0], links[1], ok)
+                sizes = np.bincount(labels[ok])
+                labels[ok] = np.where(sizes[labels[ok]] >= min_px, labels[ok], -1)
+                ok &= labels >= 0
+                if align:
+                    z = align_components(z, z0, labels)
             # Re-evaluate the HS normals at the refined depths (they depend on depth).
             c, n = evaluate(rays[pix] * z[pix][:, None], np.ones(1), np.float32)
             good = c[:, 0] < INVALID_COST  # else keep the previous normal

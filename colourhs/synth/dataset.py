@@ -258,6 +258,13 @@ def _jobs(preset: Preset, poses, parts) -> list[_Job]:
     return [j for j in jobs if j.frames or j.chromatic]
 
 
+def _scene_of(job: _Job) -> str | None:
+    """The scene (or chromatic object) a job renders; None for the board and white captures."""
+    path = (job.frames or (job.chromatic,))[0]
+    parts = path.split("/")
+    return parts[1] if parts[0] in ("scenes", "chromatic") and parts[1] != "white" else None
+
+
 SCENE_META = {
     "plane": {"chromatic": None, "dynamic": False,
               "description": "held-out pose of the white marker board"},
@@ -279,6 +286,7 @@ def synthesise(
     progress: bool = True,
     overwrite: bool = False,
     workers: int | None = None,
+    scenes: tuple[str, ...] | None = None,
 ) -> Path:
     """Render a synthetic colour HS dataset into ``out`` (capture format v1).
 
@@ -293,6 +301,8 @@ def synthesise(
     seed : seed of every random choice (rig, poses, noise).
     nuisances : effects to simulate (default: all on, :class:`Nuisances`).
     parts : subset of ``("photometric", "chromatic", "scenes")`` to render.
+    scenes : render only these of ``plane``, ``statue``, ``toy``, ``sheet`` (their
+        frames and chromatic captures); default all.
     progress : show a progress bar.
     overwrite : replace an existing ``out``.
     workers : processes rendering views in parallel (default: CPU count).
@@ -318,7 +328,7 @@ def synthesise(
         shutil.rmtree(tmp)
     tmp.mkdir(parents=True)
     try:
-        _write_dataset(tmp, rig, p, poses, seed, nuis, parts, progress, workers)
+        _write_dataset(tmp, rig, p, poses, seed, nuis, parts, progress, workers, scenes)
         if out.exists():
             shutil.rmtree(out)
         os.replace(tmp, out)
@@ -328,7 +338,7 @@ def synthesise(
     return out
 
 
-def _write_dataset(root, rig, p, poses, seed, nuis, parts, progress, workers):
+def _write_dataset(root, rig, p, poses, seed, nuis, parts, progress, workers, scenes=None):
     (root / "rig.json").write_text(json.dumps(rig_json(rig, p, p.board), indent=2))
     gt = root / "gt"
     gt.mkdir()
@@ -345,10 +355,14 @@ def _write_dataset(root, rig, p, poses, seed, nuis, parts, progress, workers):
             f.create_dataset(key, data=mu, compression="gzip")
     if "scenes" in parts:
         for name, meta in SCENE_META.items():
+            if scenes is not None and name not in scenes:
+                continue
             d = root / "scenes" / name
             d.mkdir(parents=True, exist_ok=True)
             (d / "scene.json").write_text(json.dumps(meta, indent=2))
     jobs = _jobs(p, poses, parts)
+    if scenes is not None:
+        jobs = [j for j in jobs if _scene_of(j) in (None, *scenes)]
     rays = [camera_rays(c, p.width, p.height, p.supersample) for c in rig.cameras]
     args = [(root, rig, rays, p, job, seed, nuis) for job in jobs]
     bar = tqdm(total=len(jobs), desc=f"synth {p.name}", unit="view", disable=not progress)

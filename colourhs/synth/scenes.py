@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from colourhs.geometry import vertex_normals
 from colourhs.synth.brdf import Material
 
 WHITE_ALBEDO = 0.8  # reflectance of the board's white and of the white reference
@@ -46,16 +47,6 @@ class SceneGeometry:
     material_ids: np.ndarray
     materials: tuple[Material, ...]
     albedo: Callable[[np.ndarray, np.ndarray], np.ndarray]
-
-
-def vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    """Area-weighted vertex normals (V, 3) of a triangle mesh."""
-    v = vertices[triangles]
-    fn = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
-    vn = np.zeros_like(vertices)
-    for k in range(3):
-        np.add.at(vn, triangles[:, k], fn)
-    return vn / np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-30)
 
 
 def grid_mesh(nu: int, nv: int, wrap_u: bool = False) -> np.ndarray:

@@ -1,0 +1,581 @@
+"""Accuracy of reconstructions against ground truth: Hausdorff distances, error maps, metrics.
+
+The paper (section IV-A.1) scores a reconstruction by the RMS Hausdorff
+distance between the vertices of its Poisson mesh and the overlaid
+ground-truth (GT) mesh, and shows the per-vertex distances as heat maps
+(Figure 5). A single-view reconstruction only covers the surface its
+reference camera sees, so both sides are first restricted to that **seen
+region** (:func:`seen_surface`, :func:`evaluated_vertices`):
+
+- GT: the triangles hit by the reference camera's pixel rays or with a
+  vertex it sees (the grazing band at a rim that pixel rays miss), and the
+  ray hits themselves (one per pixel) as samples of the seen GT;
+- reconstruction: the mesh vertices visible from the reference camera that
+  project onto pixels where the GT is visible (dilated by a couple of pixels,
+  so that surface spilling over the silhouette's edge still counts).
+
+The seen GT triangles are the accuracy's target; unseen sides (the back of
+the object, which a one-sided reconstruction cannot have) count in neither
+direction.
+
+Reported per frame (:func:`evaluate_frame`, all in millimetres):
+
+``hausdorff_rms_mm``, ``hausdorff_mean_mm``, ``hausdorff_max_mm``
+    **Accuracy**, one direction: from each evaluated reconstruction vertex to
+    the seen GT surface (the paper's "RMS Hausdorff distance").
+``completeness_rms_mm``, ``completeness_mean_mm``, ``completeness_max_mm``
+    **Completeness**, the other direction: from the seen GT (one sample per
+    reference pixel where the GT is visible) to the whole reconstruction mesh.
+``depth_median_mm``, ``depth_rms_mm``, ``depth_p95_mm``, ``normal_median_deg``, ``coverage``
+    Per-pixel errors of the depth file against the GT rendered into the
+    reference camera (:func:`depth_errors`).
+
+Distances are computed by MeshLab's Hausdorff filter (pymeshlab
+``get_hausdorff_distance``): point-to-surface distances from samples of one
+mesh to the closest point on the other's triangles.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+import open3d as o3d
+import pandas as pd
+import pymeshlab
+from scipy.ndimage import binary_dilation
+
+from colourhs.geometry import backproject, camera_centre, pixel_grid, project, world_to_camera
+from colourhs.groundtruth import load_mesh, render_depth_normals
+from colourhs.io import atomic_output, write_json
+from colourhs.mesh import DepthMap, TriMesh, read_depth, write_ply
+
+__all__ = [
+    "CONTRACT_COLUMNS",
+    "depth_errors",
+    "depth_summary",
+    "distance_summary",
+    "evaluate_frame",
+    "evaluated_vertices",
+    "hausdorff",
+    "hausdorff_symmetric",
+    "metrics_table",
+    "seen_surface",
+    "visible_vertices",
+]
+
+#: The results contract's columns of ``reports/NAME/metrics.csv``, in order.
+CONTRACT_COLUMNS = (
+    "scene", "frame", "variant", "hausdorff_rms_mm", "hausdorff_mean_mm", "hausdorff_max_mm",
+    "depth_median_mm", "depth_rms_mm", "normal_median_deg",
+)  # fmt: skip
+#: Extra metric columns, after the contract's.
+EXTRA_COLUMNS = (
+    "hausdorff_median_mm", "completeness_rms_mm", "completeness_mean_mm", "completeness_max_mm",
+    "depth_p95_mm", "coverage", "hausdorff_samples", "completeness_samples",
+)  # fmt: skip
+#: Offset (metres) of a visibility ray's start from the vertex it tests (avoids self-hits).
+VISIBILITY_EPS_M = 1e-4
+
+
+# --------------------------------------------------------------------------- distances
+
+
+def distance_summary(distances_m: np.ndarray) -> dict:
+    """RMS, mean, median and max (metres) and the count of point-to-surface distances.
+
+    RMS is ``sqrt(mean(d**2))``, as in MeshLab's Hausdorff filter. All NaN for no distances.
+    """
+    d = np.asarray(distances_m, float).ravel()
+    d = d[np.isfinite(d)]
+    if d.size == 0:
+        nan = float("nan")
+        return {"rms_m": nan, "mean_m": nan, "median_m": nan, "max_m": nan, "n_samples": 0}
+    return {
+        "rms_m": float(np.sqrt(np.mean(d**2))),
+        "mean_m": float(np.mean(d)),
+        "median_m": float(np.median(d)),
+        "max_m": float(np.max(d)),
+        "n_samples": int(d.size),
+    }
+
+
+def _ml_mesh(vertices, triangles) -> pymeshlab.Mesh:
+    v = np.ascontiguousarray(np.asarray(vertices, np.float64).reshape(-1, 3))
+    if triangles is None or len(triangles) == 0:
+        return pymeshlab.Mesh(vertex_matrix=v)
+    f = np.ascontiguousarray(np.asarray(triangles, np.int32).reshape(-1, 3))
+    return pymeshlab.Mesh(vertex_matrix=v, face_matrix=f)
+
+
+def hausdorff(
+    vertices_a: np.ndarray,
+    triangles_a: np.ndarray | None,
+    vertices_b: np.ndarray,
+    triangles_b: np.ndarray,
+    sample_vertices: bool = True,
+    n_samples: int | None = None,
+) -> dict:
+    """One-sided Hausdorff distance from mesh (or point set) a to the surface of mesh b.
+
+    Wraps pymeshlab's ``get_hausdorff_distance`` (MeshLab's "Hausdorff
+    Distance" filter): samples of a, each with the distance to the closest
+    point on b's triangles.
+
+    Parameters
+    ----------
+    vertices_a : ndarray, shape (Na, 3)
+        Vertices of a, metres.
+    triangles_a : ndarray, shape (Ta, 3), or None
+        Triangles of a (None or empty: a is a point set; vertex sampling only).
+    vertices_b, triangles_b : ndarray, shapes (Nb, 3), (Tb, 3)
+        The target mesh, metres.
+    sample_vertices : bool
+        True: sample a's vertices (all of them, in order, unless ``n_samples``
+        is smaller than their count); False: ``n_samples`` Monte-Carlo samples
+        on a's triangles (area-uniform; default ``max(10 * Na, 10000)``).
+    n_samples : int, optional
+        Number of samples.
+
+    Returns
+    -------
+    dict
+        ``rms_m``, ``mean_m``, ``max_m``, ``min_m`` (metres, from MeshLab),
+        ``n_samples``, ``samples`` (n, 3) sample points on a, ``closest`` (n, 3)
+        their closest points on b and ``distances`` (n,) metres; with all
+        vertices sampled, ``distances[i]`` belongs to ``vertices_a[i]``.
+    """
+    va = np.asarray(vertices_a, float).reshape(-1, 3)
+    vb = np.asarray(vertices_b, float).reshape(-1, 3)
+    if len(va) == 0:
+        raise ValueError("hausdorff: mesh a has no vertices")
+    if triangles_b is None or len(triangles_b) == 0:
+        raise ValueError("hausdorff: target mesh b has no triangles")
+    has_faces = triangles_a is not None and len(triangles_a) > 0
+    if not sample_vertices and not has_faces:
+        raise ValueError("hausdorff: face sampling needs triangles on mesh a")
+    if n_samples is None:
+        n_samples = len(va) if sample_vertices else max(10 * len(va), 10000)
+    both = np.vstack([va, vb])
+    # Any distance is below the diagonal of the union's bounding box: count every sample.
+    max_dist = 1.01 * float(np.linalg.norm(np.ptp(both, axis=0))) + 1e-9
+    ms = pymeshlab.MeshSet()
+    ms.add_mesh(_ml_mesh(va, triangles_a if has_faces else None), "a")
+    ms.add_mesh(_ml_mesh(vb, triangles_b), "b")
+    out = ms.get_hausdorff_distance(
+        sampledmesh=0, targetmesh=1, savesample=True, samplevert=bool(sample_vertices),
+        sampleedge=False, samplefauxedge=False, sampleface=not sample_vertices,
+        samplenum=int(n_samples), maxdist=pymeshlab.PureValue(max_dist),
+    )  # fmt: skip
+    labels = {}
+    for mid in range(ms.mesh_number()):
+        labels[ms.mesh(mid).label()] = ms.mesh(mid)
+    samples = labels["Hausdorff Sample Point"].vertex_matrix().copy()
+    closest = labels["Hausdorff Closest Points"].vertex_matrix().copy()
+    return {
+        "rms_m": float(out["RMS"]),
+        "mean_m": float(out["mean"]),
+        "max_m": float(out["max"]),
+        "min_m": float(out["min"]),
+        "n_samples": int(out["n_samples"]),
+        "samples": samples,
+        "closest": closest,
+        "distances": np.linalg.norm(samples - closest, axis=1),
+    }
+
+
+def hausdorff_symmetric(vertices_a, triangles_a, vertices_b, triangles_b, **kwargs) -> dict:
+    """Both one-sided distances (:func:`hausdorff` a->b and b->a) and the symmetric maximum.
+
+    Returns
+    -------
+    dict
+        ``a_to_b`` and ``b_to_a`` (the two results) and ``max_m``, the
+        symmetric Hausdorff distance (metres).
+    """
+    ab = hausdorff(vertices_a, triangles_a, vertices_b, triangles_b, **kwargs)
+    ba = hausdorff(vertices_b, triangles_b, vertices_a, triangles_a, **kwargs)
+    return {"a_to_b": ab, "b_to_a": ba, "max_m": max(ab["max_m"], ba["max_m"])}
+
+
+# --------------------------------------------------------------------------- seen region
+
+
+def _scene(vertices, triangles) -> o3d.t.geometry.RaycastingScene:
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(
+        o3d.core.Tensor(np.asarray(vertices, np.float32).reshape(-1, 3)),
+        o3d.core.Tensor(np.asarray(triangles, np.uint32).reshape(-1, 3)),
+    )
+    return scene
+
+
+def visible_vertices(
+    vertices: np.ndarray,
+    triangles: np.ndarray | None,
+    camera,
+    width: int,
+    height: int,
+    eps_m: float = VISIBILITY_EPS_M,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Mesh vertices a camera sees, and the pixels they fall on.
+
+    A vertex is visible when it is in front of the camera, projects inside
+    the image and is not hidden by the mesh itself: a ray from ``eps_m`` off
+    the vertex towards the camera centre hits no triangle. Unlike pixel ray
+    casts this does not thin out at grazing angles (silhouette rims).
+
+    Parameters
+    ----------
+    vertices : ndarray, shape (V, 3)
+        World points, metres.
+    triangles : ndarray, shape (T, 3), or None
+        The occluding mesh (None: no occlusion test).
+    camera : object with ``K``, ``dist``, ``R``, ``t``
+        A :class:`colourhs.capture.Camera` or :class:`colourhs.mesh.DepthMap`.
+    width, height : int
+        Image size, pixels.
+    eps_m : float
+        Start offset of the visibility rays, metres.
+
+    Returns
+    -------
+    visible : ndarray of bool, shape (V,)
+    pixel : ndarray of int, shape (V, 2)
+        Nearest pixel (row, column) of each vertex; -1 where not visible.
+    """
+    v = np.asarray(vertices, float).reshape(-1, 3)
+    uv = project(v, camera.K, camera.dist, camera.R, camera.t)
+    ok = np.all(np.isfinite(uv), axis=1) & (world_to_camera(v, camera.R, camera.t)[:, 2] > 0)
+    pixel = np.full((len(v), 2), -1)
+    pixel[ok] = np.rint(uv[ok, ::-1]).astype(int)
+    ok &= (pixel[:, 0] >= 0) & (pixel[:, 0] < height) & (pixel[:, 1] >= 0) & (pixel[:, 1] < width)
+    if ok.any() and triangles is not None and len(triangles):
+        d = camera_centre(camera.R, camera.t) - v[ok]
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        rays = np.concatenate([v[ok] + eps_m * d, d], axis=1).astype(np.float32)
+        hidden = _scene(v, triangles).test_occlusions(o3d.core.Tensor(rays)).numpy()
+        ok[ok] = ~hidden
+    pixel[~ok] = -1
+    return ok, pixel
+
+
+def seen_surface(
+    vertices: np.ndarray, triangles: np.ndarray, camera, width: int, height: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """What a camera sees of a mesh.
+
+    Parameters
+    ----------
+    vertices, triangles : ndarray, shapes (V, 3), (T, 3)
+        The mesh (world frame, metres).
+    camera : object with ``K``, ``dist``, ``R``, ``t``
+        A :class:`colourhs.capture.Camera` or :class:`colourhs.mesh.DepthMap`.
+    width, height : int
+        Image size, pixels.
+
+    Returns
+    -------
+    seen_triangles : ndarray of bool, shape (T,)
+        Triangles hit by a pixel-centre ray or with a vertex the camera sees
+        (:func:`visible_vertices`; this keeps the thin grazing band at a
+        silhouette rim that pixel rays miss).
+    pixel_mask : ndarray of bool, shape (height, width)
+        Pixels whose ray hits the mesh.
+    points : ndarray, shape (M, 3)
+        The hit points (one per True pixel, row-major), metres.
+    """
+    tri = np.asarray(triangles).reshape(-1, 3)
+    grid = pixel_grid(width, height).reshape(-1, 2)
+    origin, dirs = backproject(grid, camera.K, camera.dist, camera.R, camera.t)
+    rays = np.concatenate([np.broadcast_to(origin, dirs.shape), dirs], axis=1)
+    ans = _scene(vertices, tri).cast_rays(o3d.core.Tensor(rays.astype(np.float32)))
+    t_hit = ans["t_hit"].numpy().astype(float)
+    hit = np.isfinite(t_hit)
+    seen = np.zeros(len(tri), bool)
+    seen[ans["primitive_ids"].numpy()[hit].astype(np.int64)] = True
+    visible, _ = visible_vertices(vertices, tri, camera, width, height)
+    seen |= visible[tri].any(axis=1)
+    points = origin + dirs[hit] * t_hit[hit, None]
+    return seen, hit.reshape(height, width), points
+
+
+def evaluated_vertices(
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    camera,
+    pixel_mask: np.ndarray,
+    dilate_px: int = 2,
+) -> np.ndarray:
+    """Reconstruction vertices inside the seen region.
+
+    A vertex counts when the camera sees it (:func:`visible_vertices`) on a
+    pixel of ``pixel_mask`` (where the GT is visible) dilated by ``dilate_px``
+    pixels, so that surface spilling just past the true silhouette counts.
+
+    Parameters
+    ----------
+    vertices, triangles : ndarray, shapes (V, 3), (T, 3)
+        The reconstruction mesh (world frame, metres).
+    camera : object with ``K``, ``dist``, ``R``, ``t``
+        The reference camera.
+    pixel_mask : ndarray of bool, shape (H, W)
+        Pixels where the GT is visible (:func:`seen_surface`).
+    dilate_px : int
+        Dilation of ``pixel_mask``, pixels.
+
+    Returns
+    -------
+    ndarray of bool, shape (V,)
+    """
+    h, w = pixel_mask.shape
+    mask = binary_dilation(pixel_mask, iterations=dilate_px) if dilate_px > 0 else pixel_mask
+    ok, pixel = visible_vertices(vertices, triangles, camera, w, h)
+    ok[ok] = mask[pixel[ok, 0], pixel[ok, 1]]
+    return ok
+
+
+# --------------------------------------------------------------------------- depth maps
+
+
+def depth_summary(
+    depth_error_m: np.ndarray, normal_error_deg: np.ndarray, truth_pixels: int
+) -> dict:
+    """Depth and normal error statistics over the pixels both reconstructed and true.
+
+    Parameters
+    ----------
+    depth_error_m : ndarray
+        Signed depth errors (metres) of the compared pixels (NaN entries ignored).
+    normal_error_deg : ndarray
+        Normal angle errors (degrees) of the compared pixels (NaN entries ignored).
+    truth_pixels : int
+        Pixels where the ground truth is visible (the coverage's denominator).
+
+    Returns
+    -------
+    dict
+        ``depth_median_mm``, ``depth_rms_mm``, ``depth_p95_mm`` (of the absolute
+        error), ``normal_median_deg``, ``coverage`` (compared / truth pixels; None
+        where there are no truth pixels) and ``truth_pixels``; the errors are None
+        where there is nothing to compare.
+    """
+    e = np.abs(np.asarray(depth_error_m, float).ravel()) * 1e3
+    e = e[np.isfinite(e)]
+    a = np.asarray(normal_error_deg, float).ravel()
+    a = a[np.isfinite(a)]
+    truth_pixels = int(truth_pixels)
+    out = {"depth_median_mm": None, "depth_rms_mm": None, "depth_p95_mm": None,
+           "normal_median_deg": None,
+           "coverage": e.size / truth_pixels if truth_pixels > 0 else None,
+           "truth_pixels": truth_pixels}  # fmt: skip
+    if e.size:
+        out["depth_median_mm"] = float(np.median(e))
+        out["depth_rms_mm"] = float(np.sqrt(np.mean(e**2)))
+        out["depth_p95_mm"] = float(np.percentile(e, 95))
+    if a.size:
+        out["normal_median_deg"] = float(np.median(a))
+    return out
+
+
+def depth_errors(
+    depth_map: DepthMap,
+    gt_vertices: np.ndarray,
+    gt_triangles: np.ndarray,
+    gt_normals: np.ndarray,
+    width: int | None = None,
+    height: int | None = None,
+) -> tuple[np.ndarray, np.ndarray, dict]:
+    """Per-pixel depth and normal errors of a depth map against a GT mesh.
+
+    The GT is rendered into the depth map's reference camera
+    (:func:`colourhs.groundtruth.render_depth_normals`: z-depth and interpolated
+    vertex normals facing the camera at every pixel centre).
+
+    Parameters
+    ----------
+    depth_map : DepthMap
+    gt_vertices, gt_triangles, gt_normals : ndarray
+        The GT mesh (metres) and its unit vertex normals.
+    width, height : int, optional
+        Image size, pixels (default: the depth map's; must match it).
+
+    Returns
+    -------
+    depth_error : ndarray, shape (H, W)
+        Reconstructed minus true z-depth, metres; NaN where either is missing.
+    normal_error : ndarray, shape (H, W)
+        Angle between reconstructed and true normals, degrees; NaN where either is missing.
+    metrics : dict
+        :func:`depth_summary` of the two maps.
+    """
+    width = depth_map.width if width is None else int(width)
+    height = depth_map.height if height is None else int(height)
+    if (height, width) != depth_map.depth.shape:
+        raise ValueError(
+            f"{depth_map.path}: depth map is {depth_map.depth.shape}, image is {(height, width)}"
+        )
+    gd, gn = render_depth_normals(
+        np.asarray(gt_vertices, float), np.asarray(gt_triangles), np.asarray(gt_normals, float),
+        depth_map, width, height,
+    )  # fmt: skip
+    depth = np.asarray(depth_map.depth, float)
+    err = depth - gd  # NaN where either is NaN
+    n = np.asarray(depth_map.normal, float)
+    with np.errstate(invalid="ignore"):
+        n = n / np.linalg.norm(n, axis=2, keepdims=True)
+        ang = np.degrees(np.arccos(np.clip(np.sum(n * gn, axis=2), -1.0, 1.0)))
+    ang[~np.isfinite(err)] = np.nan
+    return err, ang, depth_summary(err, ang, int(np.isfinite(gd).sum()))
+
+
+# --------------------------------------------------------------------------- rule functions
+
+
+def _mm(x):
+    return None if x is None or not np.isfinite(x) else float(x) * 1e3
+
+
+def _empty_metrics() -> dict:
+    return {k: None for k in CONTRACT_COLUMNS[3:] + EXTRA_COLUMNS}
+
+
+def evaluate_frame(
+    depth_h5: str | Path,
+    mesh_ply: str | Path | None,
+    gt_ply: str | Path | None,
+    out_json: str | Path,
+    out_ply: str | Path | None = None,
+    scene: str = "",
+    frame: str = "",
+    variant: str = "",
+    vmax_mm: float | None = None,
+    dilate_px: int = 2,
+    completeness_samples: int = 20000,
+) -> dict:
+    """Score one reconstructed frame against its ground truth (the Snakemake rule's function).
+
+    Parameters
+    ----------
+    depth_h5 : str or Path
+        Results-contract depth file (gives the reference camera and image size).
+    mesh_ply : str or Path, optional
+        The frame's Poisson mesh (``mesh/<frame>.ply``); None skips the Hausdorff metrics.
+    gt_ply : str or Path, optional
+        GT mesh (``scenes/<scene>/gt/<frame>.ply``); None (a scene without ground
+        truth) writes the metrics with empty (null) values.
+    out_json : str or Path
+        Metrics JSON to write (atomically): scene, frame, variant, the metric
+        columns of :data:`CONTRACT_COLUMNS` and :data:`EXTRA_COLUMNS` (see the
+        module docstring for their meaning), sizes and inputs.
+    out_ply : str or Path, optional
+        The reconstruction mesh coloured by each vertex's accuracy distance
+        (:func:`colourhs.figures.value_colours`, viridis from 0 to ``vmax_mm``);
+        grey outside the seen region or without ground truth.
+    scene, frame, variant : str
+        Identify the row in the metrics table.
+    vmax_mm : float, optional
+        Top of the colour scale, mm (default: the 95th percentile of the distances).
+    dilate_px : int
+        Pixels by which the GT's image mask is grown (selects evaluated vertices).
+    completeness_samples : int
+        At most this many seen-GT samples (every k-th visible pixel's hit) for
+        completeness: MeshLab's search slows with the distance, so a poor
+        reconstruction with all 70 k samples of a demo frame takes a minute.
+
+    Returns
+    -------
+    dict
+        What was written to ``out_json``.
+    """
+    from colourhs.figures import value_colours
+
+    t0 = time.perf_counter()
+    dm = read_depth(depth_h5)
+    info = {"scene": str(scene), "frame": str(frame), "variant": str(variant),
+            "method": dm.method, "camera": dm.camera}  # fmt: skip
+    info.update(_empty_metrics())
+    mesh = TriMesh(*load_mesh(mesh_ply)) if mesh_ply is not None else None
+    dist_v = None
+    if gt_ply is not None:
+        gv, gt_tri, gn = load_mesh(gt_ply)
+        _, _, depth_metrics = depth_errors(dm, gv, gt_tri, gn)
+        info.update(depth_metrics)
+        if mesh is not None:
+            v, tri, _ = mesh
+            seen, pixel_mask, gt_points = seen_surface(gv, gt_tri, dm, dm.width, dm.height)
+            if seen.any():
+                target = gt_tri[seen]
+                evaluated = evaluated_vertices(v, tri, dm, pixel_mask, dilate_px)
+                dist_v = np.full(len(v), np.nan)
+                info["hausdorff_samples"] = int(evaluated.sum())
+                if evaluated.any():  # the evaluated vertices as a point set, in vertex order
+                    acc = hausdorff(v[evaluated], None, gv, target)
+                    dist_v[evaluated] = acc["distances"]
+                    info.update({
+                        "hausdorff_rms_mm": _mm(acc["rms_m"]),
+                        "hausdorff_mean_mm": _mm(acc["mean_m"]),
+                        "hausdorff_max_mm": _mm(acc["max_m"]),
+                        "hausdorff_median_mm": _mm(float(np.median(acc["distances"]))),
+                    })  # fmt: skip
+                step = max(1, -(-len(gt_points) // int(completeness_samples)))
+                comp = hausdorff(gt_points[::step], None, v, tri)
+                info.update({
+                    "completeness_rms_mm": _mm(comp["rms_m"]),
+                    "completeness_mean_mm": _mm(comp["mean_m"]),
+                    "completeness_max_mm": _mm(comp["max_m"]),
+                    "completeness_samples": comp["n_samples"],
+                })  # fmt: skip
+    if out_ply is not None and mesh is not None:
+        d_mm = np.full(len(mesh.vertices), np.nan) if dist_v is None else dist_v * 1e3
+        finite = d_mm[np.isfinite(d_mm)]
+        top = vmax_mm if vmax_mm is not None else (np.percentile(finite, 95) if finite.size else 1)
+        info["colour_vmax_mm"] = float(top)
+        write_ply(out_ply, mesh.vertices, mesh.triangles, mesh.normals,
+                  colours=value_colours(d_mm, 0.0, float(top)))  # fmt: skip
+    info.update({
+        "mesh_vertices": None if mesh is None else int(len(mesh.vertices)),
+        "depth_h5": str(depth_h5), "mesh_ply": None if mesh_ply is None else str(mesh_ply),
+        "gt_ply": None if gt_ply is None else str(gt_ply),
+         "dilate_px": int(dilate_px),
+        "completeness_max_samples": int(completeness_samples),
+        "units": "mm; hausdorff_* = reconstruction -> seen GT (accuracy), "
+                 "completeness_* = seen GT -> reconstruction",
+        "seconds": time.perf_counter() - t0,
+    })  # fmt: skip
+    write_json(out_json, info)
+    return info
+
+
+def metrics_table(json_paths, out_csv: str | Path) -> pd.DataFrame:
+    """Gather per-frame metrics JSON files into the tidy ``reports/NAME/metrics.csv``.
+
+    One row per (scene, frame, variant), sorted by them; columns
+    :data:`CONTRACT_COLUMNS`, then :data:`EXTRA_COLUMNS`, then ``method``;
+    empty cells where a metric is unknown (no ground truth). Written atomically.
+
+    Raises
+    ------
+    ValueError
+        On a repeated (scene, frame, variant) or a file missing those keys.
+    """
+    rows = []
+    for p in json_paths:
+        rec = json.loads(Path(p).read_text())
+        missing = [k for k in ("scene", "frame", "variant") if k not in rec]
+        if missing:
+            raise ValueError(f"{p}: metrics lack {missing}")
+        rows.append(rec)
+    columns = list(CONTRACT_COLUMNS) + list(EXTRA_COLUMNS) + ["method"]
+    table = pd.DataFrame(rows, columns=columns)
+    for key in ("scene", "frame", "variant"):
+        table[key] = table[key].astype(str)
+    dup = table.duplicated(["scene", "frame", "variant"])
+    if dup.any():
+        raise ValueError(f"metrics: repeated rows {table.loc[dup, ['scene', 'frame', 'variant']]}")
+    table = table.sort_values(["scene", "frame", "variant"]).reset_index(drop=True)
+    with atomic_output(out_csv) as tmp:
+        table.to_csv(tmp, index=False)
+    return table

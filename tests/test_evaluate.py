@@ -1,0 +1,202 @@
+"""Hausdorff distances, seen regions, depth errors and the metrics table (colourhs.evaluate)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import open3d as o3d
+import pandas as pd
+import pytest
+from scipy.spatial import cKDTree
+
+from colourhs.capture import Camera
+from colourhs.evaluate import (
+    CONTRACT_COLUMNS,
+    depth_errors,
+    evaluate_frame,
+    hausdorff,
+    hausdorff_symmetric,
+    metrics_table,
+    seen_surface,
+    visible_vertices,
+)
+from colourhs.geometry import look_at
+from colourhs.groundtruth import load_mesh, render_depth_normals
+from colourhs.mesh import read_depth, write_ply
+from colourhs.reconstruct.frame import DepthResult, write_depth
+
+W, H = 128, 96
+
+
+def sphere(r: float, resolution: int, scale=(1.0, 1.0, 1.0), centre=(0.0, 0.0, 0.0)):
+    """Vertices (metres), triangles and unit normals of a UV sphere (or ellipsoid)."""
+    m = o3d.geometry.TriangleMesh.create_sphere(r, resolution)
+    m.vertices = o3d.utility.Vector3dVector(np.asarray(m.vertices) * scale + centre)
+    m.compute_vertex_normals()
+    return np.asarray(m.vertices), np.asarray(m.triangles), np.asarray(m.vertex_normals)
+
+
+def surface_samples(vertices, triangles, n, seed=0):
+    """n area-uniform random points on a triangle mesh."""
+    rng = np.random.default_rng(seed)
+    tri = vertices[triangles]
+    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    k = rng.choice(len(tri), n, p=area / area.sum())
+    a, b = rng.random((2, n))
+    flip = a + b > 1
+    a[flip], b[flip] = 1 - a[flip], 1 - b[flip]
+    t = tri[k]
+    return t[:, 0] + a[:, None] * (t[:, 1] - t[:, 0]) + b[:, None] * (t[:, 2] - t[:, 0])
+
+
+def make_camera() -> Camera:
+    K = np.array([[300.0, 0.0, W / 2 - 0.3], [0.0, 300.0, H / 2 + 0.2], [0.0, 0.0, 1.0]])
+    R, t = look_at(np.array([0.03, -0.02, -0.8]), np.zeros(3))
+    return Camera("cam1", K, np.array([-0.05, 0.02, 0.0, 0.0, 0.0]), R, t, "red", np.zeros(3))
+
+
+def test_hausdorff_agrees_with_nearest_neighbours():
+    # Sphere (r = 0.1 m) to an ellipsoid (semi-axes 0.115, 0.1, 0.09 m): distances
+    # 0 to 15 mm. Reference: nearest of 600 000 random samples of the ellipsoid
+    # mesh (about 0.25 mm apart, which overestimates a 5 mm distance by
+    # ~0.25**2 / 10 = 0.006 mm).
+    va, ta, _ = sphere(0.1, 20)
+    vb, tb, _ = sphere(0.1, 40, scale=(1.15, 1.0, 0.9))
+    res = hausdorff(va, ta, vb, tb)
+    assert res["n_samples"] == len(va)
+    assert np.array_equal(res["samples"], va)  # all vertices, in order
+    ref = cKDTree(surface_samples(vb, tb, 600_000)).query(va)[0]
+    rms_ref = np.sqrt(np.mean(ref**2))
+    assert rms_ref > 5e-3  # a non-trivial pair
+    assert res["rms_m"] == pytest.approx(rms_ref, rel=0.02)
+    assert res["mean_m"] == pytest.approx(ref.mean(), rel=0.02)
+    assert res["max_m"] == pytest.approx(ref.max(), rel=0.02)
+    assert np.abs(res["distances"] - ref).max() < 0.5e-3
+    assert np.sqrt(np.mean(res["distances"] ** 2)) == pytest.approx(res["rms_m"], rel=1e-6)
+    # Monte-Carlo face samples: same agreement on the samples it drew.
+    faces = hausdorff(va, ta, vb, tb, sample_vertices=False, n_samples=5000)
+    assert faces["n_samples"] == len(faces["samples"]) == 5000
+    ref_f = cKDTree(surface_samples(vb, tb, 600_000, seed=1)).query(faces["samples"])[0]
+    assert faces["rms_m"] == pytest.approx(np.sqrt(np.mean(ref_f**2)), rel=0.02)
+
+
+def test_hausdorff_both_directions():
+    # A unit-ish sphere and one 2 mm larger: 2 mm either way, up to the
+    # tessellation's sagitta (r (1 - cos(pi / 60)) = 0.14 mm at resolution 60).
+    va, ta, _ = sphere(0.1, 60)
+    vb, tb, _ = sphere(0.102, 60)
+    res = hausdorff_symmetric(va, ta, vb, tb)
+    for side in ("a_to_b", "b_to_a"):
+        assert res[side]["mean_m"] == pytest.approx(2e-3, abs=0.15e-3)
+    assert res["max_m"] == pytest.approx(2e-3, abs=0.15e-3)
+    # A point set as the sampled side: its points' distances.
+    pts = np.array([[0.0, 0.0, 0.2], [0.0, 0.13, 0.0]])
+    res = hausdorff(pts, None, va, ta)
+    assert res["distances"] == pytest.approx([0.1, 0.03], abs=1e-6)
+
+
+def _depth_map(tmp_path, name, depth, normal, camera):
+    finite = np.isfinite(depth)
+    result = DepthResult(depth.astype(np.float32), normal.astype(np.float32),
+                         finite.astype(np.float32), finite, {})  # fmt: skip
+    path = tmp_path / f"{name}.h5"
+    write_depth(path, result, camera, {"method": "test"})
+    return path
+
+
+def test_depth_errors_zero_for_truth_and_the_offset_for_a_shift(tmp_path):
+    cam = make_camera()
+    gv, gt, gn = sphere(0.1, 60)
+    gd, gnorm = render_depth_normals(gv, gt, gn, cam, W, H)
+    assert 3000 < np.isfinite(gd).sum() < W * H
+    dm = read_depth(_depth_map(tmp_path, "truth", gd, gnorm, cam))
+    err, ang, m = depth_errors(dm, gv, gt, gn, W, H)
+    assert np.array_equal(np.isfinite(err), np.isfinite(gd))
+    assert np.nanmax(np.abs(err)) < 1e-6  # float32 storage of 0.8 m
+    assert m["depth_rms_mm"] < 1e-3 and m["normal_median_deg"] < 0.05
+    assert m["coverage"] == 1.0
+    shifted = gd + 2e-3
+    shifted[:, : W // 2] = np.nan  # half the image reconstructed
+    dm = read_depth(_depth_map(tmp_path, "shifted", shifted, gnorm, cam))
+    err, _, m = depth_errors(dm, gv, gt, gn)
+    assert np.nanmax(np.abs(err - 2e-3)) < 1e-6
+    assert m["depth_median_mm"] == pytest.approx(2.0, abs=1e-3)
+    assert m["depth_rms_mm"] == pytest.approx(2.0, abs=1e-3)
+    assert m["depth_p95_mm"] == pytest.approx(2.0, abs=1e-3)
+    assert m["coverage"] == pytest.approx(np.isfinite(shifted).sum() / np.isfinite(gd).sum())
+    with pytest.raises(ValueError, match="image is"):
+        depth_errors(dm, gv, gt, gn, W + 1, H)
+
+
+def test_seen_surface_is_the_front():
+    cam = make_camera()
+    gv, gt, _ = sphere(0.1, 40)
+    seen, mask, pts = seen_surface(gv, gt, cam, W, H)
+    assert len(pts) == mask.sum() > 3000
+    assert np.abs(np.linalg.norm(pts, axis=1) - 0.1).max() < 1e-3
+    # The camera at distance D sees the smooth sphere up to the rim angle
+    # arccos(r / D) from its direction; the polyhedron (4.5 degree steps) one
+    # step more (a vertex is visible when one of its faces faces the camera),
+    # its seen triangles one step further still.
+    c = cam.centre
+    angle = np.degrees(np.arccos((gv @ c) / (0.1 * np.linalg.norm(c))))
+    rim = np.degrees(np.arccos(0.1 / np.linalg.norm(c)))
+    seen_v = np.zeros(len(gv), bool)
+    seen_v[gt[seen].ravel()] = True
+    visible, pixel = visible_vertices(gv, gt, cam, W, H)
+    assert np.all(visible[angle < rim - 0.5]) and not np.any(visible[angle > rim + 5])
+    assert np.all(seen_v[angle < rim]) and not np.any(seen_v[angle > rim + 9.5])
+    assert 0.4 < seen.mean() < 0.6
+    assert np.all(pixel[~visible] == -1) and np.all(pixel[visible] >= 0)
+
+
+def test_evaluate_frame_and_metrics_table(tmp_path):
+    # GT: a 0.1 m sphere. Reconstruction: a whole sphere 1 mm larger (its back
+    # included) and the exact depth map. The two tessellations share their
+    # directions, so each seen vertex is 1 mm above a GT vertex (measured
+    # 1.0000 mm; completeness 0.9995 mm from points on the facets). Were the
+    # unseen back counted, the max would be ~0.2 m.
+    cam = make_camera()
+    gv, gt, gn = sphere(0.1, 60)
+    gt_ply = write_ply(tmp_path / "gt.ply", gv, gt, gn)
+    mv, mt, mn = sphere(0.101, 60)
+    mesh_ply = write_ply(tmp_path / "mesh.ply", mv, mt, mn)
+    gd, gnorm = render_depth_normals(gv, gt, gn, cam, W, H)
+    h5 = _depth_map(tmp_path, "depth", gd, gnorm, cam)
+    out_json, out_ply = tmp_path / "m" / "sphere_a.json", tmp_path / "m" / "sphere_a.ply"
+    info = evaluate_frame(h5, mesh_ply, gt_ply, out_json, out_ply,
+                          scene="sphere", frame="000001", variant="bayes_full")  # fmt: skip
+    assert json.loads(out_json.read_text()) == pytest.approx(info)
+    assert info["hausdorff_mean_mm"] == pytest.approx(1.0, abs=0.02)
+    assert info["hausdorff_rms_mm"] == pytest.approx(1.0, abs=0.02)
+    assert info["hausdorff_max_mm"] < 1.05
+    assert 0.3 * len(mv) < info["hausdorff_samples"] < 0.55 * len(mv)
+    assert info["completeness_mean_mm"] == pytest.approx(1.0, abs=0.02)
+    assert info["completeness_max_mm"] < 1.05
+    assert info["depth_median_mm"] < 1e-3 and info["coverage"] == 1.0
+    cv, ct, _ = load_mesh(out_ply)
+    assert len(cv) == len(mv)
+    coloured = o3d.io.read_triangle_mesh(str(out_ply))
+    assert coloured.has_vertex_colors()
+    # The same frame without ground truth: the metrics are empty.
+    empty = evaluate_frame(h5, mesh_ply, None, tmp_path / "m" / "sphere_b.json",
+                           scene="sphere", frame="000001", variant="bayes_nocalib")  # fmt: skip
+    assert empty["hausdorff_rms_mm"] is None and empty["depth_median_mm"] is None
+    evaluate_frame(h5, mesh_ply, gt_ply, tmp_path / "m" / "aaa.json",
+                   scene="another", frame="000000", variant="ml_full")  # fmt: skip
+    csv = tmp_path / "reports" / "metrics.csv"
+    table = metrics_table(sorted((tmp_path / "m").glob("*.json")), csv)
+    read = pd.read_csv(csv, dtype={"frame": str})
+    assert list(read.columns[: len(CONTRACT_COLUMNS)]) == list(CONTRACT_COLUMNS)
+    assert list(zip(read.scene, read.frame, read.variant, strict=True)) == [
+        ("another", "000000", "ml_full"),
+        ("sphere", "000001", "bayes_full"),
+        ("sphere", "000001", "bayes_nocalib"),
+    ]
+    assert read.loc[2, "hausdorff_rms_mm":"normal_median_deg"].isna().all()
+    assert read.loc[1, "hausdorff_rms_mm"] == pytest.approx(info["hausdorff_rms_mm"])
+    assert len(table) == 3
+    with pytest.raises(ValueError, match="repeated"):
+        metrics_table([out_json, out_json], tmp_path / "dup.csv")
+    assert not (tmp_path / "dup.csv").exists()
