@@ -1,8 +1,9 @@
 """colourhs: the Colour Helmholtz Stereopsis workflow.
 
-Stages (one rule file each under workflow/rules/):
-raw captures -> validation -> (later issues) marker poses -> photometric maps
--> chromaticity maps -> per-frame depth/normal -> meshes -> evaluation -> reports.
+Stages (one rule file each under workflow/rules/): raw captures -> validation
+-> marker poses -> photometric maps -> chromaticity maps -> per-frame
+depth/normal -> visual hull and Poisson meshes -> evaluation -> figures and
+report (reports/NAME/index.html).
 """
 
 from snakemake.utils import min_version, validate
@@ -21,6 +22,12 @@ include: "workflow/rules/synth.smk"
 include: "workflow/rules/capture.smk"
 include: "workflow/rules/calibration.smk"
 include: "workflow/rules/reconstruct.smk"
+include: "workflow/rules/surfaces.smk"
+include: "workflow/rules/evaluate.smk"
+include: "workflow/rules/report.smk"
+
+
+report: "workflow/report/workflow.rst"
 
 
 rule all:
@@ -29,3 +36,4 @@ rule all:
         expand("results/{name}/capture/summary.json", name=DATASETS),
         [t for name in DATASETS for t in calibration_targets(name)],
         lambda w: [t for name in DATASETS for t in reconstruction_targets(name)],
+        lambda w: [t for name in DATASETS for t in report_targets(name)],

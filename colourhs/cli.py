@@ -1,4 +1,8 @@
-"""Command line: ``colourhs synth``, ``colourhs validate``, ``colourhs run``."""
+"""Command line: ``colourhs run`` (the whole workflow) and one subcommand per stage.
+
+Each stage subcommand calls one function of the package; the Snakemake rules
+call these subcommands.
+"""
 
 from __future__ import annotations
 
@@ -52,12 +56,17 @@ def _run(args) -> int:
     config_path = Path(args.directory) / "results" / name / "run-config.yaml"
     config_path.parent.mkdir(parents=True, exist_ok=True)
     config = {"datasets": {name: {"path": str(dataset)}}, "only": [name]}
+    if args.variants:
+        config["reconstruction"] = {"variants": [v.strip() for v in args.variants.split(",")]}
     config_path.write_text(yaml.safe_dump(config))
+    # Snakemake's own arguments (targets included) go before --configfile,
+    # whose list of files would otherwise swallow them.
     cmd = [
         sys.executable, "-m", "snakemake", "--snakefile", str(SNAKEFILE),
         "--directory", str(Path(args.directory).resolve()), "--cores", str(args.cores),
+        *args.snakemake_args,
         "--configfile", str(PROJECT_ROOT / "config.yaml"), str(config_path.resolve()),
-    ] + list(args.snakemake_args)  # fmt: skip
+    ]  # fmt: skip
     return subprocess.call(cmd)
 
 
@@ -119,10 +128,95 @@ def _reconstruct(args) -> int:
     return 0
 
 
+def _bool(text: str) -> bool:
+    if text.lower() in ("1", "true", "yes", "on"):
+        return True
+    if text.lower() in ("0", "false", "no", "off"):
+        return False
+    raise argparse.ArgumentTypeError(f"expected true or false, got {text!r}")
+
+
+def _pairs(items: list[str], what: str) -> dict[str, str]:
+    """``KEY=VALUE`` arguments as an ordered dict."""
+    out = {}
+    for item in items or []:
+        key, sep, value = item.partition("=")
+        if not sep or not key or not value:
+            raise ValueError(f"{what}: expected KEY=PATH, got {item!r}")
+        out[key] = value
+    return out
+
+
+def _hull(args) -> int:
+    from colourhs.hull import visual_hull
+
+    info = visual_hull(args.dataset, args.scene, args.frame, args.out, voxel_m=args.voxel_m,
+                       threshold=args.threshold, out_depth_h5=args.depth)  # fmt: skip
+    print(json.dumps(info, indent=2, default=str))
+    return 0
+
+
+def _mesh(args) -> int:
+    from colourhs.mesh import frame_mesh
+
+    info = frame_mesh(args.depth, args.out, hull_ply=args.hull, poisson_depth=args.poisson_depth,
+                      density_quantile=args.density_quantile)  # fmt: skip
+    print(json.dumps(info, indent=2, default=str))
+    return 0
+
+
+def _evaluate(args) -> int:
+    from colourhs.evaluate import evaluate_frame
+
+    info = evaluate_frame(args.depth, args.mesh, args.gt, args.out, out_ply=args.coloured,
+                          scene=args.scene, frame=args.frame, variant=args.variant,
+                          vmax_mm=args.vmax_mm)  # fmt: skip
+    print(json.dumps(info, indent=2, default=str))
+    return 0
+
+
+def _metrics(args) -> int:
+    from colourhs.evaluate import metrics_table
+
+    table = metrics_table(args.json, args.out)
+    print(f"wrote {args.out}: {len(table)} rows")
+    return 0
+
+
+def _figures(args) -> int:
+    from colourhs.figures import scene_figures
+
+    written = scene_figures(args.out, _pairs(args.depth, "--depth"), _pairs(args.mesh, "--mesh"),
+                            args.gt, _pairs(args.animate, "--animate"))  # fmt: skip
+    print(f"wrote {len(written)} figures into {args.out}")
+    return 0
+
+
+def _report(args) -> int:
+    from colourhs.report import build_report, find_benchmarks
+
+    figures = _pairs(args.figures, "--figures")
+    tsvs = find_benchmarks(args.benchmarks, args.name)
+    config = args.config if args.config else {}
+    build_report(args.out, args.name, args.metrics, args.calibration or [], figures, tsvs, config)
+    print(f"wrote {args.out}")
+    return 0
+
+
+def _config(args) -> int:
+    from colourhs.io import atomic_output
+
+    with atomic_output(args.out) as tmp:
+        tmp.write_text(yaml.safe_dump(json.loads(args.json)))
+    print(f"wrote {args.out}")
+    return 0
+
+
 RECONSTRUCT_PARAMS = {"reference": str, "n_labels": int, "alpha": float, "tau": float,
                       "working_radius_m": float, "data_weight": float, "max_cost": float,
                       "cost_scale": float, "erode_px": int, "edge_m": float,
-                      "refine_passes": int, "min_component": int}  # fmt: skip
+                      "refine_passes": int, "min_component": int, "align": _bool,
+                      "shape_weight": float, "link_m": float}  # fmt: skip
 
 PHOTOMETRIC_PARAMS = ("grid_spacing_px", "step_px", "smoothness", "coupling", "margin_m",
                       "min_cos", "min_signal")  # fmt: skip
@@ -198,11 +292,72 @@ def build_parser() -> argparse.ArgumentParser:
         rc.add_argument("--" + name.replace("_", "-"), dest=name, type=kind, default=None)
     rc.set_defaults(func=_reconstruct)
 
+    h = sub.add_parser("hull", help="visual hull of one frame from its silhouettes (PLY)")
+    h.add_argument("dataset", type=Path)
+    h.add_argument("scene")
+    h.add_argument("frame")
+    h.add_argument("out", type=Path, help="hull mesh PLY to write")
+    h.add_argument("--depth", type=Path, default=None, help="also write the vh depth HDF5")
+    h.add_argument("--voxel-m", type=float, default=None, help="voxel size, metres")
+    h.add_argument("--threshold", type=float, default=0.02, help="silhouette threshold")
+    h.set_defaults(func=_hull)
+
+    me = sub.add_parser("mesh", help="oriented points of a depth file -> Poisson mesh (PLY)")
+    me.add_argument("depth", type=Path, help="results-contract depth HDF5")
+    me.add_argument("out", type=Path, help="mesh PLY to write")
+    me.add_argument("--hull", type=Path, default=None, help="visual hull PLY to close the cloud")
+    me.add_argument("--poisson-depth", type=int, default=8)
+    me.add_argument("--density-quantile", type=float, default=0.02)
+    me.set_defaults(func=_mesh)
+
+    ev = sub.add_parser("evaluate", help="Hausdorff and depth/normal errors of one frame")
+    ev.add_argument("depth", type=Path)
+    ev.add_argument("mesh", type=Path)
+    ev.add_argument("out", type=Path, help="metrics JSON to write")
+    ev.add_argument("--gt", type=Path, default=None, help="ground-truth mesh (none: empty metrics)")
+    ev.add_argument("--coloured", type=Path, default=None, help="mesh coloured by its error")
+    ev.add_argument("--scene", default="")
+    ev.add_argument("--frame", default="")
+    ev.add_argument("--variant", default="")
+    ev.add_argument("--vmax-mm", type=float, default=None)
+    ev.set_defaults(func=_evaluate)
+
+    mt = sub.add_parser("metrics", help="gather per-frame metrics JSON into metrics.csv")
+    mt.add_argument("out", type=Path)
+    mt.add_argument("json", nargs="+", type=Path)
+    mt.set_defaults(func=_metrics)
+
+    fg = sub.add_parser("figures", help="a scene's figures (Figure 7 grid, maps, animation)")
+    fg.add_argument("out", type=Path, help="folder to write")
+    fg.add_argument("--depth", nargs="+", default=[], help="VARIANT=depth.h5 ...")
+    fg.add_argument("--mesh", nargs="+", default=[], help="VARIANT=mesh.ply ...")
+    fg.add_argument("--gt", type=Path, default=None)
+    fg.add_argument("--animate", nargs="*", default=[], help="FRAME=mesh.ply ... (dynamic scene)")
+    fg.set_defaults(func=_figures)
+
+    rp = sub.add_parser("report", help="the evaluation report (index.html)")
+    rp.add_argument("out", type=Path)
+    rp.add_argument("--name", required=True)
+    rp.add_argument("--metrics", type=Path, required=True)
+    rp.add_argument("--calibration", nargs="*", default=[], help="calibration figures (PNG)")
+    rp.add_argument("--figures", nargs="*", default=[], help="SCENE=figure folder ...")
+    rp.add_argument("--benchmarks", type=Path, default=Path("benchmarks/snakemake"))
+    rp.add_argument("--config", type=Path, default=None, help="the run's configuration (YAML)")
+    rp.set_defaults(func=_report)
+
+    cf = sub.add_parser("config", help="write a run's configuration (JSON text) as YAML")
+    cf.add_argument("out", type=Path)
+    cf.add_argument("json")
+    cf.set_defaults(func=_config)
+
     r = sub.add_parser("run", help="run the whole workflow on a dataset")
     r.add_argument("dataset", type=Path)
     r.add_argument("--name", default=None, help="results name (default: the folder's name)")
     r.add_argument("--cores", type=int, default=2)
     r.add_argument("--directory", default=".", help="where results/ and reports/ go")
+    r.add_argument("--variants", default=None,
+                   help="comma-separated variant ids (default: vh,ml_full,bayes_nocalib,"
+                        "bayes_ph,bayes_full)")  # fmt: skip
     r.set_defaults(func=_run)
     r.epilog = "Arguments after `--` are passed on to snakemake."
     return p

@@ -552,3 +552,73 @@ def write_coloured_ply(
         if not o3d.io.write_triangle_mesh(str(tmp), mesh, write_ascii=False):
             raise OSError(f"{path}: open3d could not write the mesh")
     return path
+
+
+def scene_figures(
+    out_dir: str | Path,
+    depths: Mapping[str, str | Path],
+    meshes: Mapping[str, str | Path],
+    gt_ply: str | Path | None = None,
+    animation: Mapping[str, str | Path] | None = None,
+    fps: float = 8,
+) -> list[Path]:
+    """A scene's figures, variants side by side (the Snakemake rule's function).
+
+    Writes into ``out_dir``: ``figure7.png`` (shaded renders of every variant's
+    mesh, and of the ground truth when given, from the reference camera: the
+    paper's Figure 7), and per variant ``<variant>_depth.png``,
+    ``<variant>_normal.png`` and, with ground truth, ``<variant>_depth_error.png``
+    (|depth error|, mm) and ``<variant>_normal_error.png`` (degrees); with
+    ``animation`` (frame -> mesh of a dynamic scene), ``animation.gif`` of the
+    shaded reconstruction over the frames.
+
+    Parameters
+    ----------
+    out_dir : folder to write (created).
+    depths, meshes : variant -> results-contract depth file / Poisson mesh of the frame.
+    gt_ply : the frame's ground-truth mesh, or None.
+    animation : frame -> mesh PLY, in frame order, or None.
+    fps : frames per second of the animation.
+
+    Returns
+    -------
+    The PNG/GIF files written.
+    """
+    from colourhs.evaluate import depth_errors
+    from colourhs.groundtruth import load_mesh
+    from colourhs.mesh import read_depth
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    written = []
+    renders = {}
+    gt = load_mesh(gt_ply) if gt_ply is not None else None
+    cam = None
+    for variant, path in depths.items():
+        dm = read_depth(path)
+        cam = cam or dm
+        written.append(depth_map_figure(dm.depth, out / f"{variant}_depth.png", variant))
+        written.append(normal_map_figure(dm.normal, out / f"{variant}_normal.png", variant))
+        if gt is not None:
+            dz, dn, _ = depth_errors(dm, *gt)
+            if np.isfinite(dz).any():
+                name = out / f"{variant}_depth_error.png"
+                written.append(error_map_figure(np.abs(dz) * 1e3, name, f"{variant}: |dz|"))
+                name = out / f"{variant}_normal_error.png"
+                written.append(error_map_figure(dn, name, f"{variant}: normal error", unit="deg"))
+
+    def render(ply):
+        v, t, _ = load_mesh(ply)
+        return shaded_render(v, t, cam.K, cam.R, cam.t, cam.width, cam.height, dist=cam.dist)
+
+    if cam is None:
+        raise ValueError("scene_figures: no depth files given")
+    if gt is not None:
+        renders["ground truth"] = render(gt_ply)
+    for variant, ply in meshes.items():
+        renders[variant] = render(ply)
+    written.append(render_grid_figure(renders, out / "figure7.png", "shaded reconstructions"))
+    if animation:
+        frames = [render(ply) for ply in animation.values()]
+        written.append(write_animation(frames, out / "animation.gif", fps=fps))
+    return written

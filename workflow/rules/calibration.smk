@@ -4,37 +4,45 @@
 
 rule marker_poses:
     input:
-        dataset=lambda w: dataset_path(w.name),
+        lambda w: photometric_inputs(w.name),
     output:
         "results/{name}/calib/marker_poses.csv",
     log:
         "logs/calib/{name}/marker_poses.log",
+    conda:
+        "../envs/colourhs.yaml"
     threads: 1
     resources:
         mem_mb=2000,
         runtime=10,
+    params:
+        dataset=lambda w: dataset_path(w.name),
     shell:
-        "{PYTHON} -m colourhs markers {input.dataset} {output} > {log} 2>&1"
+        "$COLOURHS_PYTHON -m colourhs markers {params.dataset} {output} > {log} 2>&1"
 
 
 rule crosstalk:
     input:
-        dataset=lambda w: dataset_path(w.name),
+        lambda w: chromatic_inputs(w.name, "white"),
     output:
         "results/{name}/calib/crosstalk.json",
     log:
         "logs/calib/{name}/crosstalk.log",
+    conda:
+        "../envs/colourhs.yaml"
     threads: 1
     resources:
         mem_mb=1000,
         runtime=5,
+    params:
+        dataset=lambda w: dataset_path(w.name),
     shell:
-        "{PYTHON} -m colourhs crosstalk {input.dataset} {output} > {log} 2>&1"
+        "$COLOURHS_PYTHON -m colourhs crosstalk {params.dataset} {output} > {log} 2>&1"
 
 
 rule photometric_maps:
     input:
-        dataset=lambda w: dataset_path(w.name),
+        images=lambda w: photometric_inputs(w.name),
         poses="results/{name}/calib/marker_poses.csv",
         crosstalk=lambda w: (
             f"results/{w.name}/calib/crosstalk.json" if unmix_crosstalk(w.name) else []
@@ -46,20 +54,23 @@ rule photometric_maps:
         "logs/calib/{name}/photometric.log",
     benchmark:
         "benchmarks/snakemake/photometric/{name}.tsv"
+    conda:
+        "../envs/colourhs.yaml"
     threads: 1
     resources:
         mem_mb=4000,
         runtime=20,
     params:
+        dataset=lambda w: dataset_path(w.name),
         options=lambda w, input: photometric_options(w.name, input.crosstalk),
     shell:
-        "{PYTHON} -m colourhs photometric {input.dataset} {input.poses} {output.h5} "
+        "$COLOURHS_PYTHON -m colourhs photometric {params.dataset} {input.poses} {output.h5} "
         "--figure {output.png} {params.options} > {log} 2>&1"
 
 
 rule chromaticity_map:
     input:
-        dataset=lambda w: dataset_path(w.name),
+        lambda w: chromatic_inputs(w.name, w.object) + chromatic_inputs(w.name, "white"),
     output:
         h5="results/{name}/calib/chromaticity/{object}.h5",
         png="results/{name}/calib/chromaticity/{object}.png",
@@ -67,12 +78,15 @@ rule chromaticity_map:
         "logs/calib/{name}/chromaticity/{object}.log",
     wildcard_constraints:
         object="[A-Za-z0-9_-]+",
+    conda:
+        "../envs/colourhs.yaml"
     threads: 1
     resources:
         mem_mb=1000,
         runtime=10,
     params:
+        dataset=lambda w: dataset_path(w.name),
         min_signal=lambda w: calibration(w.name)["chromaticity"]["min_signal"],
     shell:
-        "{PYTHON} -m colourhs chromaticity {input.dataset} {wildcards.object} {output.h5} "
+        "$COLOURHS_PYTHON -m colourhs chromaticity {params.dataset} {wildcards.object} {output.h5} "
         "--figure {output.png} --min-signal {params.min_signal} > {log} 2>&1"

@@ -8,9 +8,11 @@ rule validate_dataset:
         "results/{name}/capture/summary.json",
     log:
         "logs/capture/{name}.log",
+    conda:
+        "../envs/colourhs.yaml"
     threads: 1
     resources:
         mem_mb=1000,
         runtime=10,
     shell:
-        "{PYTHON} -m colourhs validate {input} --summary {output} > {log} 2>&1"
+        "$COLOURHS_PYTHON -m colourhs validate {input} --summary {output} > {log} 2>&1"

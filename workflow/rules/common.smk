@@ -2,7 +2,8 @@ import json
 import sys
 from pathlib import Path
 
-PYTHON = sys.executable
+# Rules run the package with the Python that runs Snakemake (the project's venv).
+shell.prefix(f"export COLOURHS_PYTHON={sys.executable}; ")
 DATASETS = config.get("only") or list(config["datasets"])
 _unknown = sorted(set(DATASETS) - set(config["datasets"]))
 if _unknown:
@@ -18,6 +19,42 @@ def dataset_path(name):
     if "synth" in entry:
         return f"{SYNTH_ROOT}/{name}"
     return entry["path"]
+
+
+def dataset_root(name):
+    """The dataset folder, once it exists (a synthetic one: after its checkpoint)."""
+    if "synth" in config["datasets"][name]:
+        return checkpoints.synth_dataset.get(name=name).output[0]
+    return dataset_path(name)
+
+
+def _files(name, pattern):
+    """Sorted files of a dataset matching a glob pattern (inputs, so reruns follow them)."""
+    return sorted(str(p) for p in Path(dataset_root(name)).glob(pattern))
+
+
+def photometric_inputs(name):
+    """rig.json and every photometric board image."""
+    return _files(name, "rig.json") + _files(name, "photometric/*/*.png")
+
+
+def chromatic_inputs(name, obj):
+    """rig.json and one chromatic object's captures."""
+    return _files(name, "rig.json") + _files(name, f"chromatic/{obj}/*/*.png")
+
+
+def frame_inputs(name, scene, frame):
+    """rig.json, a frame's images and its silhouettes (when the scene has masks)."""
+    return (
+        _files(name, "rig.json")
+        + _files(name, f"scenes/{scene}/frames/{frame}/*.png")
+        + _files(name, f"scenes/{scene}/masks/{frame}/*.png")
+    )
+
+
+def gt_mesh(name, scene, frame):
+    """The frame's ground-truth mesh as a list (empty without ground truth)."""
+    return _files(name, f"scenes/{scene}/gt/{frame}.ply")
 
 
 def synth_settings(name):
@@ -110,9 +147,9 @@ def calibration_targets(name):
     return out
 
 
-# The paper's ablation (Figure 7) with the results contract's ids; `vh` comes
-# with the surfaces stage.
+# The paper's ablation (Figure 7) with the results contract's ids.
 VARIANTS = {
+    "vh": {"method": "vh", "photometric": False, "chromaticity": False},
     "ml_full": {"method": "ml", "photometric": True, "chromaticity": True},
     "bayes_nocalib": {"method": "bayes", "photometric": False, "chromaticity": False},
     "bayes_ph": {"method": "bayes", "photometric": True, "chromaticity": False},
@@ -170,13 +207,95 @@ def reconstruct_options(name, scene, variant):
     return " ".join(opts)
 
 
+def variants():
+    return config.get("reconstruction", {}).get("variants") or list(VARIANTS)
+
+
+def section(key):
+    """A workflow config section (surfaces, evaluation), {} when absent."""
+    return config.get(key) or {}
+
+
+def mesh_uses_hull(variant):
+    return variant == "vh" or bool(section("surfaces").get("mesh_with_hull", False))
+
+
+def cli_options(values):
+    """`--key value` options of the non-null entries of a dict (plain values)."""
+    return " ".join(
+        f"--{k.replace('_', '-')} {v}"
+        for k, v in sorted(values.items())
+        if v is not None
+    )
+
+
 def reconstruction_targets(name):
-    variants = config.get("reconstruction", {}).get("variants") or list(VARIANTS)
     out = []
     for scene, (frames, _) in selected_scenes(name).items():
-        for variant in variants:
-            if variant in VARIANTS:
-                out += [
-                    f"results/{name}/{scene}/{variant}/depth/{f}.h5" for f in frames
-                ]
+        for variant in variants():
+            out += [f"results/{name}/{scene}/{variant}/depth/{f}.h5" for f in frames]
     return out
+
+
+def evaluation_targets(name):
+    """Every frame's metrics JSON (which needs its mesh and depth)."""
+    out = []
+    for scene, (frames, _) in selected_scenes(name).items():
+        for variant in variants():
+            out += [f"results/{name}/{scene}/{variant}/eval/{f}.json" for f in frames]
+    return out
+
+
+def animation_variant():
+    """The variant animated for a dynamic scene: the last of the configured ones."""
+    return variants()[-1]
+
+
+def figure_inputs(name, scene):
+    """Depth files and meshes of a scene's first frame per variant, its ground truth,
+    and the animated variant's meshes of every frame (dynamic scenes)."""
+    frames = scene_info(name)[scene][0]
+    f0 = frames[0]
+    out = {
+        "depth": [f"results/{name}/{scene}/{v}/depth/{f0}.h5" for v in variants()],
+        "mesh": [f"results/{name}/{scene}/{v}/mesh/{f0}.ply" for v in variants()],
+        "gt": gt_mesh(name, scene, f0),
+        "animation": [],
+    }
+    if len(frames) > 1:
+        a = animation_variant()
+        out["animation"] = [f"results/{name}/{scene}/{a}/mesh/{f}.ply" for f in frames]
+    return out
+
+
+def figure_options(name, scene):
+    """`colourhs figures` options: VARIANT=path pairs (plain strings)."""
+    inp = figure_inputs(name, scene)
+    frames = scene_info(name)[scene][0]
+    opts = ["--depth"] + [f"{v}={p}" for v, p in zip(variants(), inp["depth"])]
+    opts += ["--mesh"] + [f"{v}={p}" for v, p in zip(variants(), inp["mesh"])]
+    if inp["gt"]:
+        opts += ["--gt", inp["gt"][0]]
+    if inp["animation"]:
+        opts += ["--animate"] + [f"{f}={p}" for f, p in zip(frames, inp["animation"])]
+    return " ".join(opts)
+
+
+def report_inputs(name):
+    scenes = list(selected_scenes(name))
+    return {
+        "metrics": f"reports/{name}/metrics.csv",
+        "config": f"results/{name}/config.yaml",
+        "calibration": [
+            f"results/{name}/calib/photometric.png",
+            *[
+                f"results/{name}/calib/chromaticity/{o}.png"
+                for o in chromatic_objects(name)
+            ],
+        ],
+        "figures": [f"reports/{name}/figures/{s}" for s in scenes],
+    }
+
+
+def report_targets(name):
+    return [f"reports/{name}/index.html"]

@@ -8,6 +8,8 @@ checkpoint synth_dataset:
         "logs/synth/{name}.log",
     benchmark:
         "benchmarks/snakemake/synth/{name}.tsv"
+    conda:
+        "../envs/colourhs.yaml"
     threads: 2
     resources:
         mem_mb=4000,
@@ -16,5 +18,5 @@ checkpoint synth_dataset:
         preset=lambda w: synth_settings(w.name)["preset"],
         seed=lambda w: synth_settings(w.name).get("seed", 0),
     shell:
-        "{PYTHON} -m colourhs synth --preset {params.preset} --seed {params.seed} "
+        "$COLOURHS_PYTHON -m colourhs synth --preset {params.preset} --seed {params.seed} "
         "--workers {threads} {output} 2> {log}"

@@ -1,0 +1,412 @@
+"""Tests of the evaluation report colourhs.report (small inputs, no pipeline run)."""
+
+from __future__ import annotations
+
+import base64
+import math
+from html.parser import HTMLParser
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pandas as pd
+import pytest
+from PIL import Image
+
+from colourhs.report import (
+    PAPER_REFERENCE,
+    REQUIRED_COLUMNS,
+    build_report,
+    find_benchmarks,
+    format_number,
+    read_benchmarks,
+    read_metrics,
+    software_versions,
+    summarise_benchmarks,
+    summarise_metrics,
+)
+
+HEADER = "s\th:m:s\tmax_rss\tmax_vms\tmax_uss\tmax_pss\tio_in\tio_out\tmean_load\tcpu_time\n"
+VARIANTS = ("bayes_ph", "vh", "bayes_nocalib")  # deliberately not in the paper's order
+
+
+# --------------------------------------------------------------------------- fixtures
+
+
+def _metrics_rows() -> list[dict]:
+    """Two scenes x two frames x three variants; ``sheet`` has no ground truth."""
+    rng = np.random.default_rng(0)
+    rows = []
+    for frame in ("000000", "000001"):
+        for variant in VARIANTS:
+            rows.append({"scene": "sheet", "frame": frame, "variant": variant})
+            rows.append(
+                {
+                    "scene": "plane",
+                    "frame": frame,
+                    "variant": variant,
+                    "hausdorff_rms_mm": rng.uniform(1, 9),
+                    "hausdorff_mean_mm": rng.uniform(1, 9),
+                    "hausdorff_max_mm": rng.uniform(10, 90),
+                    "depth_median_mm": rng.uniform(1, 9),
+                    "depth_rms_mm": rng.uniform(1, 9),
+                    "normal_median_deg": rng.uniform(1, 30),
+                    "completeness_rms_mm": rng.uniform(1, 9),
+                    "coverage": rng.uniform(0, 1),
+                }
+            )
+    # known values for one cell of each aggregation
+    for r in rows:
+        if r["scene"] == "plane" and r["variant"] == "bayes_ph":
+            first = r["frame"] == "000000"
+            r["hausdorff_rms_mm"] = 1.25 if first else 3.75  # mean 2.5
+            r["depth_rms_mm"] = 3.0 if first else 4.0  # RMS sqrt(12.5) = 3.5355, mean 3.5
+            r["hausdorff_max_mm"] = 41.0 if first else 77.0  # max 77
+    return rows
+
+
+@pytest.fixture
+def metrics_csv(tmp_path) -> Path:
+    cols = [*REQUIRED_COLUMNS, "completeness_rms_mm", "coverage", "method"]
+    df = pd.DataFrame(_metrics_rows(), columns=cols)
+    df["method"] = "bayes"
+    path = tmp_path / "reports" / "demo" / "metrics.csv"
+    path.parent.mkdir(parents=True)
+    df.to_csv(path, index=False)
+    return path
+
+
+@pytest.fixture
+def images(tmp_path) -> dict:
+    d = tmp_path / "results" / "demo" / "figures"
+    d.mkdir(parents=True)
+    mu = d / "mu_maps.png"
+    chroma = d / "chromaticity_monster.png"
+    grid = d / "plane_grid.png"
+    img = np.zeros((8, 12, 3), np.uint8)
+    img[..., 1] = 200
+    assert cv2.imwrite(str(mu), img)
+    assert cv2.imwrite(str(chroma), img[..., ::-1].copy())
+    assert cv2.imwrite(str(grid), 255 - img)
+    gif = d / "plane_animation.gif"
+    frames = [Image.fromarray(np.full((8, 8, 3), v, np.uint8)) for v in (0, 128, 255)]
+    frames[0].save(gif, save_all=True, append_images=frames[1:], duration=100, loop=0)
+    return {"calib": [mu, chroma], "plane": [grid, gif]}
+
+
+@pytest.fixture
+def benchmarks(tmp_path) -> list[Path]:
+    root = tmp_path / "benchmarks" / "snakemake"
+    job = root / "reconstruct" / "demo" / "plane" / "bayes_ph"
+    files = {
+        root / "photometric" / "demo.tsv": [(6.08, 569.80, 6.05)],
+        job / "000000.tsv": [(8.76, 1302.51, 11.93)],
+        job / "000001.tsv": [(1.24, 900.0, 2.07)],
+    }
+    for path, runs in files.items():
+        path.parent.mkdir(parents=True, exist_ok=True)
+        lines = [
+            f"{s:.2f}\t0:00:{int(s):02d}\t{rss:.2f}\t913.95\t539.49\t553.42\t0.06\t5.50\t91.46\t{cpu:.2f}\n"
+            for s, rss, cpu in runs
+        ]
+        path.write_text(HEADER + "".join(lines))
+    return list(files)
+
+
+# --------------------------------------------------------------------------- html parsing
+
+
+class _Tables(HTMLParser):
+    """Tables of a page by the id of the ``<h2>`` before them: {section: [[row cells]]}."""
+
+    def __init__(self):
+        super().__init__()
+        self.section = ""
+        self.tables: dict[str, list[list[list[str]]]] = {}
+        self.cell: list[str] | None = None
+        self.row: list[str] | None = None
+
+    def handle_starttag(self, tag, attrs):
+        if tag == "h2":
+            self.section = dict(attrs).get("id", "")
+        elif tag == "table":
+            self.tables.setdefault(self.section, []).append([])
+        elif tag == "tr":
+            self.row = []
+        elif tag in ("td", "th"):
+            self.cell = []
+
+    def handle_endtag(self, tag):
+        if tag in ("td", "th") and self.cell is not None:
+            self.row.append("".join(self.cell).strip())
+            self.cell = None
+        elif tag == "tr" and self.row is not None:
+            self.tables[self.section][-1].append(self.row)
+            self.row = None
+
+    def handle_data(self, data):
+        if self.cell is not None:
+            self.cell.append(data)
+
+
+def _tables(text: str) -> dict:
+    p = _Tables()
+    p.feed(text)
+    return p.tables
+
+
+def _as_dicts(table: list[list[str]]) -> dict[str, dict[str, str]]:
+    """{first cell: {header: cell}} of a table whose first row is its header."""
+    header, *rows = table
+    return {r[0]: dict(zip(header, r, strict=True)) for r in rows}
+
+
+@pytest.fixture
+def report(tmp_path, metrics_csv, images, benchmarks) -> Path:
+    config = {
+        "datasets": {"demo": {"path": Path("data/demo")}},
+        "variants": ["vh", "bayes_ph"],
+        "mrf": {"lambda": np.float64(0.5), "levels": (3, 2)},
+        "note": "<script>alert(1)</script>",
+    }
+    return build_report(
+        tmp_path / "reports" / "demo" / "index.html",
+        "demo",
+        metrics_csv,
+        images["calib"],
+        {"plane": images["plane"], "sheet": []},
+        benchmarks,
+        config,
+        extra={"dataset folder": "data/<demo>"},
+    )
+
+
+# --------------------------------------------------------------------------- tests
+
+
+def test_format_number():
+    assert format_number(2.5) == "2.50"
+    assert format_number(2) == "2.00"
+    assert format_number(0.012345) == "0.0123"
+    assert format_number(123.456) == "123"
+    assert format_number(1302.51) == "1303"
+    assert format_number(0) == "0"
+    assert format_number(float("nan")) == "" and format_number(None) == ""
+
+
+def test_summarise_metrics_aggregates_and_orders(metrics_csv):
+    df = read_metrics(metrics_csv)
+    assert df["frame"].tolist()[0] == "000000"  # ids stay strings
+    extra = df[df["variant"] == "vh"].assign(variant="zz_custom")
+    s = summarise_metrics(pd.concat([df, extra]))
+    assert s.columns[:3].tolist() == ["scene", "variant", "frames"]
+    assert "method" not in s.columns and {"completeness_rms_mm", "coverage"} <= set(s.columns)
+    plane = s[s["scene"] == "plane"].set_index("variant")
+    assert plane.index.tolist() == ["vh", "bayes_nocalib", "bayes_ph", "zz_custom"]
+    assert (plane["frames"] == 2).all()
+
+    raw = df[df["scene"] == "plane"]
+    for variant, g in raw.groupby("variant"):
+        row = plane.loc[variant]
+        assert row["hausdorff_rms_mm"] == pytest.approx(g["hausdorff_rms_mm"].mean())
+        assert row["hausdorff_mean_mm"] == pytest.approx(g["hausdorff_mean_mm"].mean())
+        assert row["hausdorff_max_mm"] == pytest.approx(g["hausdorff_max_mm"].max())
+        assert row["depth_median_mm"] == pytest.approx(g["depth_median_mm"].median())
+        rms = math.sqrt(sum(x * x for x in g["depth_rms_mm"]) / len(g))
+        assert row["depth_rms_mm"] == pytest.approx(rms)
+        assert row["normal_median_deg"] == pytest.approx(g["normal_median_deg"].median())
+        assert row["completeness_rms_mm"] == pytest.approx(g["completeness_rms_mm"].mean())
+        assert row["coverage"] == pytest.approx(g["coverage"].mean())
+    assert plane.loc["bayes_ph", "depth_rms_mm"] == pytest.approx(math.sqrt(12.5))
+
+    sheet = s[s["scene"] == "sheet"]
+    assert len(sheet) == 4 and sheet["hausdorff_rms_mm"].isna().all()
+    assert sheet["depth_rms_mm"].isna().all() and (sheet["frames"] == 2).all()
+
+
+def test_summarise_metrics_skips_missing_frames():
+    df = pd.DataFrame(
+        {
+            "scene": ["a", "a", "a"],
+            "frame": ["0", "1", "2"],
+            "variant": ["vh"] * 3,
+            "depth_rms_mm": [3.0, np.nan, 4.0],
+            "hausdorff_rms_mm": [np.nan, 2.0, np.nan],
+        }
+    )
+    row = summarise_metrics(df).iloc[0]
+    assert row["frames"] == 3
+    assert row["depth_rms_mm"] == pytest.approx(math.sqrt(12.5))
+    assert row["hausdorff_rms_mm"] == pytest.approx(2.0)
+
+
+def test_read_and_summarise_benchmarks(benchmarks):
+    b = read_benchmarks(benchmarks)
+    assert len(b) == 3 and set(b["rule"]) == {"photometric", "reconstruct"}
+    assert b["s"].dtype.kind == "f" and b["max_rss"].dtype.kind == "f"
+    s = summarise_benchmarks(b).set_index("rule")
+    assert s.index.tolist() == ["reconstruct", "photometric", "all"]  # by total time
+    assert s.loc["reconstruct", "jobs"] == 2
+    assert s.loc["reconstruct", "total_s"] == pytest.approx(10.0)
+    assert s.loc["reconstruct", "mean_s"] == pytest.approx(5.0)
+    assert s.loc["reconstruct", "max_rss_mb"] == pytest.approx(1302.51)
+    assert s.loc["all", "total_s"] == pytest.approx(16.08)
+    assert s.loc["all", "jobs"] == 3
+    assert read_benchmarks([]).empty and summarise_benchmarks(read_benchmarks([])).empty
+
+
+def test_read_benchmarks_rejects_non_benchmark(tmp_path):
+    bad = tmp_path / "benchmarks" / "snakemake" / "x" / "a.tsv"
+    bad.parent.mkdir(parents=True)
+    bad.write_text("a\tb\n1\t2\n")
+    with pytest.raises(ValueError, match="a.tsv"):
+        read_benchmarks([bad])
+
+
+def test_report_is_self_contained(report, images):
+    text = report.read_text(encoding="utf-8")
+    assert report.name == "index.html"
+    assert 'src="http' not in text and 'href="http' not in text and "<link" not in text
+    assert "<script>" not in text  # the config's string is escaped
+    assert "&lt;script&gt;" in text and "data/&lt;demo&gt;" in text
+    for path in images["calib"] + images["plane"]:
+        mime = "image/gif" if path.suffix == ".gif" else "image/png"
+        assert f"data:{mime};base64,{base64.b64encode(path.read_bytes()).decode()}" in text
+    assert text.count("data:image/png;base64,") == 3
+    assert "colourhs run DATASET_DIR --name demo" in text
+    assert " UTC" in text
+    # no temporary files left beside the page
+    assert sorted(p.name for p in report.parent.iterdir()) == ["index.html", "metrics.csv"]
+
+
+def test_report_metric_tables(report, metrics_csv):
+    text = report.read_text(encoding="utf-8")
+    tables = _tables(text)
+    raw = read_metrics(metrics_csv)
+    (plane_table,) = tables["scene-plane"]
+    plane = _as_dicts(plane_table)
+    assert list(plane) == ["vh", "bayes_nocalib", "bayes_ph"]  # the paper's order
+    for variant in VARIANTS:
+        assert variant in text
+        g = raw[(raw["scene"] == "plane") & (raw["variant"] == variant)]
+        row = plane[variant]
+        assert row["frames"] == "2"
+        assert row["hausdorff_rms_mm"] == format_number(g["hausdorff_rms_mm"].mean())
+        assert row["hausdorff_max_mm"] == format_number(g["hausdorff_max_mm"].max())
+        rms = math.sqrt((g["depth_rms_mm"] ** 2).mean())
+        assert row["depth_rms_mm"] == format_number(rms)
+        assert row["normal_median_deg"] == format_number(g["normal_median_deg"].median())
+        assert row["coverage"] == format_number(g["coverage"].mean())
+    assert plane["bayes_ph"]["depth_rms_mm"] == "3.54"  # RMS, not the mean 3.50
+    assert plane["bayes_ph"]["hausdorff_max_mm"] == "77.0"
+    # the paper's numbers beside ours, right after our column
+    header = plane_table[0]
+    assert header[header.index("hausdorff_rms_mm") + 1] == "paper hausdorff_rms_mm"
+    assert plane["bayes_nocalib"]["paper hausdorff_rms_mm"] == "2.50"
+    assert plane["bayes_ph"]["paper hausdorff_rms_mm"] == "2.00"
+    assert plane["bayes_ph"]["hausdorff_rms_mm"] == "2.50"
+    assert plane["vh"]["paper hausdorff_rms_mm"] == ""
+    assert PAPER_REFERENCE["plane"]["bayes_nocalib"]["hausdorff_rms_mm"] == 2.5
+    assert PAPER_REFERENCE["plane"]["bayes_ph"]["hausdorff_rms_mm"] == 2.0
+    # a scene without ground truth: variants and frame counts, empty metric cells
+    (sheet_table,) = tables["scene-sheet"]
+    sheet = _as_dicts(sheet_table)
+    assert list(sheet) == ["vh", "bayes_nocalib", "bayes_ph"]
+    assert "paper hausdorff_rms_mm" not in sheet_table[0]
+    for row in sheet.values():
+        assert row["frames"] == "2"
+        assert row["hausdorff_rms_mm"] == "" and row["depth_rms_mm"] == ""
+
+
+def test_report_timing_and_environment(report):
+    tables = _tables(report.read_text(encoding="utf-8"))
+    (timing,) = tables["timing"]
+    t = _as_dicts(timing)
+    assert t["reconstruct"]["jobs"] == "2"
+    assert t["reconstruct"]["total_s"] == "10.0"
+    assert t["reconstruct"]["mean_s"] == "5.00"
+    assert t["reconstruct"]["max_rss_mb"] == "1303"
+    assert t["photometric"]["total_s"] == "6.08"
+    assert t["all"]["total_s"] == "16.1"
+    env = {r[0]: r[1] for r in tables["env"][0]}
+    for key in ("python", "colourhs", "numpy", "scipy", "open3d", "pymeshlab", "opencv"):
+        assert env[key]
+    assert env["h5py"] and env["snakemake"] and env["numba"] and env["CPU count"]
+    text = report.read_text(encoding="utf-8")
+    assert "lambda: 0.5" in text and "path: data/demo" in text
+
+
+def test_software_versions_missing_package(monkeypatch):
+    from colourhs import report as rep
+
+    monkeypatch.setitem(rep.SOFTWARE, "nosuchpkg", ("nosuchpkg_xyz", ("nosuchpkg-xyz",)))
+    v = software_versions()
+    assert v["nosuchpkg"] == "not installed"
+    assert v["numpy"] == np.__version__
+
+
+def test_report_links_instead_of_embedding(tmp_path, metrics_csv, images):
+    out = build_report(
+        tmp_path / "reports" / "demo" / "index.html",
+        "demo",
+        metrics_csv,
+        images["calib"],
+        {"plane": images["plane"]},
+        [],
+        {},
+        embed_images=False,
+    )
+    text = out.read_text(encoding="utf-8")
+    assert "base64" not in text
+    assert 'src="../../results/demo/figures/mu_maps.png"' in text
+    assert "No benchmark files." in text
+
+
+@pytest.mark.parametrize("drop", ["depth_rms_mm", "variant"])
+def test_missing_column_raises_and_writes_nothing(tmp_path, metrics_csv, images, drop):
+    bad = tmp_path / "bad.csv"
+    pd.read_csv(metrics_csv).drop(columns=drop).to_csv(bad, index=False)
+    out = tmp_path / "reports" / "demo" / "index.html"
+    with pytest.raises(ValueError, match=drop) as err:
+        build_report(out, "demo", bad, images["calib"], {}, [], {})
+    assert "bad.csv" in str(err.value)
+    assert not out.exists()
+    assert [p.name for p in out.parent.iterdir()] == ["metrics.csv"]  # no temporary file
+
+
+def test_missing_metrics_file_raises(tmp_path):
+    out = tmp_path / "index.html"
+    with pytest.raises(ValueError, match="nothere.csv"):
+        build_report(out, "demo", tmp_path / "nothere.csv", [], {}, [], {})
+    assert not out.exists()
+
+
+def test_missing_figure_raises(tmp_path, metrics_csv):
+    out = tmp_path / "index.html"
+    with pytest.raises(ValueError, match="gone.png"):
+        build_report(out, "demo", metrics_csv, [tmp_path / "gone.png"], {}, [], {})
+    assert not out.exists()
+
+
+def test_folders_config_file_and_find_benchmarks(tmp_path, metrics_csv, images, benchmarks):
+    other = tmp_path / "benchmarks" / "snakemake" / "reconstruct" / "other" / "s" / "v" / "0.tsv"
+    other.parent.mkdir(parents=True)
+    other.write_text(HEADER + "99.0\t0:01:39\t1\t1\t1\t1\t0\t0\t1\t99.0\n")
+    root = tmp_path / "benchmarks" / "snakemake"
+    assert find_benchmarks(root, "demo") == sorted(benchmarks)
+    assert len(find_benchmarks(root)) == 4 and find_benchmarks(tmp_path / "none") == []
+    config = tmp_path / "config.yaml"
+    config.write_text("mrf:\n  lambda: 0.25\n")
+    out = build_report(
+        tmp_path / "index.html",
+        "demo",
+        metrics_csv,
+        images["calib"][0].parent,  # a folder: all its images
+        {"plane": images["plane"][0].parent},
+        find_benchmarks(root, "demo"),
+        config,
+    )
+    text = out.read_text(encoding="utf-8")
+    assert text.count("data:image/png;base64,") == 6 and text.count("data:image/gif;") == 2
+    assert "lambda: 0.25" in text
+    assert _as_dicts(_tables(text)["timing"][0])["all"]["total_s"] == "16.1"

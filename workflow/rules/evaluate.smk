@@ -1,0 +1,53 @@
+# Evaluation (paper section IV): RMS Hausdorff distance of each mesh to the
+# ground truth over what the reference camera saw, depth and normal errors,
+# and the tidy table reports/NAME/metrics.csv.
+
+
+rule evaluate_frame:
+    input:
+        depth="results/{name}/{scene}/{variant}/depth/{frame}.h5",
+        mesh="results/{name}/{scene}/{variant}/mesh/{frame}.ply",
+        gt=lambda w: gt_mesh(w.name, w.scene, w.frame),
+    output:
+        json="results/{name}/{scene}/{variant}/eval/{frame}.json",
+        ply="results/{name}/{scene}/{variant}/eval/{frame}.ply",
+    log:
+        "logs/evaluate/{name}/{scene}/{variant}/{frame}.log",
+    benchmark:
+        "benchmarks/snakemake/evaluate_frame/{name}/{scene}/{variant}/{frame}.tsv"
+    wildcard_constraints:
+        frame="[0-9]{6}",
+    conda:
+        "../envs/colourhs.yaml"
+    threads: 1
+    resources:
+        mem_mb=3000,
+        runtime=10,
+    params:
+        gt=lambda w, input: f"--gt {input.gt}" if input.gt else "",
+        options=lambda w: cli_options(section("evaluation")),
+    shell:
+        "$COLOURHS_PYTHON -m colourhs evaluate {input.depth} {input.mesh} {output.json} {params.gt} "
+        "--coloured {output.ply} --scene {wildcards.scene} --frame {wildcards.frame} "
+        "--variant {wildcards.variant} {params.options} > {log} 2>&1"
+
+
+rule metrics_table:
+    input:
+        lambda w: evaluation_targets(w.name),
+    output:
+        report(
+            "reports/{name}/metrics.csv",
+            caption="../report/metrics.rst",
+            category="Evaluation",
+        ),
+    log:
+        "logs/evaluate/{name}/metrics.log",
+    conda:
+        "../envs/colourhs.yaml"
+    threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=5,
+    shell:
+        "$COLOURHS_PYTHON -m colourhs metrics {output} {input} > {log} 2>&1"

@@ -1,0 +1,71 @@
+# Figures and the evaluation report reports/NAME/index.html.
+
+
+rule effective_config:
+    output:
+        "results/{name}/config.yaml",
+    log:
+        "logs/report/{name}/config.log",
+    conda:
+        "../envs/colourhs.yaml"
+    threads: 1
+    resources:
+        mem_mb=500,
+        runtime=2,
+    params:
+        config=lambda w: json.dumps(config, sort_keys=True),
+    shell:
+        "$COLOURHS_PYTHON -m colourhs config {output} {params.config:q} > {log} 2>&1"
+
+
+rule scene_figures:
+    input:
+        unpack(lambda w: figure_inputs(w.name, w.scene)),
+    output:
+        report(
+            directory("reports/{name}/figures/{scene}"),
+            patterns=["{fig}.png"],
+            caption="../report/scene_figures.rst",
+            category="Figures",
+            subcategory="{scene}",
+        ),
+    log:
+        "logs/report/{name}/figures/{scene}.log",
+    benchmark:
+        "benchmarks/snakemake/scene_figures/{name}/{scene}.tsv"
+    conda:
+        "../envs/colourhs.yaml"
+    threads: 1
+    resources:
+        mem_mb=3000,
+        runtime=10,
+    params:
+        options=lambda w: figure_options(w.name, w.scene),
+    shell:
+        "$COLOURHS_PYTHON -m colourhs figures {output} {params.options} > {log} 2>&1"
+
+
+rule report:
+    input:
+        unpack(lambda w: report_inputs(w.name)),
+    output:
+        report(
+            "reports/{name}/index.html",
+            caption="../report/index.rst",
+            category="Evaluation",
+        ),
+    log:
+        "logs/report/{name}/index.log",
+    conda:
+        "../envs/colourhs.yaml"
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=5,
+    params:
+        figures=lambda w, input: " ".join(f"{Path(d).name}={d}" for d in input.figures),
+    shell:
+        "$COLOURHS_PYTHON -m colourhs report {output} --name {wildcards.name} "
+        "--metrics {input.metrics} --config {input.config} "
+        "--calibration {input.calibration} --figures {params.figures} "
+        "--benchmarks benchmarks/snakemake > {log} 2>&1"

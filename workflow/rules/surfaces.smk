@@ -1,0 +1,59 @@
+# Surfaces (paper section IV-A): the visual hull of each frame (the `vh`
+# variant, and the closing points of the meshes), then one Poisson mesh per
+# scene x frame x variant from the oriented points of its depth file.
+
+
+rule visual_hull:
+    input:
+        lambda w: frame_inputs(w.name, w.scene, w.frame),
+    output:
+        ply="results/{name}/{scene}/hull/{frame}.ply",
+        depth="results/{name}/{scene}/vh/depth/{frame}.h5",
+    log:
+        "logs/surfaces/{name}/{scene}/hull/{frame}.log",
+    benchmark:
+        "benchmarks/snakemake/visual_hull/{name}/{scene}/{frame}.tsv"
+    wildcard_constraints:
+        frame="[0-9]{6}",
+    conda:
+        "../envs/colourhs.yaml"
+    threads: 1
+    resources:
+        mem_mb=3000,
+        runtime=10,
+    params:
+        dataset=lambda w: dataset_path(w.name),
+        options=lambda w: cli_options(section("surfaces").get("hull", {})),
+    shell:
+        "$COLOURHS_PYTHON -m colourhs hull {params.dataset} {wildcards.scene} {wildcards.frame} "
+        "{output.ply} --depth {output.depth} {params.options} > {log} 2>&1"
+
+
+rule frame_mesh:
+    input:
+        depth="results/{name}/{scene}/{variant}/depth/{frame}.h5",
+        hull=lambda w: (
+            f"results/{w.name}/{w.scene}/hull/{w.frame}.ply"
+            if mesh_uses_hull(w.variant)
+            else []
+        ),
+    output:
+        "results/{name}/{scene}/{variant}/mesh/{frame}.ply",
+    log:
+        "logs/surfaces/{name}/{scene}/{variant}/mesh/{frame}.log",
+    benchmark:
+        "benchmarks/snakemake/frame_mesh/{name}/{scene}/{variant}/{frame}.tsv"
+    wildcard_constraints:
+        frame="[0-9]{6}",
+    conda:
+        "../envs/colourhs.yaml"
+    threads: 1
+    resources:
+        mem_mb=3000,
+        runtime=10,
+    params:
+        hull=lambda w, input: f"--hull {input.hull}" if input.hull else "",
+        options=lambda w: cli_options(section("surfaces").get("mesh", {})),
+    shell:
+        "$COLOURHS_PYTHON -m colourhs mesh {input.depth} {output} {params.hull} {params.options} "
+        "> {log} 2>&1"
