@@ -187,7 +187,8 @@ def _figures(args) -> int:
     from colourhs.figures import scene_figures
 
     written = scene_figures(args.out, _pairs(args.depth, "--depth"), _pairs(args.mesh, "--mesh"),
-                            args.gt, _pairs(args.animate, "--animate"))  # fmt: skip
+                            args.gt, _pairs(args.animate, "--animate"),
+                            coloured=_pairs(args.coloured, "--coloured"))  # fmt: skip
     print(f"wrote {len(written)} figures into {args.out}")
     return 0
 
@@ -332,6 +333,7 @@ def build_parser() -> argparse.ArgumentParser:
     fg.add_argument("--depth", nargs="+", default=[], help="VARIANT=depth.h5 ...")
     fg.add_argument("--mesh", nargs="+", default=[], help="VARIANT=mesh.ply ...")
     fg.add_argument("--gt", type=Path, default=None)
+    fg.add_argument("--coloured", nargs="*", default=[], help="VARIANT=error-coloured mesh ...")
     fg.add_argument("--animate", nargs="*", default=[], help="FRAME=mesh.ply ... (dynamic scene)")
     fg.set_defaults(func=_figures)
 

@@ -561,6 +561,7 @@ def scene_figures(
     gt_ply: str | Path | None = None,
     animation: Mapping[str, str | Path] | None = None,
     fps: float = 8,
+    coloured: Mapping[str, str | Path] | None = None,
 ) -> list[Path]:
     """A scene's figures, variants side by side (the Snakemake rule's function).
 
@@ -570,7 +571,10 @@ def scene_figures(
     ``<variant>_normal.png`` and, with ground truth, ``<variant>_depth_error.png``
     (|depth error|, mm) and ``<variant>_normal_error.png`` (degrees); with
     ``animation`` (frame -> mesh of a dynamic scene), ``animation.gif`` of the
-    shaded reconstruction over the frames.
+    shaded reconstruction over the frames; with ``coloured`` (variant -> mesh
+    coloured by its Hausdorff distance, from :func:`colourhs.evaluate.evaluate_frame`,
+    its metrics JSON beside it), ``hausdorff.png``: those meshes rendered, each
+    titled with its colour scale (viridis, 0 to the top in mm).
 
     Parameters
     ----------
@@ -579,6 +583,7 @@ def scene_figures(
     gt_ply : the frame's ground-truth mesh, or None.
     animation : frame -> mesh PLY, in frame order, or None.
     fps : frames per second of the animation.
+    coloured : variant -> error-coloured mesh PLY, or None.
 
     Returns
     -------
@@ -618,6 +623,23 @@ def scene_figures(
     for variant, ply in meshes.items():
         renders[variant] = render(ply)
     written.append(render_grid_figure(renders, out / "figure7.png", "shaded reconstructions"))
+    if coloured:
+        import json
+
+        import open3d as o3d
+
+        tiles = {}
+        for variant, ply in coloured.items():
+            mesh = o3d.io.read_triangle_mesh(str(ply))
+            v, t = np.asarray(mesh.vertices), np.asarray(mesh.triangles)
+            rgb = np.asarray(mesh.vertex_colors) if mesh.has_vertex_colors() else None
+            meta = Path(ply).with_suffix(".json")
+            top = json.loads(meta.read_text()).get("colour_vmax_mm") if meta.exists() else None
+            label = f"{variant} (0-{top:.3g} mm)" if top else variant
+            tiles[label] = shaded_render(v, t, cam.K, cam.R, cam.t, cam.width, cam.height,
+                                         vertex_rgb=rgb, dist=cam.dist)  # fmt: skip
+        title = "Hausdorff distance to the ground truth (viridis, grey: not evaluated)"
+        written.append(render_grid_figure(tiles, out / "hausdorff.png", title))
     if animation:
         frames = [render(ply) for ply in animation.values()]
         written.append(write_animation(frames, out / "animation.gif", fps=fps))

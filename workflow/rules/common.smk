@@ -261,7 +261,12 @@ def figure_inputs(name, scene):
         "mesh": [f"results/{name}/{scene}/{v}/mesh/{f0}.ply" for v in variants()],
         "gt": gt_mesh(name, scene, f0),
         "animation": [],
+        "coloured": [],
     }
+    if out["gt"]:
+        out["coloured"] = [
+            f"results/{name}/{scene}/{v}/eval/{f0}.ply" for v in variants()
+        ]
     if len(frames) > 1:
         a = animation_variant()
         out["animation"] = [f"results/{name}/{scene}/{a}/mesh/{f}.ply" for f in frames]
@@ -276,6 +281,9 @@ def figure_options(name, scene):
     opts += ["--mesh"] + [f"{v}={p}" for v, p in zip(variants(), inp["mesh"])]
     if inp["gt"]:
         opts += ["--gt", inp["gt"][0]]
+        opts += ["--coloured"] + [
+            f"{v}={p}" for v, p in zip(variants(), inp["coloured"])
+        ]
     if inp["animation"]:
         opts += ["--animate"] + [f"{f}={p}" for f, p in zip(frames, inp["animation"])]
     return " ".join(opts)
