@@ -1,0 +1,60 @@
+"""Wall time of the README's main job on the demo preset, and where it goes.
+
+``.venv/bin/python benchmarks/bench_pipeline.py [--fresh]`` runs
+``snakemake --cores 2`` in the project folder (``--fresh`` first removes
+``results/demo``, ``reports/demo`` and the demo's Snakemake benchmark files, so
+everything after the synthetic rendering reruns; the rendered dataset is kept
+if present) and writes ``benchmarks/results/pipeline_demo.json``: the wall
+time and, per rule, the jobs and seconds from the rules' benchmark files.
+Target (issue 6): the whole demo pipeline within 15 minutes on 2 cores.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from colourhs.report import find_benchmarks, read_benchmarks, summarise_benchmarks
+
+ROOT = Path(__file__).resolve().parents[1]
+HERE = Path(__file__).parent
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--fresh", action="store_true")
+    ap.add_argument("--cores", type=int, default=2)
+    args = ap.parse_args()
+    if args.fresh:
+        for p in (ROOT / "results" / "demo", ROOT / "reports" / "demo"):
+            shutil.rmtree(p, ignore_errors=True)
+        for f in find_benchmarks(ROOT / "benchmarks" / "snakemake", "demo"):
+            if "synth" not in f.parts:
+                f.unlink()
+    t = time.perf_counter()
+    subprocess.run([sys.executable, "-m", "snakemake", "--cores", str(args.cores)], cwd=ROOT,
+                   check=True)  # fmt: skip
+    wall = time.perf_counter() - t
+    table = summarise_benchmarks(read_benchmarks(find_benchmarks(ROOT / "benchmarks" / "snakemake",
+                                                                 "demo")))  # fmt: skip
+    result = {
+        "command": f"snakemake --cores {args.cores}",
+        "fresh": args.fresh,
+        "wall_s": round(wall, 1),
+        "cpu_count": os.cpu_count(),
+        "rules": table.round(2).to_dict(orient="records"),
+    }
+    (HERE / "results").mkdir(exist_ok=True)
+    (HERE / "results" / "pipeline_demo.json").write_text(json.dumps(result, indent=2))
+    print(table.to_string(index=False))
+    print(f"wall {wall:.0f} s")
+
+
+if __name__ == "__main__":
+    main()
