@@ -3,7 +3,7 @@
 
 rule validate_dataset:
     input:
-        lambda w: dataset_path(w.name),
+        lambda w: capture_files(w.name),
     output:
         "results/{name}/capture/summary.json",
     log:
@@ -14,5 +14,7 @@ rule validate_dataset:
     resources:
         mem_mb=1000,
         runtime=10,
+    params:
+        dataset=lambda w: dataset_path(w.name),
     shell:
-        "$COLOURHS_PYTHON -m colourhs validate {input} --summary {output} > {log} 2>&1"
+        "$COLOURHS_PYTHON -m colourhs validate {params.dataset} --summary {output} > {log} 2>&1"

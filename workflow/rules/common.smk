@@ -43,6 +43,23 @@ def chromatic_inputs(name, obj):
     return _files(name, "rig.json") + _files(name, f"chromatic/{obj}/*/*.png")
 
 
+def capture_files(name):
+    """Every file of a dataset that validation reads (JSON metadata, images, masks, meshes)."""
+    return sorted(
+        set(_files(name, "rig.json"))
+        | set(_files(name, "**/*.png"))
+        | set(_files(name, "scenes/*/scene.json"))
+        | set(_files(name, "scenes/*/gt/*.ply"))
+    )
+
+
+def silhouette_inputs(name, scene, frame):
+    """rig.json and a frame's masks; the frame's images when the scene has no masks."""
+    masks = _files(name, f"scenes/{scene}/masks/{frame}/*.png")
+    images = masks or _files(name, f"scenes/{scene}/frames/{frame}/*.png")
+    return _files(name, "rig.json") + images
+
+
 def frame_inputs(name, scene, frame):
     """rig.json, a frame's images and its silhouettes (when the scene has masks)."""
     return (

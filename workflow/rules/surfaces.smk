@@ -5,7 +5,7 @@
 
 rule visual_hull:
     input:
-        lambda w: frame_inputs(w.name, w.scene, w.frame),
+        lambda w: silhouette_inputs(w.name, w.scene, w.frame),
     output:
         ply="results/{name}/{scene}/hull/{frame}.ply",
         depth="results/{name}/{scene}/vh/depth/{frame}.h5",

@@ -1,0 +1,367 @@
+"""Caching and incremental reruns of the Snakemake workflow, through Snakemake's Python API.
+
+One real run of the whole workflow on a copy of the tiny dataset (variants vh and
+bayes_ph, scenes plane and sheet), then, in file order: what a second run would do,
+what replacing one board image / one frame image / one reconstruction parameter
+would rerun (dry runs, the change undone afterwards), and a failing stage and its
+resumed run (real runs).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+from collections import Counter
+from collections.abc import Iterable
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import pytest
+import yaml
+from snakemake.api import SnakemakeApi
+from snakemake.settings.enums import Quietness
+from snakemake.settings.types import (
+    ConfigSettings,
+    DAGSettings,
+    ExecutionSettings,
+    OutputSettings,
+    ResourceSettings,
+)
+
+from colourhs.cli import PROJECT_ROOT, SNAKEFILE
+
+NAME = "t"
+VARIANTS = ("vh", "bayes_ph")
+FRAMES = {"plane": ("000000",), "sheet": ("000000", "000001", "000002")}
+RUN_CONFIG = {
+    "datasets": {NAME: {"path": None}},  # set by the fixture
+    "only": [NAME],
+    "reconstruction": {"variants": list(VARIANTS), "scenes": sorted(FRAMES)},
+}
+
+
+# --------------------------------------------------------------------------- Snakemake API
+
+
+def _snakemake(workdir: Path, configfiles, *, dryrun: bool, keep_going: bool = False):
+    """Run (or dry-run) the default target; returns (succeeded, jobs, updated files).
+
+    ``jobs``: (rule, outputs) of every job Snakemake planned, read from its DAG;
+    ``updated files``: the outputs of those jobs as Snakemake reports them.
+    """
+    updated: list[str] = []
+    quiet = {Quietness.RULES, Quietness.PROGRESS} if dryrun else None
+    jobs: list[tuple[str, tuple[str, ...]]] = []
+    try:
+        with SnakemakeApi(OutputSettings(quiet=quiet, dryrun=dryrun)) as api:
+            workflow_api = api.workflow(
+                resource_settings=ResourceSettings(cores=2),
+                config_settings=ConfigSettings(configfiles=[Path(p) for p in configfiles]),
+                snakefile=SNAKEFILE,
+                workdir=workdir,
+            )
+            dag_api = workflow_api.dag(DAGSettings())
+            try:
+                dag_api.execute_workflow(
+                    executor="dryrun" if dryrun else "local",
+                    execution_settings=ExecutionSettings(keep_going=keep_going),
+                    updated_files=updated,
+                )
+            finally:
+                dag = workflow_api._workflow.dag  # the DAG the call built (no public getter)
+                if dag is not None and dryrun:
+                    jobs = [(j.rule.name, tuple(map(str, j.output))) for j in dag.needrun_jobs()]
+    except Exception as e:  # a failed job: WorkflowError
+        if dryrun:
+            raise
+        print(f"snakemake failed: {e}")
+        return False, jobs, updated
+    return True, jobs, updated
+
+
+@dataclass(frozen=True)
+class Plan:
+    """What Snakemake would run now: one (rule, output path) per output file."""
+
+    outputs: frozenset[tuple[str, str]]
+    rules: Counter  # rule name -> number of jobs
+
+    def __bool__(self) -> bool:
+        return bool(self.outputs)
+
+    def of(self, rule: str) -> set[str]:
+        return {path for r, path in self.outputs if r == rule}
+
+
+def planned_jobs(workdir: Path, configfiles) -> Plan:
+    """Dry run: the jobs Snakemake would run now (the `all` target rule left out)."""
+    _, jobs, updated = _snakemake(workdir, configfiles, dryrun=True)
+    jobs = [(rule, out) for rule, out in jobs if rule != "all"]
+    outputs = frozenset((rule, path) for rule, out in jobs for path in out)
+    # The DAG's jobs and Snakemake's own list of files it would update agree.
+    assert {path for _, path in outputs} == set(updated)
+    return Plan(outputs, Counter(rule for rule, _ in jobs))
+
+
+def assert_plan(plan: Plan, required: set, optional: Iterable = ()) -> None:
+    """Every required job output is planned, and nothing beyond required + optional."""
+    planned = set(plan.outputs)
+    missing = required - planned
+    extra = planned - required - set(optional)
+    assert not missing and not extra, f"missing: {sorted(missing)}\nunexpected: {sorted(extra)}"
+
+
+# --------------------------------------------------------------------------- expected jobs
+
+
+def hs_jobs(scene: str, frame: str, variant: str = "bayes_ph") -> set[tuple[str, str]]:
+    """A Helmholtz-stereo frame's reconstruction, mesh and evaluation."""
+    base = f"results/{NAME}/{scene}/{variant}"
+    return {
+        ("reconstruct_frame", f"{base}/depth/{frame}.h5"),
+        ("frame_mesh", f"{base}/mesh/{frame}.ply"),
+        ("evaluate_frame", f"{base}/eval/{frame}.json"),
+        ("evaluate_frame", f"{base}/eval/{frame}.ply"),
+    }
+
+
+def vh_jobs(scene: str, frame: str) -> set[tuple[str, str]]:
+    """A frame's visual hull (the vh variant's depth), its mesh and evaluation."""
+    base = f"results/{NAME}/{scene}"
+    return {
+        ("visual_hull", f"{base}/hull/{frame}.ply"),
+        ("visual_hull", f"{base}/vh/depth/{frame}.h5"),
+        ("frame_mesh", f"{base}/vh/mesh/{frame}.ply"),
+        ("evaluate_frame", f"{base}/vh/eval/{frame}.json"),
+        ("evaluate_frame", f"{base}/vh/eval/{frame}.ply"),
+    }
+
+
+def all_hs_jobs() -> set[tuple[str, str]]:
+    return {job for scene, frames in FRAMES.items() for f in frames for job in hs_jobs(scene, f)}
+
+
+def report_jobs(*scenes: str) -> set[tuple[str, str]]:
+    """The metrics table, the named scenes' figures and the report."""
+    return {
+        ("metrics_table", f"reports/{NAME}/metrics.csv"),
+        ("report", f"reports/{NAME}/index.html"),
+        *{("scene_figures", f"reports/{NAME}/figures/{s}") for s in scenes},
+    }
+
+
+# Capture validation reads the whole dataset folder: whether a changed image reruns
+# it is test_validation_follows_the_capture_files's business, not the others'.
+VALIDATION = {("validate_dataset", f"results/{NAME}/capture/summary.json")}
+CALIBRATION_RULES = {"marker_poses", "photometric_maps", "crosstalk", "chromaticity_map"}
+
+
+# --------------------------------------------------------------------------- files
+
+
+def snapshot(workdir: Path) -> dict[str, int]:
+    """Relative path -> mtime (ns) of every file under results/ and reports/."""
+    return {
+        str(p.relative_to(workdir)): p.stat().st_mtime_ns
+        for top in ("results", "reports")
+        for p in (workdir / top).rglob("*")
+        if p.is_file()
+    }
+
+
+def changed(before: dict[str, int], after: dict[str, int]) -> set[str]:
+    """Files written, removed or created between two snapshots."""
+    return {p for p in before.keys() | after.keys() if before.get(p) != after.get(p)}
+
+
+def under(paths: Iterable[str], jobs: set[tuple[str, str]]) -> set[str]:
+    """The paths that are (or lie inside) one of the jobs' outputs."""
+    outs = {path for _, path in jobs}
+    return {p for p in paths if p in outs or any(p.startswith(o + "/") for o in outs)}
+
+
+def newest_output(workdir: Path) -> float:
+    return max(os.stat(workdir / p).st_mtime for p in snapshot(workdir))
+
+
+def tweak_png(path: Path) -> None:
+    """Re-encode a 16-bit PNG with its first pixel's lowest bit flipped."""
+    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    assert img is not None and img.dtype.name == "uint16"
+    img[0, 0, 0] ^= 1
+    assert cv2.imwrite(str(path), img)
+
+
+@contextmanager
+def replaced(path: Path, change, workdir: Path):
+    """Change a dataset file (newer than every output); put it back, bytes and times."""
+    original, st = path.read_bytes(), path.stat()
+    try:
+        change(path)
+        assert path.read_bytes() != original
+        stamp = newest_output(workdir) + 1.0
+        os.utime(path, (stamp, stamp))
+        yield path
+    finally:
+        path.write_bytes(original)
+        os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns))
+
+
+# --------------------------------------------------------------------------- the run
+
+
+@dataclass
+class Run:
+    workdir: Path
+    data: Path
+    configfiles: list[Path]
+    first: dict[str, int]  # snapshot after the first run
+
+
+@pytest.fixture(scope="module")
+def run(tiny_dataset, tmp_path_factory) -> Run:
+    """The whole workflow, run once for real on a copy of the tiny dataset."""
+    root = tmp_path_factory.mktemp("workflow")
+    data = root / "capture"
+    shutil.copytree(tiny_dataset, data)
+    workdir = root / "run"
+    workdir.mkdir()
+    config = dict(RUN_CONFIG, datasets={NAME: {"path": str(data)}})
+    (workdir / "run-config.yaml").write_text(yaml.safe_dump(config))
+    # As `colourhs run`: the project's config.yaml, then the run's.
+    configfiles = [PROJECT_ROOT / "config.yaml", workdir / "run-config.yaml"]
+    ok, _, updated = _snakemake(workdir, configfiles, dryrun=False)
+    assert ok, "the first run of the workflow failed"
+    assert f"reports/{NAME}/index.html" in updated
+    return Run(workdir, data, configfiles, snapshot(workdir))
+
+
+# --------------------------------------------------------------------------- tests
+
+
+def test_first_run_made_every_output(run):
+    files = set(run.first)
+    expected = {path for _, path in all_hs_jobs() | report_jobs() | VALIDATION}
+    expected |= {
+        path for scene, frames in FRAMES.items() for f in frames for _, path in vh_jobs(scene, f)
+    }
+    expected |= {
+        f"results/{NAME}/calib/{f}"
+        for f in ("marker_poses.csv", "photometric.h5", "photometric.png", "crosstalk.json")
+    }
+    expected |= {f"results/{NAME}/config.yaml"}
+    assert expected <= files, sorted(expected - files)
+    for scene in FRAMES:  # directory outputs
+        assert any(p.startswith(f"reports/{NAME}/figures/{scene}/") for p in files)
+    assert {p for p in files if p.startswith(f"results/{NAME}/calib/chromaticity/")}
+    assert not [p for p in files if ".tmp" in Path(p).name]
+
+
+def test_second_run_does_nothing(run):
+    assert not planned_jobs(run.workdir, run.configfiles)
+    ok, _, updated = _snakemake(run.workdir, run.configfiles, dryrun=False)
+    assert ok and updated == []
+    assert snapshot(run.workdir) == run.first
+
+
+def test_board_image_reruns_photometric_maps_and_downstream(run):
+    pose = sorted((run.data / "photometric").iterdir())[3]
+    with replaced(pose / "cam1.png", tweak_png, run.workdir):
+        plan = planned_jobs(run.workdir, run.configfiles)
+    calib = f"results/{NAME}/calib"
+    required = {
+        ("marker_poses", f"{calib}/marker_poses.csv"),
+        ("photometric_maps", f"{calib}/photometric.h5"),
+        ("photometric_maps", f"{calib}/photometric.png"),
+        *all_hs_jobs(),  # bayes_ph reads photometric.h5; vh reads no calibration
+        *report_jobs("plane", "sheet"),
+    }
+    assert_plan(plan, required, optional=VALIDATION)
+    assert plan.rules["reconstruct_frame"] == 4
+    assert plan.rules["frame_mesh"] == plan.rules["evaluate_frame"] == 4
+    assert not {"crosstalk", "chromaticity_map", "visual_hull", "effective_config"} & set(
+        plan.rules
+    )
+    assert not [p for p in plan.of("frame_mesh") if "/vh/" in p]
+    # Undone: nothing to do again.
+    assert not planned_jobs(run.workdir, run.configfiles)
+
+
+def test_frame_image_reruns_that_frame_only(run):
+    image = run.data / "scenes" / "sheet" / "frames" / "000001" / "cam2.png"
+    with replaced(image, tweak_png, run.workdir):
+        plan = planned_jobs(run.workdir, run.configfiles)
+    required = hs_jobs("sheet", "000001") | report_jobs("sheet")
+    # The sheet has masks, so its hull reads no frame image; the rule declares the
+    # frame's images all the same (frame_inputs), so the hull may rerun too.
+    assert_plan(plan, required, optional=vh_jobs("sheet", "000001") | VALIDATION)
+    assert plan.of("reconstruct_frame") == {f"results/{NAME}/sheet/bayes_ph/depth/000001.h5"}
+    assert plan.of("scene_figures") == {f"reports/{NAME}/figures/sheet"}
+    assert not [path for _, path in plan.outputs if "/plane/" in path]
+    assert not [path for _, path in plan.outputs if re.search(r"/00000[02]\.", path)]
+    assert not CALIBRATION_RULES & set(plan.rules)
+    assert not planned_jobs(run.workdir, run.configfiles)
+
+
+def test_reconstruction_parameter_reruns_reconstruction_and_downstream(run):
+    config = yaml.safe_load(run.configfiles[1].read_text())
+    config["reconstruction"]["params"] = {"n_labels": 7}
+    changed_config = run.workdir / "run-config-n_labels.yaml"
+    changed_config.write_text(yaml.safe_dump(config))
+    plan = planned_jobs(run.workdir, [run.configfiles[0], changed_config])
+    required = all_hs_jobs() | report_jobs("plane", "sheet")
+    # The run's recorded configuration changes with it.
+    required |= {("effective_config", f"results/{NAME}/config.yaml")}
+    assert_plan(plan, required)
+    assert plan.rules["reconstruct_frame"] == 4
+    assert not (CALIBRATION_RULES | {"visual_hull", "validate_dataset"}) & set(plan.rules)
+    assert not planned_jobs(run.workdir, run.configfiles)
+
+
+def test_failed_stage_leaves_no_partial_output_and_rerun_resumes(run):
+    image = run.data / "scenes" / "sheet" / "frames" / "000001" / "cam1.png"
+    failed_depth = f"results/{NAME}/sheet/bayes_ph/depth/000001.h5"
+    downstream = (hs_jobs("sheet", "000001") | report_jobs("sheet")) - {
+        ("reconstruct_frame", failed_depth)
+    }
+    optional = vh_jobs("sheet", "000001") | VALIDATION  # reads the image (see above)
+    before = snapshot(run.workdir)
+    with replaced(image, lambda p: p.write_bytes(p.read_bytes()[:200]), run.workdir):
+        ok, _, _ = _snakemake(run.workdir, run.configfiles, dryrun=False, keep_going=True)
+        failed = snapshot(run.workdir)
+    assert not ok, "the run with a truncated frame image succeeded"
+    assert not (run.workdir / failed_depth).exists()
+    # Nothing downstream of the failure was written (the old files are still there, stale).
+    assert not under(changed(before, failed), downstream)
+    assert all(failed[p] == before[p] for p in under(before, downstream))
+    # Only the failed frame's jobs that do not read the broken image may have run.
+    assert changed(before, failed) - {failed_depth} <= under(
+        before.keys() | failed.keys(), optional
+    )
+    assert not [p for p in failed if ".tmp" in Path(p).name]
+
+    # The image restored (its old mtime too): the rerun does the failed frame and what
+    # follows, nothing else.
+    plan = planned_jobs(run.workdir, run.configfiles)
+    assert_plan(plan, hs_jobs("sheet", "000001") | report_jobs("sheet"), optional=optional)
+    ok, _, updated = _snakemake(run.workdir, run.configfiles, dryrun=False)
+    assert ok
+    assert set(updated) == {path for _, path in plan.outputs}
+    after = snapshot(run.workdir)
+    assert set(after) == set(run.first)  # every output exists again
+    rerun = changed(failed, after)
+    assert failed_depth in rerun
+    assert under(rerun, downstream) == under(after, downstream)  # all rewritten
+    assert rerun <= under(after, plan.outputs)
+    assert not [p for p in after if ".tmp" in Path(p).name]
+    assert not planned_jobs(run.workdir, run.configfiles)
+
+
+def test_validation_follows_the_capture_files(run):
+    image = run.data / "scenes" / "sheet" / "frames" / "000001" / "cam3.png"
+    with replaced(image, tweak_png, run.workdir):
+        plan = planned_jobs(run.workdir, run.configfiles)
+    assert plan.of("validate_dataset") == {path for _, path in VALIDATION}
