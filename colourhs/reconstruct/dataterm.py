@@ -23,12 +23,18 @@ from typing import NamedTuple
 
 import numba as nb
 import numpy as np
+from llvmlite import ir
+from numba import types
+from numba.core import cgutils
+from numba.extending import intrinsic
 
 INVALID_COST = 1.0
 
 
-NEWTON_STEPS = 6
+HALLEY_STEPS = 3  # exact to float32 for sigma_3 / sigma_2 < 0.6; 4 for < 0.8
 TINY = 1e-300
+LOW, HIGH = 1e-150, 1e150  # clamps that keep a product of two of them finite
+LANES = 4  # slots per SIMD load: S holds a multiple of 4 slots per pixel
 SENTINEL = np.float32(-1.0e30)  # an unusable sample: any positive bilinear weight makes it < 0
 
 
@@ -37,10 +43,11 @@ class Prepared(NamedTuple):
 
     Attributes
     ----------
-    S : (C, H, W, 2 * s) float32
+    S : (C, H, W, nv) float32
         Per camera and pixel, the s Helmholtz-camera values J = mu * i / p of
-        the camera's slots, then their chromaticities p (1 without
-        chromaticity calibration); ``SENTINEL`` where J is unusable.
+        the camera's slots, then (with chromaticity calibration only) their
+        chromaticities p, padded with 1 to nv, a multiple of 4 (the kernel
+        reads 4 slots with one SIMD load). ``SENTINEL`` where J is unusable.
     slots : (P, 2) int64
         Slot of each side of each reciprocal pair in its camera's S.
     use_p : bool
@@ -52,62 +59,113 @@ class Prepared(NamedTuple):
     use_p: bool
 
 
+@intrinsic
+def _bilinear4(typingctx, src, i, dx, dy, w00, w01, w10, w11, dst, j, step):
+    """``dst[j + s * step] = w00 src[i + s] + w01 src[i + dx + s]
+    + w10 src[i + dy + s] + w11 src[i + dx + dy + s]`` for s < 4, with flat
+    indices into C-contiguous float32 arrays and <4 x float> loads and
+    arithmetic: one bilinear footprint of a group of 4 packed slots. (Numba
+    leaves LLVM's SLP vectoriser off, and the loop vectoriser would need
+    gathers. No bounds checks: the caller keeps the footprint inside.)"""
+    sig = types.void(src, i, dx, dy, w00, w01, w10, w11, dst, j, step)
+
+    def codegen(context, builder, signature, args):
+        src_v, i_v, dx_v, dy_v = args[:4]
+        weights, dst_v, j_v, step_v = args[4:8], args[8], args[9], args[10]
+        v4 = ir.VectorType(ir.FloatType(), LANES)
+        sdata = cgutils.create_struct_proxy(signature.args[0])(context, builder, src_v).data
+        ddata = cgutils.create_struct_proxy(signature.args[8])(context, builder, dst_v).data
+
+        def texel(off):
+            ptr = builder.gep(sdata, [off], inbounds=True)
+            return builder.load(builder.bitcast(ptr, v4.as_pointer()), align=4)
+
+        def splat(w, ty):
+            x = context.cast(builder, w, ty, types.float32)
+            x = builder.insert_element(ir.Constant(v4, ir.Undefined), x, ir.IntType(32)(0))
+            zeros = ir.Constant(ir.VectorType(ir.IntType(32), LANES), [0] * LANES)
+            return builder.shuffle_vector(x, ir.Constant(v4, ir.Undefined), zeros)
+
+        i_dy = builder.add(i_v, dy_v)
+        offs = (i_v, builder.add(i_v, dx_v), i_dy, builder.add(i_dy, dx_v))
+        acc = None
+        for off, w, ty in zip(offs, weights, signature.args[4:8], strict=True):
+            term = builder.fmul(texel(off), splat(w, ty), flags=("fast",))
+            acc = term if acc is None else builder.fadd(acc, term, flags=("fast",))
+        for s in range(LANES):  # scattered: the next pass reads each slot over k
+            off = builder.add(j_v, builder.mul(step_v, step_v.type(s)))
+            lane = builder.extract_element(acc, ir.IntType(32)(s))
+            builder.store(lane, builder.gep(ddata, [off], inbounds=True))
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
 @nb.njit(cache=True, fastmath=True, inline="always")
 def _smallest_eig(a, b, c, d, e, f):
-    """Smallest eigenvalue and the next one of the symmetric PSD matrix
-    [[a, d, e], [d, b, f], [e, f, c]].
+    """Smallest eigenvalue lam3 of the symmetric PSD matrix
+    [[a, d, e], [d, b, f], [e, f, c]], with q = lam1 lam2 and
+    den = lam1 + lam2 + |lam1 - lam2| (so the next one is lam2 = 2 q / den).
 
-    ``NEWTON_STEPS`` Newton steps on the characteristic polynomial from 0: it
-    is convex and decreasing up to the smallest root, so the iterates rise
-    monotonically to it, quadratically fast when sigma_3 << sigma_2 (the
-    hypotheses that matter). Branch-free, so the loop over hypotheses
+    ``HALLEY_STEPS`` Halley steps on the characteristic polynomial from 0 (one
+    division each, cubic convergence): it is convex and decreasing up to the
+    smallest root, and the iterates rise monotonically to it (never a step
+    down, against rounding past the root), fast when sigma_3 << sigma_2 (the
+    hypotheses that matter); slowly only as sigma_3 -> sigma_2, costs that
+    the MRF truncates anyway. Branch-free, so the loop over hypotheses
     vectorises."""
     tr = a + b + c
     c2 = a * b + a * c + b * c - d * d - e * e - f * f
     det = max(a * (b * c - f * f) - d * (d * c - f * e) + e * (d * f - b * e), 0.0)
     lam = 0.0
-    for _ in range(NEWTON_STEPS):
+    for _ in range(HALLEY_STEPS):
         p = det - lam * (c2 - lam * (tr - lam))
         dp = lam * (2.0 * tr - 3.0 * lam) - c2
-        lam += max(-p / min(dp, -TINY), 0.0)  # never a step down (rounding past the root)
+        ddp = 2.0 * tr - 6.0 * lam
+        lam += max(-2.0 * p * dp / max(2.0 * dp * dp - p * ddp, TINY), 0.0)
     s = tr - lam  # lam1 + lam2
     q = max(c2 - lam * s, 0.0)  # lam1 * lam2
     disc = max(s * s - 4.0 * q, 0.0)
-    lam2 = 2.0 * q / max(s + np.sqrt(disc), TINY)
-    return lam, lam2
+    return lam, q, s + np.sqrt(disc)
 
 
 @nb.njit(parallel=True, cache=True, fastmath=True)
 def _kernel(
-    rays, c_ref, depths, Ks, dists, Ps, lights, S, slots, use_p, pair_cams,
+    rays, c_ref, depths, Ks, dists, Ps, lights, S, ns, slots, use_p, pair_cams,
     nthreads, cost, normals,
 ):  # fmt: skip
-    """Pixels over prange; per pixel, passes over the hypotheses that each
-    vectorise: project into every camera (OpenCV model), sample the six
-    reciprocal intensities bilinearly (gathers), accumulate the Gram matrix of
-    W row by row (eq. 5), then sigma_3 / sigma_2 and the null vector."""
+    """Pixels over prange; per pixel, four passes over the hypotheses: project
+    into every camera (OpenCV model), with the bilinear weights and the
+    light fall-offs; sample all packed slots of each footprint (SIMD over the
+    slots: no gathers); accumulate the Gram matrix of W row by row (eq. 5);
+    then sigma_3 / sigma_2 and the null vector. Passes 1, 3 and 4 vectorise
+    over the hypotheses. ``ns``: offset of the p slots in S."""
     N = rays.shape[0]
     Kn = depths.shape[0]
     ncam = Ks.shape[0]
     npair = pair_cams.shape[0]
     Hh, Ww, nv = S.shape[1], S.shape[2], S.shape[3]
-    ns = nv // 2
     row = Ww * nv
+    plane = Hh * row
+    # Flat, and no array views inside the prange: any alias there makes numba
+    # drop noalias on the arrays, which the vectorised passes rely on.
+    Sf = S.reshape(S.size)
     nblocks = 4 * nthreads
     chunk = (N + nblocks - 1) // nblocks
     for t in nb.prange(nblocks):
         base = np.empty((ncam, Kn), np.int64)
-        fa = np.empty((ncam, Kn))
-        fb = np.empty((ncam, Kn))
-        nread = nv if use_p else ns
-        smp = np.empty((ncam, nv, Kn))
+        wts = np.empty((ncam, 4, Kn), np.float32)
+        fall = np.empty((ncam, Kn), np.float32)  # light fall-off 1 / |L_c - X|^3
+        smp = np.empty((ncam, nv, Kn), np.float32)
         M = np.empty((6, Kn))
-        R = np.empty((4, Kn))  # cost and normal, copied out after the vectorised pass
+        R = np.empty((3, Kn), np.float32)  # normal, copied out after the vectorised pass
         ok = np.empty(Kn, np.uint8)
         for n in range(t * chunk, min(N, (t + 1) * chunk)):
             r0, r1, r2 = rays[n, 0], rays[n, 1], rays[n, 2]
-            ok[:] = 1
-            # 1. Project every hypothesis into every camera; bilinear footprints.
+            for k in range(Kn):
+                ok[k] = 1
+            # 1. Project every hypothesis into every camera; bilinear footprints
+            # and the fall-off of the camera's light.
             for c in range(ncam):
                 A0 = (
                     Ps[c, 0, 3]
@@ -132,10 +190,20 @@ def _kernel(
                 B2 = Ps[c, 2, 0] * r0 + Ps[c, 2, 1] * r1 + Ps[c, 2, 2] * r2
                 fx, sk, cx, fy, cy = Ks[c, 0, 0], Ks[c, 0, 1], Ks[c, 0, 2], Ks[c, 1, 1], Ks[c, 1, 2]
                 k1, k2, p1, p2, k3 = dists[c, 0], dists[c, 1], dists[c, 2], dists[c, 3], dists[c, 4]
+                l0, l1, l2 = (
+                    lights[c, 0] - c_ref[0],
+                    lights[c, 1] - c_ref[1],
+                    lights[c, 2] - c_ref[2],
+                )
+                cbase = c * plane
                 for k in range(Kn):
                     z = depths[k]
-                    h = A2 + z * B2
-                    ih = 1.0 / max(h, 1e-12)  # finite even behind the camera (then invalid)
+                    h = max(A2 + z * B2, 1e-12)  # finite even behind the camera (then invalid)
+                    d0, d1, d2 = l0 - z * r0, l1 - z * r1, l2 - z * r2
+                    dd = d0 * d0 + d1 * d1 + d2 * d2
+                    r32 = np.float32(1.0) / np.sqrt(np.float32(dd))  # in float32: cheap
+                    fall[c, k] = r32 * r32 * r32
+                    ih = 1.0 / h
                     x = (A0 + z * B0) * ih
                     y = (A1 + z * B1) * ih
                     rr = x * x + y * y
@@ -144,36 +212,46 @@ def _kernel(
                     yd = y * radial + p1 * (rr + 2.0 * y * y) + 2.0 * p2 * x * y
                     u = fx * xd + sk * yd + cx
                     v = fy * yd + cy
-                    inside = (h > 0.0) & (u >= 0.0) & (v >= 0.0) & (u <= Ww - 1) & (v <= Hh - 1)
+                    inside = (
+                        (A2 + z * B2 > 0.0)
+                        & (u >= 0.0)
+                        & (v >= 0.0)
+                        & (u <= Ww - 1)
+                        & (v <= Hh - 1)
+                    )
                     ok[k] &= inside
                     u = min(max(u, 0.0), Ww - 1.0)
                     v = min(max(v, 0.0), Hh - 1.0)
-                    u0 = min(int(u), Ww - 2)
-                    v0 = min(int(v), Hh - 2)
-                    fa[c, k] = u - u0
-                    fb[c, k] = v - v0
-                    base[c, k] = v0 * row + u0 * nv
-            # 2. Sample every slot of every camera in one bilinear footprint: the
-            # Helmholtz cameras' J = mu i / p, then (with chromaticity) their p.
+                    u0 = min(np.floor(u), Ww - 2.0)
+                    v0 = min(np.floor(v), Hh - 2.0)
+                    a = u - u0
+                    b = v - v0
+                    # Weights in float64, then rounded: a weight that is tiny but
+                    # positive stays positive, so a SENTINEL under it still counts.
+                    wts[c, 0, k] = (1.0 - a) * (1.0 - b)
+                    wts[c, 1, k] = a * (1.0 - b)
+                    wts[c, 2, k] = (1.0 - a) * b
+                    wts[c, 3, k] = a * b
+                    base[c, k] = int(cbase + v0 * row + u0 * nv)  # exact in float64
+            # 2. Sample every slot of every camera in one bilinear footprint, 4
+            # slots at a time: the Helmholtz cameras' J = mu i / p, then (with
+            # chromaticity) their p. Scalar over k: bilinear sampling would
+            # need gathers, which cost more than these 16-byte loads.
             for c in range(ncam):
-                img = S[c].ravel()
                 for k in range(Kn):
-                    a = fa[c, k]
-                    b = fb[c, k]
-                    w00 = (1.0 - a) * (1.0 - b)
-                    w01 = a * (1.0 - b)
-                    w10 = (1.0 - a) * b
-                    w11 = a * b
-                    i0 = base[c, k]
-                    good = True
-                    for s in range(nread):
-                        j = (w00 * img[i0 + s] + w01 * img[i0 + nv + s]
-                             + w10 * img[i0 + row + s] + w11 * img[i0 + row + nv + s])  # fmt: skip
-                        smp[c, s, k] = j
-                        good &= (s >= ns) | (j > 0.0)  # else dark, saturated, outside, no p
-                    ok[k] &= good
-            # 3. The Gram matrix of W, row by row (eq. 5).
-            M[:] = 0.0
+                    w00, w01, w10, w11 = wts[c, 0, k], wts[c, 1, k], wts[c, 2, k], wts[c, 3, k]
+                    for g in range(0, nv, LANES):
+                        _bilinear4(Sf, base[c, k] + g, nv, row, w00, w01, w10, w11,
+                                   smp, (c * nv + g) * Kn + k, Kn)  # fmt: skip
+            # 3. The Gram matrix of W, row by row (eq. 5); a hypothesis with a
+            # J sample <= 0 (dark, saturated, outside, no p) is invalid.
+            for k in range(Kn):
+                M[0, k] = 0.0
+                M[1, k] = 0.0
+                M[2, k] = 0.0
+                M[3, k] = 0.0
+                M[4, k] = 0.0
+                M[5, k] = 0.0
             for p in range(npair):
                 a = pair_cams[p, 0]
                 b = pair_cams[p, 1]
@@ -190,21 +268,16 @@ def _kernel(
                 )
                 for k in range(Kn):
                     z = depths[k]
-                    da0 = la0 - z * r0
-                    da1 = la1 - z * r1
-                    da2 = la2 - z * r2
-                    db0 = lb0 - z * r0
-                    db1 = lb1 - z * r1
-                    db2 = lb2 - z * r2
-                    ra2 = da0 * da0 + da1 * da1 + da2 * da2
-                    rb2 = db0 * db0 + db1 * db1 + db2 * db2
+                    Ja = smp[a, ja, k]
+                    Jb = smp[b, jb, k]
+                    ok[k] &= (Ja > 0.0) & (Jb > 0.0)
                     # Eq. (5) weights p_ab p_ba (mu_a i_a / p_ab v_a - ...).
                     pp = smp[a, ns + ja, k] * smp[b, ns + jb, k] if use_p else 1.0
-                    sa = pp * smp[a, ja, k] / (ra2 * np.sqrt(ra2))
-                    sb = pp * smp[b, jb, k] / (rb2 * np.sqrt(rb2))
-                    w0 = sa * da0 - sb * db0
-                    w1 = sa * da1 - sb * db1
-                    w2 = sa * da2 - sb * db2
+                    sa = pp * Ja * fall[a, k]
+                    sb = pp * Jb * fall[b, k]
+                    w0 = sa * (la0 - z * r0) - sb * (lb0 - z * r0)
+                    w1 = sa * (la1 - z * r1) - sb * (lb1 - z * r1)
+                    w2 = sa * (la2 - z * r2) - sb * (lb2 - z * r2)
                     M[0, k] += w0 * w0
                     M[1, k] += w1 * w1
                     M[2, k] += w2 * w2
@@ -214,7 +287,7 @@ def _kernel(
             # 4. sigma_3 / sigma_2 and the oriented null vector.
             for k in range(Kn):
                 m00, m11, m22, m01, m02, m12 = M[0, k], M[1, k], M[2, k], M[3, k], M[4, k], M[5, k]
-                lam3, lam2 = _smallest_eig(m00, m11, m22, m01, m02, m12)
+                lam3, q, den = _smallest_eig(m00, m11, m22, m01, m02, m12)
                 # Null vector of M - lam3 I: the largest cross product of two of its rows.
                 q00, q11, q22 = m00 - lam3, m11 - lam3, m22 - lam3
                 c0x = m01 * m12 - m02 * q11
@@ -235,21 +308,26 @@ def _kernel(
                 ny = c0y if big0 else (c1y if big1 else c2y)
                 nz = c0z if big0 else (c1z if big1 else c2z)
                 nn = max(n0, max(n1, n2))
-                valid = (ok[k] != 0) & (lam2 > TINY) & (nn > TINY)
-                inv = 1.0 / np.sqrt(max(nn, TINY))
-                inv = inv if valid else 0.0
+                # lam2 = 2 q / den > 0 and a null vector; one division for both
+                # 1 / lam2 and 1 / |n| (q and nn clamped so the product is finite).
+                valid = (ok[k] != 0) & (2.0 * q > TINY * den) & (nn > TINY)
+                q2 = min(max(2.0 * q, LOW), HIGH)
+                nnc = min(max(nn, LOW), HIGH)
+                rq = 1.0 / (q2 * nnc)
+                inv = np.sqrt(q2 * rq)
                 # Orient towards the reference camera: n . (c - X) = -z n . r > 0.
                 inv = -inv if nx * r0 + ny * r1 + nz * r2 > 0.0 else inv
-                score = np.sqrt(max(lam3, 0.0) / max(lam2, TINY))
-                R[0, k] = score if valid else INVALID_COST
-                R[1, k] = nx * inv
-                R[2, k] = ny * inv
-                R[3, k] = nz * inv
+                # (sigma_3 / sigma_2)^2 <= 1: its square root in float32, like the output.
+                score = np.sqrt(np.float32(min(max(lam3, 0.0) * den * nnc * rq, 4.0)))
+                # Selects, not products: an invalid hypothesis may carry inf or nan.
+                cost[n, k] = score if valid else np.float32(INVALID_COST)
+                R[0, k] = nx * inv if valid else 0.0
+                R[1, k] = ny * inv if valid else 0.0
+                R[2, k] = nz * inv if valid else 0.0
             for k in range(Kn):
-                cost[n, k] = R[0, k]
-                normals[n, k, 0] = R[1, k]
-                normals[n, k, 1] = R[2, k]
-                normals[n, k, 2] = R[3, k]
+                normals[n, k, 0] = R[0, k]
+                normals[n, k, 1] = R[1, k]
+                normals[n, k, 2] = R[2, k]
 
 
 def prepare_images(
@@ -267,11 +345,12 @@ def prepare_images(
     its mu map and chromaticity are folded into its image once:
     J = mu * i / p. J is replaced by ``SENTINEL`` where i is too dark
     (``min_signal``, after black level, in [0, 1]), p is unknown, the pixel is
-    saturated or outside the silhouette; a bilinear sample that gives any
-    weight to such a pixel is then negative and its hypothesis invalid. The
-    eq. (5) weights p_ab p_ba are restored in the kernel from the packed p.
-    Each camera's slots (one per channel it contributes to a pair) are packed
-    per pixel, so one bilinear footprint reads them all.
+    saturated or outside the silhouette, or mu is not positive; a bilinear
+    sample that gives any weight to such a pixel is then negative and its
+    hypothesis invalid. The eq. (5) weights p_ab p_ba are restored in the
+    kernel from the packed p. Each camera's slots (one per channel it
+    contributes to a pair) are packed per pixel, so one bilinear footprint
+    reads them all, 4 at a time.
 
     Parameters
     ----------
@@ -296,7 +375,8 @@ def prepare_images(
     ns = max(len(u) for u in used)
     slots = np.array([[used[cam].index(ch) for cam, ch in zip(pc, pch, strict=True)]
                       for pc, pch in zip(pair_cams, pair_ch, strict=True)], np.int64)  # fmt: skip
-    S = np.ones((C, H, W, 2 * ns), np.float32)
+    nv = LANES * -(-(2 * ns if chroma is not None else ns) // LANES)
+    S = np.ones((C, H, W, nv), np.float32)
     unusable = saturated.astype(bool).copy()
     if silhouettes is not None:
         unusable |= ~silhouettes.astype(bool)
@@ -306,15 +386,17 @@ def prepare_images(
             bad = unusable[c] | ~(J > min_signal)
             if chroma is not None:
                 p = chroma[c, ch].astype(np.float32)
-                bad |= ~(p > 0)
-                with np.errstate(invalid="ignore", divide="ignore"):
+                with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
                     J = J / p
+                # Never a nan or inf in S: the kernel's fastmath assumes none.
+                bad |= ~(p > 0) | ~np.isfinite(J)
                 S[c, :, :, ns + s] = np.where(bad, 1.0, p)
             S[c, :, :, s] = np.where(bad, SENTINEL, J)
     if mu is not None:
         for p, ((a, b), (sa, sb)) in enumerate(zip(pair_cams, slots, strict=True)):
-            S[a, :, :, sa] = np.where(S[a, :, :, sa] > 0, S[a, :, :, sa] * mu[p, 0], SENTINEL)
-            S[b, :, :, sb] = np.where(S[b, :, :, sb] > 0, S[b, :, :, sb] * mu[p, 1], SENTINEL)
+            for cam, slot, m in ((a, sa, mu[p, 0]), (b, sb, mu[p, 1])):
+                J = S[cam, :, :, slot]
+                S[cam, :, :, slot] = np.where((J > 0) & (m > 0) & np.isfinite(m), J * m, SENTINEL)
     return Prepared(S, slots, chroma is not None)
 
 
@@ -350,12 +432,14 @@ def data_term(
         [np.hstack([np.asarray(c.R, float), np.asarray(c.t, float)[:, None]]) for c in cameras]
     )
     lights = np.stack([np.asarray(c.light_centre, float) for c in cameras])
+    ns = int(prepared.slots.max()) + 1  # slots of the busiest camera: where its p start
     cost = np.empty((len(rays), len(depths)), np.float32)
     normals = np.empty((len(rays), len(depths), 3), np.float32)
     _kernel(
         np.ascontiguousarray(rays, np.float64), np.asarray(c_ref, float),
-        np.asarray(depths, np.float64), Ks, dists, Ps, lights, prepared.S, prepared.slots,
-        prepared.use_p, np.asarray(pair_cams, np.int64), nb.get_num_threads(), cost, normals,
+        np.asarray(depths, np.float64), Ks, dists, Ps, lights,
+        np.ascontiguousarray(prepared.S), ns, prepared.slots, prepared.use_p,
+        np.asarray(pair_cams, np.int64), nb.get_num_threads(), cost, normals,
     )  # fmt: skip
     return cost, normals
 
