@@ -323,4 +323,6 @@ def report_inputs(name):
 
 
 def report_targets(name):
+    """The report, requested once the dataset's scenes are known (after synthesis)."""
+    selected_scenes(name)
     return [f"reports/{name}/index.html"]

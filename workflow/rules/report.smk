@@ -63,7 +63,9 @@ rule report:
         mem_mb=2000,
         runtime=5,
     params:
-        figures=lambda w, input: " ".join(f"{Path(d).name}={d}" for d in input.figures),
+        figures=lambda w: " ".join(
+            f"{Path(d).name}={d}" for d in report_inputs(w.name)["figures"]
+        ),
     shell:
         "$COLOURHS_PYTHON -m colourhs report {output} --name {wildcards.name} "
         "--metrics {input.metrics} --config {input.config} "
