@@ -17,6 +17,13 @@ configfile: "config.yaml"
 validate(config, "workflow/schemas/config.schema.yaml")
 
 
+# Dataset and scene names are single path components, so a dataset's own files
+# (data/synthetic/demo/rig.json) never match a rule's output pattern.
+wildcard_constraints:
+    name="[A-Za-z0-9_-]+",
+    scene="[A-Za-z0-9_-]+",
+
+
 include: "workflow/rules/common.smk"
 include: "workflow/rules/synth.smk"
 include: "workflow/rules/capture.smk"

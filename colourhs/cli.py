@@ -118,6 +118,7 @@ def _reconstruct(args) -> int:
     from colourhs.reconstruct.frame import reconstruct_frame
 
     params = {k: v for k, v in vars(args).items() if k in RECONSTRUCT_PARAMS and v is not None}
+    params["progress"] = sys.stderr.isatty()  # a bar at a terminal, none in a rule's log
     result = reconstruct_frame(
         args.dataset, args.scene, args.frame, args.out, args.method, args.crosstalk,
         args.photometric, args.chromaticity, **params,

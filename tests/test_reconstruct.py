@@ -21,6 +21,7 @@ from colourhs.reconstruct.frame import (
     reconstruct,
     reconstruct_frame,
     reference_rays,
+    working_depth,
 )
 
 
@@ -80,6 +81,31 @@ def test_invalid_hypotheses_are_marked(tiny_dataset, calib):
     cost, normals = data_term(rays[:200], ref.centre, np.array([3.0, 50.0]), rig.cameras,
                               prepared, pairs)  # fmt: skip
     assert np.all(cost == INVALID_COST) and np.all(normals == 0)
+
+
+def test_reference_camera_is_sampled_once_per_pixel(tiny_dataset, calib):
+    """Every point of a reference ray projects to its own pixel, so the kernel
+    samples the reference camera once per pixel. Against the general path (the
+    same rays from a centre 2 nm away, which no camera has): equal costs and
+    normals; and valid wherever the general path is (it may also be valid
+    where rounding put a tiny weight on a dark neighbouring texel)."""
+    fr = load_frame(tiny_dataset, "statue", "000000", **calib)
+    rig = fr.rig
+    ref = rig.cameras[0]
+    pairs = pair_arrays(rig)
+    prepared = prepare_images(fr.images, fr.saturated, pairs, fr.mu, None, fr.silhouettes)
+    rays = reference_rays(ref, 160, 120)[::5]
+    zc = working_depth(rig, ref)
+    depths = np.linspace(zc - 0.15, zc + 0.15, 64)
+    once, n_once = data_term(rays, ref.centre, depths, rig.cameras, prepared, pairs)
+    moved = ref.centre + np.array([2e-9, 0.0, 0.0])
+    every, n_every = data_term(rays, moved, depths, rig.cameras, prepared, pairs)
+    v_once, v_every = once < INVALID_COST, every < INVALID_COST
+    assert v_every.sum() > 5000
+    assert np.all(v_once[v_every])
+    assert (v_once & ~v_every).sum() < 0.05 * v_every.sum()
+    assert np.allclose(once[v_every], every[v_every], atol=1e-4)
+    assert np.abs(n_once[v_every] - n_every[v_every]).max() < 1e-3
 
 
 @pytest.mark.parametrize(

@@ -129,9 +129,44 @@ def _smallest_eig(a, b, c, d, e, f):
     return lam, q, s + np.sqrt(disc)
 
 
+@nb.njit(cache=True, fastmath=True, inline="always")
+def _to_pixel(x, y, fx, sk, cx, fy, cy, k1, k2, p1, p2, k3):
+    """Pixel (u, v) of normalised camera coordinates (x, y): OpenCV's
+    distortion (k1, k2, p1, p2, k3), then K (with skew)."""
+    rr = x * x + y * y
+    radial = 1.0 + rr * (k1 + rr * (k2 + rr * k3))
+    xd = x * radial + 2.0 * p1 * x * y + p2 * (rr + 2.0 * x * x)
+    yd = y * radial + p1 * (rr + 2.0 * y * y) + 2.0 * p2 * x * y
+    return fx * xd + sk * yd + cx, fy * yd + cy
+
+
+@nb.njit(cache=True, fastmath=True, inline="always")
+def _falloff(d0, d1, d2):
+    """Light fall-off 1 / |d|^3 of a point at offset d from the light (the
+    1 / |d|^2 of eq. (4) times the normalisation of d), in float32: cheap."""
+    r = np.float32(1.0) / np.sqrt(np.float32(d0 * d0 + d1 * d1 + d2 * d2))
+    return r * r * r
+
+
+@nb.njit(cache=True, fastmath=True, inline="always")
+def _footprint(u, v, Ww, Hh):
+    """Bilinear footprint of pixel (u, v) in a Ww x Hh image: whether (u, v)
+    is inside, the top-left texel (u0, v0) (float, exact) and the four weights
+    in float64 (then rounded by the caller: a weight that is tiny but positive
+    stays positive, so a SENTINEL under it still counts)."""
+    inside = (u >= 0.0) & (v >= 0.0) & (u <= Ww - 1) & (v <= Hh - 1)
+    u = min(max(u, 0.0), Ww - 1.0)
+    v = min(max(v, 0.0), Hh - 1.0)
+    u0 = min(np.floor(u), Ww - 2.0)
+    v0 = min(np.floor(v), Hh - 2.0)
+    a = u - u0
+    b = v - v0
+    return inside, u0, v0, (1.0 - a) * (1.0 - b), a * (1.0 - b), (1.0 - a) * b, a * b
+
+
 @nb.njit(parallel=True, cache=True, fastmath=True)
 def _kernel(
-    rays, c_ref, depths, Ks, dists, Ps, lights, S, ns, slots, use_p, pair_cams,
+    rays, c_ref, depths, Ks, dists, Ps, lights, S, ns, slots, use_p, pair_cams, ref, others,
     nthreads, cost, normals,
 ):  # fmt: skip
     """Pixels over prange; per pixel, four passes over the hypotheses: project
@@ -139,7 +174,11 @@ def _kernel(
     light fall-offs; sample all packed slots of each footprint (SIMD over the
     slots: no gathers); accumulate the Gram matrix of W row by row (eq. 5);
     then sigma_3 / sigma_2 and the null vector. Passes 1, 3 and 4 vectorise
-    over the hypotheses. ``ns``: offset of the p slots in S."""
+    over the hypotheses. ``lights``: light centres minus ``c_ref``. ``ns``:
+    offset of the p slots in S. ``ref``: the
+    camera the rays leave from, or -1; every point of a ray through a camera's
+    centre projects to the same pixel, so its footprint is computed and sampled
+    once per pixel. ``others``: the other cameras."""
     N = rays.shape[0]
     Kn = depths.shape[0]
     ncam = Ks.shape[0]
@@ -164,9 +203,35 @@ def _kernel(
             r0, r1, r2 = rays[n, 0], rays[n, 1], rays[n, 2]
             for k in range(Kn):
                 ok[k] = 1
-            # 1. Project every hypothesis into every camera; bilinear footprints
-            # and the fall-off of the camera's light.
-            for c in range(ncam):
+            if ref >= 0:
+                # The camera the rays leave from: one footprint, the same for
+                # every hypothesis (a pixel centre: weight 1 on its own texel).
+                X0, X1, X2 = c_ref[0] + r0, c_ref[1] + r1, c_ref[2] + r2  # unit depth
+                x = Ps[ref, 0, 3] + Ps[ref, 0, 0] * X0 + Ps[ref, 0, 1] * X1 + Ps[ref, 0, 2] * X2
+                y = Ps[ref, 1, 3] + Ps[ref, 1, 0] * X0 + Ps[ref, 1, 1] * X1 + Ps[ref, 1, 2] * X2
+                h = Ps[ref, 2, 3] + Ps[ref, 2, 0] * X0 + Ps[ref, 2, 1] * X1 + Ps[ref, 2, 2] * X2
+                u, v = _to_pixel(x / h, y / h, Ks[ref, 0, 0], Ks[ref, 0, 1], Ks[ref, 0, 2],
+                                 Ks[ref, 1, 1], Ks[ref, 1, 2], dists[ref, 0], dists[ref, 1],
+                                 dists[ref, 2], dists[ref, 3], dists[ref, 4])  # fmt: skip
+                u = np.round(u) if abs(u - np.round(u)) < 1e-6 else u
+                v = np.round(v) if abs(v - np.round(v)) < 1e-6 else v
+                inside, u0, v0, w00, w01, w10, w11 = _footprint(u, v, Ww, Hh)
+                at = int(ref * plane + v0 * row + u0 * nv)
+                for g in range(0, nv, LANES):
+                    _bilinear4(Sf, at + g, nv, row, w00, w01, w10, w11,
+                               smp, (ref * nv + g) * Kn, Kn)  # fmt: skip
+                for g in range(nv):
+                    val = smp[ref, g, 0]
+                    for k in range(1, Kn):
+                        smp[ref, g, k] = val
+                l0, l1, l2 = lights[ref, 0], lights[ref, 1], lights[ref, 2]
+                for k in range(Kn):
+                    z = depths[k]
+                    fall[ref, k] = _falloff(l0 - z * r0, l1 - z * r1, l2 - z * r2)
+                    ok[k] = inside & (z > 0.0)
+            # 1. Project every hypothesis into every other camera; bilinear
+            # footprints and the fall-off of the camera's light.
+            for c in others:
                 A0 = (
                     Ps[c, 0, 3]
                     + Ps[c, 0, 0] * c_ref[0]
@@ -190,54 +255,27 @@ def _kernel(
                 B2 = Ps[c, 2, 0] * r0 + Ps[c, 2, 1] * r1 + Ps[c, 2, 2] * r2
                 fx, sk, cx, fy, cy = Ks[c, 0, 0], Ks[c, 0, 1], Ks[c, 0, 2], Ks[c, 1, 1], Ks[c, 1, 2]
                 k1, k2, p1, p2, k3 = dists[c, 0], dists[c, 1], dists[c, 2], dists[c, 3], dists[c, 4]
-                l0, l1, l2 = (
-                    lights[c, 0] - c_ref[0],
-                    lights[c, 1] - c_ref[1],
-                    lights[c, 2] - c_ref[2],
-                )
+                l0, l1, l2 = lights[c, 0], lights[c, 1], lights[c, 2]
                 cbase = c * plane
                 for k in range(Kn):
                     z = depths[k]
                     h = max(A2 + z * B2, 1e-12)  # finite even behind the camera (then invalid)
-                    d0, d1, d2 = l0 - z * r0, l1 - z * r1, l2 - z * r2
-                    dd = d0 * d0 + d1 * d1 + d2 * d2
-                    r32 = np.float32(1.0) / np.sqrt(np.float32(dd))  # in float32: cheap
-                    fall[c, k] = r32 * r32 * r32
+                    fall[c, k] = _falloff(l0 - z * r0, l1 - z * r1, l2 - z * r2)
                     ih = 1.0 / h
-                    x = (A0 + z * B0) * ih
-                    y = (A1 + z * B1) * ih
-                    rr = x * x + y * y
-                    radial = 1.0 + rr * (k1 + rr * (k2 + rr * k3))
-                    xd = x * radial + 2.0 * p1 * x * y + p2 * (rr + 2.0 * x * x)
-                    yd = y * radial + p1 * (rr + 2.0 * y * y) + 2.0 * p2 * x * y
-                    u = fx * xd + sk * yd + cx
-                    v = fy * yd + cy
-                    inside = (
-                        (A2 + z * B2 > 0.0)
-                        & (u >= 0.0)
-                        & (v >= 0.0)
-                        & (u <= Ww - 1)
-                        & (v <= Hh - 1)
-                    )
-                    ok[k] &= inside
-                    u = min(max(u, 0.0), Ww - 1.0)
-                    v = min(max(v, 0.0), Hh - 1.0)
-                    u0 = min(np.floor(u), Ww - 2.0)
-                    v0 = min(np.floor(v), Hh - 2.0)
-                    a = u - u0
-                    b = v - v0
-                    # Weights in float64, then rounded: a weight that is tiny but
-                    # positive stays positive, so a SENTINEL under it still counts.
-                    wts[c, 0, k] = (1.0 - a) * (1.0 - b)
-                    wts[c, 1, k] = a * (1.0 - b)
-                    wts[c, 2, k] = (1.0 - a) * b
-                    wts[c, 3, k] = a * b
+                    u, v = _to_pixel((A0 + z * B0) * ih, (A1 + z * B1) * ih, fx, sk, cx, fy, cy,
+                                     k1, k2, p1, p2, k3)  # fmt: skip
+                    inside, u0, v0, w00, w01, w10, w11 = _footprint(u, v, Ww, Hh)
+                    ok[k] &= inside & (A2 + z * B2 > 0.0)
+                    wts[c, 0, k] = w00
+                    wts[c, 1, k] = w01
+                    wts[c, 2, k] = w10
+                    wts[c, 3, k] = w11
                     base[c, k] = int(cbase + v0 * row + u0 * nv)  # exact in float64
             # 2. Sample every slot of every camera in one bilinear footprint, 4
             # slots at a time: the Helmholtz cameras' J = mu i / p, then (with
             # chromaticity) their p. Scalar over k: bilinear sampling would
             # need gathers, which cost more than these 16-byte loads.
-            for c in range(ncam):
+            for c in others:
                 for k in range(Kn):
                     w00, w01, w10, w11 = wts[c, 0, k], wts[c, 1, k], wts[c, 2, k], wts[c, 3, k]
                     for g in range(0, nv, LANES):
@@ -256,16 +294,8 @@ def _kernel(
                 a = pair_cams[p, 0]
                 b = pair_cams[p, 1]
                 ja, jb = slots[p, 0], slots[p, 1]
-                la0, la1, la2 = (
-                    lights[a, 0] - c_ref[0],
-                    lights[a, 1] - c_ref[1],
-                    lights[a, 2] - c_ref[2],
-                )
-                lb0, lb1, lb2 = (
-                    lights[b, 0] - c_ref[0],
-                    lights[b, 1] - c_ref[1],
-                    lights[b, 2] - c_ref[2],
-                )
+                la0, la1, la2 = lights[a, 0], lights[a, 1], lights[a, 2]
+                lb0, lb1, lb2 = lights[b, 0], lights[b, 1], lights[b, 2]
                 for k in range(Kn):
                     z = depths[k]
                     Ja = smp[a, ja, k]
@@ -431,15 +461,22 @@ def data_term(
     Ps = np.stack(
         [np.hstack([np.asarray(c.R, float), np.asarray(c.t, float)[:, None]]) for c in cameras]
     )
-    lights = np.stack([np.asarray(c.light_centre, float) for c in cameras])
+    # Light centres relative to the reference centre (the rays' origin).
+    lights = np.stack([np.asarray(c.light_centre, float) for c in cameras]) - np.asarray(
+        c_ref, float
+    )
     ns = int(prepared.slots.max()) + 1  # slots of the busiest camera: where its p start
+    centres = np.stack([np.asarray(c.centre, float) for c in cameras])
+    at_ref = np.flatnonzero(np.linalg.norm(centres - np.asarray(c_ref, float), axis=1) < 1e-9)
+    ref = int(at_ref[0]) if len(at_ref) else -1
+    others = np.array([c for c in range(len(cameras)) if c != ref], np.int64)
     cost = np.empty((len(rays), len(depths)), np.float32)
     normals = np.empty((len(rays), len(depths), 3), np.float32)
     _kernel(
         np.ascontiguousarray(rays, np.float64), np.asarray(c_ref, float),
         np.asarray(depths, np.float64), Ks, dists, Ps, lights,
         np.ascontiguousarray(prepared.S), ns, prepared.slots, prepared.use_p,
-        np.asarray(pair_cams, np.int64), nb.get_num_threads(), cost, normals,
+        np.asarray(pair_cams, np.int64), ref, others, nb.get_num_threads(), cost, normals,
     )  # fmt: skip
     return cost, normals
 

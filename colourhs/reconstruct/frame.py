@@ -22,6 +22,7 @@ import h5py
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import spsolve
+from tqdm import tqdm
 
 from colourhs.capture import COLOURS, Camera, Rig, open_dataset, read_image, read_mask
 from colourhs.crosstalk import load_crosstalk, unmix
@@ -338,6 +339,7 @@ def reconstruct(
     align: bool = True,
     shape_weight: float = 0.003,
     link_m: float = 0.002,
+    progress: bool = False,
 ) -> DepthResult:
     """Reconstruct one frame with ML or Bayesian colour HS.
 
@@ -364,6 +366,8 @@ def reconstruct(
         default 1 per 320 pixels of image width (at least 1).
     cost_scale : the Bayesian data term is ``min(cost / cost_scale, 1 / cost_scale)``
         (sigma_3 / sigma_2 in units of its typical noise level).
+    progress : a progress bar (tqdm, on stderr) over the data term's chunks of
+        pixels, the long part of a high-resolution frame.
     """
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
@@ -390,7 +394,8 @@ def reconstruct(
         """The data term in chunks of pixels (bounds its float32 normals buffer)."""
         cost = np.empty((len(pixel_rays), len(hypotheses)), np.float32)
         normals = np.empty((len(pixel_rays), len(hypotheses), 3), normal_dtype)
-        for s in range(0, len(pixel_rays), CHUNK):
+        chunks = range(0, len(pixel_rays), CHUNK)
+        for s in tqdm(chunks, desc="data term", unit="chunk", disable=not progress, leave=False):
             c, n = data_term(pixel_rays[s : s + CHUNK], ref.centre, hypotheses, rig.cameras,
                              prepared, pairs)  # fmt: skip
             cost[s : s + len(c)] = c

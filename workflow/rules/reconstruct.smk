@@ -16,7 +16,9 @@ rule reconstruct_frame:
         frame="[0-9]{6}",
     conda:
         "../envs/colourhs.yaml"
-    threads: 2
+    # One thread: two frames at once keep both cores busy (the solver and the
+    # refinement are serial); raise with --set-threads reconstruct_frame=N.
+    threads: 1
     resources:
         mem_mb=3000,
         runtime=10,
@@ -24,5 +26,5 @@ rule reconstruct_frame:
         dataset=lambda w: dataset_path(w.name),
         options=lambda w: reconstruct_options(w.name, w.scene, w.variant),
     shell:
-        "$COLOURHS_PYTHON -m colourhs reconstruct {params.dataset} {wildcards.scene} {wildcards.frame} "
+        "NUMBA_NUM_THREADS={threads} $COLOURHS_PYTHON -m colourhs reconstruct {params.dataset} {wildcards.scene} {wildcards.frame} "
         "{output} {params.options} > {log} 2>&1"
