@@ -121,7 +121,7 @@ def _reconstruct(args) -> int:
     params["progress"] = sys.stderr.isatty()  # a bar at a terminal, none in a rule's log
     result = reconstruct_frame(
         args.dataset, args.scene, args.frame, args.out, args.method, args.crosstalk,
-        args.photometric, args.chromaticity, **params,
+        args.photometric, args.chromaticity, args.hull, **params,
     )  # fmt: skip
     info = result.info
     print(f"{args.scene}/{args.frame} {args.method}: {info['valid_pixels']} of {info['pixels']} "
@@ -290,6 +290,8 @@ def build_parser() -> argparse.ArgumentParser:
     rc.add_argument("--crosstalk", type=Path, default=None, help="unmix with this calibration")
     rc.add_argument("--photometric", type=Path, default=None, help="mu maps (photometric.h5)")
     rc.add_argument("--chromaticity", type=Path, default=None, help="chromaticity maps (.h5)")
+    rc.add_argument("--hull", type=Path, default=None,
+                    help="visual hull PLY: depth hypotheses over its depth range")  # fmt: skip
     for name, kind in RECONSTRUCT_PARAMS.items():
         rc.add_argument("--" + name.replace("_", "-"), dest=name, type=kind, default=None)
     rc.set_defaults(func=_reconstruct)

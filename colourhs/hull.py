@@ -63,6 +63,7 @@ __all__ = [
     "depth_bounds",
     "grid_shape",
     "hull_depth",
+    "hull_depth_range",
     "hull_surface",
     "mesh_volume",
     "silhouette_distance",
@@ -799,6 +800,50 @@ def depth_bounds(
     near = np.where(hit, t_in * cos, np.nan)
     far = np.where(hit, (span - t_back) * cos, np.nan)
     return near.reshape(height, width), far.reshape(height, width)
+
+
+def hull_depth_range(
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    camera: Camera,
+    width: int,
+    height: int,
+    margin_m: float = 0.005,
+) -> tuple[float, float]:
+    """The z-depth range of the hull seen from a camera: reconstruction's labels.
+
+    The nearest entry and the farthest exit (:func:`depth_bounds`) over every
+    pixel whose ray meets the hull, widened by ``margin_m`` on both sides
+    (the hull's voxel tolerance). Every surface point the camera sees lies in
+    it, so the depth hypotheses need not span more.
+
+    Parameters
+    ----------
+    vertices, triangles, camera, width, height
+        As for :func:`depth_bounds`.
+    margin_m : float
+        Added before the entry and after the exit, metres.
+
+    Returns
+    -------
+    near, far : float
+        z-depths in metres along the camera's optical axis, ``0 < near < far``.
+
+    Raises
+    ------
+    ValueError
+        When no pixel's ray meets the hull, or the hull is behind the camera.
+    """
+    near, far = depth_bounds(vertices, triangles, camera, width, height)
+    hit = np.isfinite(near) & np.isfinite(far)
+    if not hit.any():
+        raise ValueError(f"the visual hull is not seen by camera {camera.name}")
+    lo = float(near[hit].min()) - margin_m
+    hi = float(far[hit].max()) + margin_m
+    if not 0 < lo < hi:
+        raise ValueError(f"visual hull depth range ({lo:.3f}, {hi:.3f}) m is not in front "
+                         f"of camera {camera.name}")  # fmt: skip
+    return lo, hi
 
 
 def hull_depth(

@@ -20,6 +20,7 @@ from colourhs.hull import (
     carve,
     carve_field,
     depth_bounds,
+    hull_depth_range,
     hull_surface,
     mesh_volume,
     silhouettes,
@@ -199,6 +200,24 @@ def test_depth_bounds_bracket_the_sphere(ring):
     assert np.median(z_in[core] - near[core]) < 2e-3
     far_off = ~cv2.dilate(hit.astype(np.uint8), np.ones((9, 9), np.uint8)).astype(bool)
     assert np.isnan(near[far_off]).all()
+
+
+def test_hull_depth_range_holds_the_sphere_and_little_more(ring):
+    cams, sils = ring
+    field = carve_field(sils, cams, LO, HI, VOXEL, margin_px=0.5)
+    v, t, _ = hull_surface(field, LO, VOXEL)
+    cam = cams[0]
+    near, far = hull_depth_range(v, t, cam, SIZE, SIZE, margin_m=0.003)
+    # The sphere spans z in [D - R, D + R] along the camera's axis (it looks at the centre).
+    assert near <= D_CAM - R_SPHERE - 0.003 + 0.5 * VOXEL
+    assert far >= D_CAM + R_SPHERE + 0.003 - 0.5 * VOXEL
+    # No wider than the 12-camera hull's overshoot (a few voxels) plus the margins.
+    assert near > D_CAM - R_SPHERE - 0.003 - 4 * VOXEL
+    assert far < D_CAM + R_SPHERE + 0.003 + 4 * VOXEL
+    away = Camera("away", cam.K, cam.dist, cam.R, cam.t + np.array([0.0, 0.0, -2.0]), "red",
+                  np.zeros(3))  # fmt: skip
+    with pytest.raises(ValueError, match="not seen by camera away"):
+        hull_depth_range(v, t, away, SIZE, SIZE)
 
 
 def test_working_volume_finds_the_sphere(ring):

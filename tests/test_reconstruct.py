@@ -14,6 +14,7 @@ import pytest
 from colourhs.crosstalk import calibrate_crosstalk
 from colourhs.groundtruth import load_mesh, render_depth_normals
 from colourhs.helmholtz import pair_rows
+from colourhs.io import sha256_files
 from colourhs.photometric import read_mu_maps
 from colourhs.reconstruct.dataterm import INVALID_COST, data_term, pair_arrays, prepare_images
 from colourhs.reconstruct.frame import (
@@ -106,6 +107,38 @@ def test_reference_camera_is_sampled_once_per_pixel(tiny_dataset, calib):
     assert (v_once & ~v_every).sum() < 0.05 * v_every.sum()
     assert np.allclose(once[v_every], every[v_every], atol=1e-4)
     assert np.abs(n_once[v_every] - n_every[v_every]).max() < 1e-3
+
+
+def test_depth_range_from_the_visual_hull(tiny_dataset, calib, tmp_path):
+    """With the frame's visual hull the hypotheses span its depth range, which
+    holds the true surface; the statue still comes out within the bounds of
+    the default range's test (three cameras' hull is a deep wedge: about 0.57 m
+    on tiny against the working range's 0.3 m, so the labels are coarser)."""
+    from colourhs.hull import hull_depth_range, visual_hull
+
+    hull = tmp_path / "hull.ply"
+    visual_hull(tiny_dataset, "statue", "000000", hull)
+    kw = dict(calib, chromaticity_h5=tiny_dataset / "scenes" / "statue" / "gt" / "chromaticity.h5")
+    out = tmp_path / "statue.h5"
+    res = reconstruct_frame(tiny_dataset, "statue", "000000", out, "bayes", hull_ply=hull, **kw)
+    fr = load_frame(tiny_dataset, "statue", "000000", **kw)
+    ref = fr.rig.cameras[0]
+    v, t, n = load_mesh(tiny_dataset / "scenes" / "statue" / "gt" / "000000.ply")
+    gd, _ = render_depth_normals(v, t, n, ref, 160, 120)
+    near, far = res.info["depth_range_m"]
+    hv, ht, _ = load_mesh(hull)
+    assert np.allclose((near, far), hull_depth_range(hv, ht, ref, 160, 120))
+    assert near < np.nanmin(gd) and far > np.nanmax(gd)
+    n_px, depth_med, normal_med, _ = _evaluate(tiny_dataset, "statue", fr, res)
+    assert n_px > 1500 and depth_med < 7.0 and normal_med < 4.5
+    with h5py.File(out) as f:
+        assert f.attrs["hull"] == str(hull) and f.attrs["hull_sha256"] == sha256_files([hull])
+    empty = tmp_path / "empty.ply"
+    empty.write_text("ply\nformat ascii 1.0\nelement vertex 0\nelement face 0\nend_header\n")
+    with pytest.raises(Exception, match="empty.ply"):
+        reconstruct_frame(tiny_dataset, "statue", "000000", tmp_path / "x.h5", "bayes",
+                          hull_ply=empty, **kw)  # fmt: skip
+    assert not (tmp_path / "x.h5").exists()
 
 
 @pytest.mark.parametrize(

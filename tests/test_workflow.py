@@ -306,10 +306,13 @@ def test_frame_image_reruns_that_frame_only(run):
     assert not planned_jobs(run.workdir, run.configfiles)
 
 
-def test_reconstruction_parameter_reruns_reconstruction_and_downstream(run):
+@pytest.mark.parametrize(
+    "change", [{"params": {"n_labels": 7}}, {"depth_from_hull": True}], ids=["n_labels", "hull"]
+)
+def test_reconstruction_parameter_reruns_reconstruction_and_downstream(run, change):
     config = yaml.safe_load(run.configfiles[1].read_text())
-    config["reconstruction"]["params"] = {"n_labels": 7}
-    changed_config = run.workdir / "run-config-n_labels.yaml"
+    config["reconstruction"].update(change)
+    changed_config = run.workdir / f"run-config-{'-'.join(change)}.yaml"
     changed_config.write_text(yaml.safe_dump(config))
     plan = planned_jobs(run.workdir, [run.configfiles[0], changed_config])
     required = all_hs_jobs() | report_jobs("plane", "sheet")

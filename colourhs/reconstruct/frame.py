@@ -511,10 +511,27 @@ def write_depth(path, result: DepthResult, camera: Camera, attrs: dict) -> None:
 
 def reconstruct_frame(
     dataset_dir, scene, frame, out_h5, method="bayes", crosstalk_json=None,
-    photometric_h5=None, chromaticity_h5=None, **params,
+    photometric_h5=None, chromaticity_h5=None, hull_ply=None, **params,
 ) -> DepthResult:  # fmt: skip
-    """Load, reconstruct and write one frame (the Snakemake rule's function)."""
+    """Load, reconstruct and write one frame (the Snakemake rule's function).
+
+    With ``hull_ply`` (the frame's visual hull, ``colourhs hull``) the depth
+    hypotheses span the hull's depth range in the reference camera
+    (:func:`colourhs.hull.hull_depth_range`) instead of the working range.
+    """
     fr = load_frame(dataset_dir, scene, frame, crosstalk_json, photometric_h5, chromaticity_h5)
+    if hull_ply is not None:
+        from colourhs.groundtruth import load_mesh
+        from colourhs.hull import hull_depth_range
+
+        vertices, triangles, _ = load_mesh(hull_ply)
+        ref = fr.rig.camera(params.get("reference") or fr.rig.camera_names[0])
+        try:
+            span = hull_depth_range(vertices, triangles, ref, fr.rig.image.width,
+                                    fr.rig.image.height)  # fmt: skip
+        except ValueError as err:
+            raise ValueError(f"{hull_ply}: {err}") from None
+        params = {**params, "depth_range": span}
     result = reconstruct(fr, method, **params)
     ref = fr.rig.camera(result.info["reference"])
     calib = {"crosstalk": crosstalk_json, "photometric": photometric_h5,
@@ -526,5 +543,7 @@ def reconstruct_frame(
         "calibration_sha256": {k: sha256_files([v]) for k, v in calib.items() if v},
         "inputs_sha256": sha256_files(fr.inputs),
     }
+    if hull_ply is not None:
+        attrs.update(hull=str(hull_ply), hull_sha256=sha256_files([hull_ply]))
     write_depth(out_h5, result, ref, attrs)
     return result

@@ -224,6 +224,13 @@ def reconstruct_options(name, scene, variant):
     return " ".join(opts)
 
 
+def reconstruction_hull(name, scene, frame):
+    """The frame's visual hull as a list when the config takes the depth range from it."""
+    if config.get("reconstruction", {}).get("depth_from_hull", False):
+        return [f"results/{name}/{scene}/hull/{frame}.ply"]
+    return []
+
+
 def variants():
     return config.get("reconstruction", {}).get("variants") or list(VARIANTS)
 

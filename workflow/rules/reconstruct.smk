@@ -5,6 +5,7 @@ rule reconstruct_frame:
     input:
         images=lambda w: frame_inputs(w.name, w.scene, w.frame),
         calib=lambda w: variant_calibration(w.name, w.scene, w.variant).values(),
+        hull=lambda w: reconstruction_hull(w.name, w.scene, w.frame),
     output:
         "results/{name}/{scene}/{variant}/depth/{frame}.h5",
     log:
@@ -25,6 +26,7 @@ rule reconstruct_frame:
     params:
         dataset=lambda w: dataset_path(w.name),
         options=lambda w: reconstruct_options(w.name, w.scene, w.variant),
+        hull=lambda w, input: f"--hull {input.hull}" if input.hull else "",
     shell:
         "NUMBA_NUM_THREADS={threads} $COLOURHS_PYTHON -m colourhs reconstruct {params.dataset} {wildcards.scene} {wildcards.frame} "
-        "{output} {params.options} > {log} 2>&1"
+        "{output} {params.options} {params.hull} > {log} 2>&1"
