@@ -224,10 +224,15 @@ def reconstruct_options(name, scene, variant):
     return " ".join(opts)
 
 
+def hull_ply(name, scene, frame):
+    """A frame's visual hull mesh (rule visual_hull)."""
+    return f"results/{name}/{scene}/hull/{frame}.ply"
+
+
 def reconstruction_hull(name, scene, frame):
     """The frame's visual hull as a list when the config takes the depth range from it."""
     if config.get("reconstruction", {}).get("depth_from_hull", False):
-        return [f"results/{name}/{scene}/hull/{frame}.ply"]
+        return [hull_ply(name, scene, frame)]
     return []
 
 

@@ -33,9 +33,7 @@ rule frame_mesh:
     input:
         depth="results/{name}/{scene}/{variant}/depth/{frame}.h5",
         hull=lambda w: (
-            f"results/{w.name}/{w.scene}/hull/{w.frame}.ply"
-            if mesh_uses_hull(w.variant)
-            else []
+            hull_ply(w.name, w.scene, w.frame) if mesh_uses_hull(w.variant) else []
         ),
     output:
         "results/{name}/{scene}/{variant}/mesh/{frame}.ply",
