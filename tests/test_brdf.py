@@ -10,10 +10,14 @@ import pytest
 
 from colourhs.synth.brdf import (
     Material,
+    albedo_factors,
     blinn_phong,
     cook_torrance_ggx,
     evaluate_materials,
+    evaluate_materials_bands,
+    ggx_bands,
     lambertian,
+    oren_nayar,
     ward,
 )
 
@@ -333,3 +337,121 @@ def test_evaluate_materials_errors_and_empty():
         evaluate_materials(np.array([0.5]), MATERIALS, Z, Z, Z)
     empty = evaluate_materials(np.array([], dtype=int), MATERIALS, np.zeros((0, 3)), Z, Z)
     assert empty.shape == (0,)
+
+
+# --------------------------------------------------------------------------- per-band materials
+BAND_MATERIALS = [
+    Material(kd=0.7),  # today's separable mode ("albedo" tint)
+    Material(kd=1.0, specular="ggx", ks=1.0, roughness=0.2, f0=0.045, tint="white"),
+    Material(kd=0.05, specular="ggx", ks=1.0, roughness=0.15, tint="fresnel",
+             f0_rgb=(1.0, 0.71, 0.29)),
+    Material(kd=1.0, diffuse="oren_nayar", sigma=0.4),
+    Material(kd=1.0, diffuse="oren_nayar", sigma=0.3, specular="blinn_phong", ks=0.2,
+             shininess=20.0, tint="white"),
+]  # fmt: skip
+
+
+def test_new_models_are_reciprocal_to_the_bit():
+    rng, n, l, v = _upper_triples(8)
+    sigma = rng.uniform(0.0, 0.6, N_RANDOM)
+    rough = rng.uniform(0.02, 1.0, N_RANDOM)
+    f0 = rng.uniform(0.0, 1.0, (N_RANDOM, 3))
+    albedo = rng.uniform(0.0, 1.0, (N_RANDOM, 3))
+    cases = [
+        ("oren_nayar", lambda n, l, v: oren_nayar(n, l, v, 0.35, 0.8)),
+        ("oren_nayar_arr", lambda n, l, v: oren_nayar(n, l, v, sigma)),
+        ("ggx_bands", lambda n, l, v: ggx_bands(n, l, v, 0.3, (0.95, 0.64, 0.54))),
+        ("ggx_bands_arr", lambda n, l, v: ggx_bands(n, l, v, rough, f0)),
+    ] + [
+        (f"bands{i}", lambda n, l, v, m=m: m.evaluate_bands(n, l, v, albedo))
+        for i, m in enumerate(BAND_MATERIALS)
+    ]
+    for name, f in cases:
+        a, b = f(n, l, v), f(n, v, l)
+        assert np.all(np.isfinite(a)) and np.all(a >= 0) and np.any(a > 0), name
+        np.testing.assert_array_equal(a, b, err_msg=name)
+    ids = rng.integers(0, len(BAND_MATERIALS), N_RANDOM)
+    np.testing.assert_array_equal(
+        evaluate_materials_bands(ids, BAND_MATERIALS, n, l, v, albedo),
+        evaluate_materials_bands(ids, BAND_MATERIALS, n, v, l, albedo),
+    )
+
+
+def test_new_models_vanish_below_the_horizon():
+    rng = np.random.default_rng(9)
+    n, l, v = (_unit(rng, N_RANDOM) for _ in range(3))
+    below = (np.sum(n * l, axis=-1) <= 0) | (np.sum(n * v, axis=-1) <= 0)
+    albedo = np.full(3, 0.5)
+    for out in [oren_nayar(n, l, v, 0.4), ggx_bands(n, l, v, 0.2, (0.9, 0.8, 0.5))] + [
+        m.evaluate_bands(n, l, v, albedo) for m in BAND_MATERIALS
+    ]:
+        assert np.all(np.isfinite(out)) and np.all(out >= 0)
+        assert np.all(out[below] == 0.0)
+
+
+def _oren_nayar_reference(n, l, v, sigma, rho):
+    """Textbook Oren-Nayar with explicit polar and azimuth angles (normal = z)."""
+    ti, to = np.arccos(l[..., 2]), np.arccos(v[..., 2])
+    dphi = np.arctan2(l[..., 1], l[..., 0]) - np.arctan2(v[..., 1], v[..., 0])
+    s2 = sigma**2
+    a = 1 - 0.5 * s2 / (s2 + 0.33)
+    b = 0.45 * s2 / (s2 + 0.09)
+    alpha, beta = np.maximum(ti, to), np.minimum(ti, to)
+    return rho / np.pi * (a + b * np.maximum(0, np.cos(dphi)) * np.sin(alpha) * np.tan(beta))
+
+
+def test_oren_nayar_matches_textbook_and_lambert():
+    rng, _, l, v = _upper_triples(10, 2000)
+    l = l * np.sign(l[:, 2:3])
+    v = v * np.sign(v[:, 2:3])
+    ok = (l[:, 2] > 0.05) & (v[:, 2] > 0.05)
+    l, v = l[ok], v[ok]
+    for sigma in (0.15, 0.3, 0.5):
+        np.testing.assert_allclose(
+            oren_nayar(Z, l, v, sigma, 0.7), _oren_nayar_reference(Z, l, v, sigma, 0.7), rtol=1e-9
+        )
+    np.testing.assert_array_equal(oren_nayar(Z, l, v, 0.0, 0.6), lambertian(Z, l, v, 0.6))
+    # At normal incidence the interreflection-free model reflects A = 1 - s2 / (2 (s2 + 0.33)).
+    for sigma in (0.15, 0.5):
+        albedo = _directional_albedo(lambda n, l, v, s=sigma: oren_nayar(n, l, v, s), 0.0)
+        s2 = sigma**2
+        assert albedo == pytest.approx(1 - 0.5 * s2 / (s2 + 0.33), rel=2e-3)
+
+
+def test_ggx_bands_equal_f0_is_cook_torrance():
+    rng, n, l, v = _upper_triples(11, 3000)
+    for f0 in (0.04, 0.5, 1.0):
+        per_band = ggx_bands(n, l, v, 0.3, (f0, f0, f0))
+        for b in range(3):
+            np.testing.assert_array_equal(per_band[:, b], cook_torrance_ggx(n, l, v, 0.3, f0))
+
+
+def test_tints_combine_diffuse_and_specular_as_documented():
+    rng, n, l, v = _upper_triples(12, 500)
+    p = rng.uniform(0.05, 1.0, (500, 3))
+    spec = cook_torrance_ggx(n, l, v, 0.2, 0.045)
+    white = BAND_MATERIALS[1].evaluate_bands(n, l, v, p)
+    np.testing.assert_allclose(white, p / np.pi + spec[:, None], rtol=1e-14)
+    metal = BAND_MATERIALS[2].evaluate_bands(n, l, v, p)
+    expected = 0.05 * p / np.pi + ggx_bands(n, l, v, 0.15, (1.0, 0.71, 0.29))
+    np.testing.assert_allclose(metal, expected, rtol=1e-14)
+    sep = BAND_MATERIALS[0]
+    np.testing.assert_allclose(sep.evaluate_bands(n, l, v, p), p * sep.evaluate(n, l, v)[:, None])
+    # factored rows leave p out; albedo_factors puts it back.
+    ids = rng.integers(0, len(BAND_MATERIALS), 500)
+    full = evaluate_materials_bands(ids, BAND_MATERIALS, n, l, v, p)
+    part = evaluate_materials_bands(ids, BAND_MATERIALS, n, l, v, p, factored=True)
+    np.testing.assert_allclose(part * albedo_factors(ids, BAND_MATERIALS, p), full, rtol=1e-14)
+
+
+def test_band_material_validation():
+    with pytest.raises(ValueError, match="tint"):
+        Material(tint="gold")
+    with pytest.raises(ValueError, match="ggx"):
+        Material(specular="ward", tint="fresnel", f0_rgb=(0.9, 0.9, 0.9))
+    with pytest.raises(ValueError, match="f0_rgb"):
+        Material(specular="ggx", tint="fresnel", f0_rgb=(0.9, 1.2, 0.9))
+    with pytest.raises(ValueError, match="diffuse"):
+        Material(diffuse="minnaert")
+    with pytest.raises(ValueError, match="evaluate_bands"):
+        BAND_MATERIALS[2].evaluate(Z, Z, Z)

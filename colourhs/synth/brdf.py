@@ -32,12 +32,18 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = [
+    "DIFFUSE_MODELS",
     "SPECULAR_MODELS",
+    "TINTS",
     "Material",
     "blinn_phong",
     "cook_torrance_ggx",
     "evaluate_materials",
+    "albedo_factors",
+    "evaluate_materials_bands",
+    "ggx_bands",
     "lambertian",
+    "oren_nayar",
     "ward",
 ]
 
@@ -47,6 +53,9 @@ _EPS = 1e-12
 _ALPHA_MIN = 1e-4
 
 SPECULAR_MODELS = ("none", "blinn_phong", "ggx", "ward")
+DIFFUSE_MODELS = ("lambert", "oren_nayar")
+#: How a material's reflectance ``p_b`` per light band enters its BRDF (see :class:`Material`).
+TINTS = ("albedo", "white", "fresnel")
 
 
 # --------------------------------------------------------------------------- helpers
@@ -73,7 +82,8 @@ def _geometry(n, l, v) -> dict[str, np.ndarray]:
     ``cos2_h``/``sin2_h``
     (squared cosine/sine of the half-vector angle ``theta_h``, each in ``[0, 1]``; the
     sine is computed from ``|n x h|^2`` to stay accurate near the specular peak) and
-    ``hv`` (``h.v = h.l`` in ``[0, 1]``). Every term is bit-identical under ``l <-> v``.
+    ``hv`` (``h.v = h.l`` in ``[0, 1]``) and ``lv`` (``l.v``). Every term is bit-identical
+    under ``l <-> v``.
     """
     n, l, v = _vectors(n, l, v)
     nl_raw = _dot(n, l)
@@ -97,6 +107,7 @@ def _geometry(n, l, v) -> dict[str, np.ndarray]:
         "cos2_h": nh * nh,
         "sin2_h": sin2_h,
         "hv": hv,
+        "lv": lv,
     }
 
 
@@ -314,19 +325,114 @@ def ward(n, l, v, alpha, rho_s=1.0) -> np.ndarray:
     return _finish(g["mask"], value)
 
 
+def ggx_bands(n, l, v, roughness, f0_rgb) -> np.ndarray:
+    r"""GGX microfacet BRDF with one Schlick Fresnel term per light band (metals).
+
+    The same model as :func:`cook_torrance_ggx`, but ``f0_rgb`` (``(3,)`` or
+    ``(..., 3)``) gives the normal-incidence reflectance in the red, green and
+    blue bands, so the specular colour of a metal comes from its Fresnel term:
+    ``f_b = D(h) F_b(h.v) G_2 / (4 n.l n.v)``. With equal ``f0`` in every band each
+    band is bit-identical to :func:`cook_torrance_ggx`.
+
+    Parameters
+    ----------
+    n, l, v : array_like, shape (..., 3)
+        Unit normal, unit direction to the light and unit direction to the viewer.
+    roughness : float or array_like, shape (...,)
+        Perceptual roughness ``r >= 0``; ``alpha = r**2``.
+    f0_rgb : array_like, shape (3,) or (..., 3)
+        Fresnel reflectance at normal incidence per band, in ``[0, 1]``.
+
+    Returns
+    -------
+    numpy.ndarray, shape (..., 3)
+        BRDF values in ``1/sr`` per band.
+    """
+    g = _geometry(n, l, v)
+    r = _param(roughness, "roughness")
+    fr0 = _param(f0_rgb, "f0_rgb")
+    if fr0.ndim == 0 or fr0.shape[-1] != 3:
+        raise ValueError(f"f0_rgb must have shape (..., 3), got {fr0.shape}")
+    alpha = np.maximum(r * r, _ALPHA_MIN)
+    a2 = alpha * alpha
+    nl, nv = g["nl"], g["nv"]
+    d = _ggx_d(g["cos2_h"], g["sin2_h"], a2)
+    f = fr0 + (1.0 - fr0) * ((1.0 - g["hv"]) ** 5)[..., None]
+    lam_l = nv * np.sqrt(a2 + (1.0 - a2) * nl * nl)
+    lam_v = nl * np.sqrt(a2 + (1.0 - a2) * nv * nv)
+    vis = 0.5 / np.maximum(lam_l + lam_v, _EPS)
+    return _finish(g["mask"][..., None], np.asarray(d)[..., None] * f * np.asarray(vis)[..., None])
+
+
+def oren_nayar(n, l, v, sigma, albedo=1.0) -> np.ndarray:
+    r"""Oren-Nayar rough diffuse BRDF (the qualitative model).
+
+    .. math:: f(\mathbf l, \mathbf v) = \frac{\rho}{\pi}\Big(A + B\,
+        \frac{\max(0,\ \mathbf l\cdot\mathbf v - (\mathbf n\cdot\mathbf l)
+        (\mathbf n\cdot\mathbf v))}{\max(\mathbf n\cdot\mathbf l,\ \mathbf n\cdot\mathbf v)}\Big),
+        \quad A = 1 - \frac{\sigma^2}{2(\sigma^2 + 0.33)},
+        \ B = \frac{0.45\,\sigma^2}{\sigma^2 + 0.09}
+
+    which is ``rho/pi (A + B max(0, cos(phi_i - phi_o)) sin(alpha) tan(beta))``
+    with ``alpha = max(theta_i, theta_o)`` and ``beta = min(theta_i, theta_o)``,
+    written with the symmetric terms ``l.v - (n.l)(n.v)`` and ``max(n.l, n.v)``
+    (so it is reciprocal to the bit). ``sigma = 0`` is Lambertian.
+
+    Parameters
+    ----------
+    n, l, v : array_like, shape (..., 3)
+        Unit normal, unit direction to the light and unit direction to the viewer.
+    sigma : float or array_like, shape (...,)
+        Standard deviation of the microfacet slope angle, radians.
+    albedo : float or array_like, shape (...,)
+        Diffuse reflectance ``rho``.
+
+    Returns
+    -------
+    numpy.ndarray, shape (...,)
+        BRDF value in ``1/sr``.
+
+    References
+    ----------
+    M. Oren, S. K. Nayar, "Generalization of Lambert's reflectance model",
+    SIGGRAPH 1994.
+    """
+    g = _geometry(n, l, v)
+    s = _param(sigma, "sigma")
+    rho = _param(albedo, "albedo")
+    s2 = s * s
+    a = 1.0 - 0.5 * s2 / (s2 + 0.33)
+    b = 0.45 * s2 / (s2 + 0.09)
+    nl, nv = g["nl"], g["nv"]
+    side = np.maximum(g["lv"] - nl * nv, 0.0) / np.maximum(nl, nv)
+    return _finish(g["mask"], rho / np.pi * (a + b * side))
+
+
 # --------------------------------------------------------------------------- materials
 @dataclass(frozen=True)
 class Material:
-    """A diffuse + specular mixture BRDF.
+    """A diffuse + specular mixture BRDF, with the reflectance ``p_b`` of each light band.
 
-    ``f = kd / pi + ks * spec(n, l, v)`` where ``spec`` is selected by ``specular``
-    (``"none"``: purely Lambertian, ``ks`` is ignored). Both terms are 0 below the
-    horizon, so the mixture is reciprocal and non-negative. Units: ``1/sr``.
+    The band-independent BRDF is ``f = kd * diffuse(n, l, v) + ks * spec(n, l, v)``:
+    ``diffuse`` is Lambertian (``1 / pi``) or Oren-Nayar (roughness ``sigma``),
+    ``spec`` is selected by ``specular`` (``"none"``: no lobe, ``ks`` is ignored).
+    How the surface's reflectance ``p_b`` in light band ``b`` (red, green, blue:
+    the scene's ``albedo``) enters is the ``tint``:
+
+    * ``"albedo"``: ``f_b = p_b f``, the whole BRDF scaled (separable
+      chromaticity; the original materials of the demo scenes);
+    * ``"white"``: ``f_b = p_b kd diffuse + ks spec``: a dielectric (plastic,
+      paint) whose coloured diffuse part sits under a white specular lobe;
+    * ``"fresnel"``: ``f_b = p_b kd diffuse + ks ggx_b``: a metal whose specular
+      colour is its Fresnel term, GGX with the per-band ``f0_rgb``
+      (``specular`` must be ``"ggx"``).
+
+    Every term is 0 below the horizon and reciprocal to the bit. Units: ``1/sr``.
 
     Attributes
     ----------
     kd : float
-        Diffuse albedo (Lambertian term ``kd / pi``).
+        Diffuse weight.
     specular : str
         One of ``"none"``, ``"blinn_phong"``, ``"ggx"``, ``"ward"``.
     ks : float
@@ -338,11 +444,21 @@ class Material:
     alpha : float
         Ward RMS slope (used by ``"ward"``).
     f0 : float
-        Schlick normal-incidence reflectance (used by ``"ggx"``).
+        Schlick normal-incidence reflectance (used by ``"ggx"`` unless ``tint`` is
+        ``"fresnel"``).
+    diffuse : str
+        ``"lambert"`` or ``"oren_nayar"``.
+    sigma : float
+        Oren-Nayar slope-angle deviation, radians (used by ``"oren_nayar"``).
+    tint : str
+        ``"albedo"``, ``"white"`` or ``"fresnel"`` (see above).
+    f0_rgb : tuple of 3 floats or None
+        Per-band Schlick reflectance of a ``"fresnel"`` material.
 
     References
     ----------
-    See :func:`lambertian`, :func:`blinn_phong`, :func:`cook_torrance_ggx`, :func:`ward`.
+    See :func:`lambertian`, :func:`oren_nayar`, :func:`blinn_phong`,
+    :func:`cook_torrance_ggx`, :func:`ggx_bands`, :func:`ward`.
     """
 
     kd: float = 0.5
@@ -352,17 +468,47 @@ class Material:
     roughness: float = 0.5
     alpha: float = 0.2
     f0: float = 0.04
+    diffuse: str = "lambert"
+    sigma: float = 0.3
+    tint: str = "albedo"
+    f0_rgb: tuple[float, float, float] | None = None
 
     def __post_init__(self) -> None:
         if self.specular not in SPECULAR_MODELS:
             raise ValueError(f"specular must be one of {SPECULAR_MODELS}, got {self.specular!r}")
-        for name in ("kd", "ks", "shininess", "roughness", "alpha", "f0"):
+        if self.diffuse not in DIFFUSE_MODELS:
+            raise ValueError(f"diffuse must be one of {DIFFUSE_MODELS}, got {self.diffuse!r}")
+        if self.tint not in TINTS:
+            raise ValueError(f"tint must be one of {TINTS}, got {self.tint!r}")
+        for name in ("kd", "ks", "shininess", "roughness", "alpha", "f0", "sigma"):
             value = getattr(self, name)
             if not np.isfinite(value) or value < 0:
                 raise ValueError(f"{name} must be finite and non-negative, got {value!r}")
+        if self.tint == "fresnel":
+            if self.specular != "ggx":
+                raise ValueError("a 'fresnel' tint needs the 'ggx' specular model")
+            f0 = np.asarray(self.f0_rgb if self.f0_rgb is not None else (), float)
+            if f0.shape != (3,) or not np.all(np.isfinite(f0)) or np.any((f0 < 0) | (f0 > 1)):
+                raise ValueError(f"f0_rgb must be 3 values in [0, 1], got {self.f0_rgb!r}")
+            object.__setattr__(self, "f0_rgb", tuple(float(x) for x in f0))
+
+    def _diffuse(self, n, l, v) -> np.ndarray:
+        if self.diffuse == "lambert":
+            return lambertian(n, l, v, self.kd)
+        return oren_nayar(n, l, v, self.sigma, self.kd)
+
+    def _specular(self, n, l, v) -> np.ndarray:
+        if self.specular == "blinn_phong":
+            return blinn_phong(n, l, v, self.shininess)
+        if self.specular == "ggx":
+            return cook_torrance_ggx(n, l, v, self.roughness, self.f0)
+        return ward(n, l, v, self.alpha)
 
     def evaluate(self, n, l, v) -> np.ndarray:
-        """Evaluate ``kd / pi + ks * spec(n, l, v)`` in ``1/sr``.
+        """Evaluate the band-independent ``kd diffuse + ks spec(n, l, v)`` in ``1/sr``.
+
+        The BRDF of band b is ``p_b`` times this for the ``"albedo"`` tint; for
+        ``"white"`` and ``"fresnel"`` use :meth:`evaluate_bands`.
 
         Parameters
         ----------
@@ -373,17 +519,71 @@ class Material:
         -------
         numpy.ndarray, shape (...,)
             BRDF value in ``1/sr``.
+
+        Raises
+        ------
+        ValueError
+            For a ``"fresnel"`` material (it has no band-independent BRDF).
         """
-        f = lambertian(n, l, v, self.kd)
+        if self.tint == "fresnel":
+            raise ValueError("a 'fresnel' material has one BRDF per band: use evaluate_bands")
+        f = self._diffuse(n, l, v)
         if self.specular == "none":
             return f
-        if self.specular == "blinn_phong":
-            spec = blinn_phong(n, l, v, self.shininess)
-        elif self.specular == "ggx":
-            spec = cook_torrance_ggx(n, l, v, self.roughness, self.f0)
-        else:  # "ward"
-            spec = ward(n, l, v, self.alpha)
-        return f + self.ks * spec
+        return f + self.ks * self._specular(n, l, v)
+
+    def evaluate_bands(self, n, l, v, albedo, *, factored: bool = False) -> np.ndarray:
+        """The BRDF ``f_b`` of each light band (red, green, blue), ``1/sr``.
+
+        Parameters
+        ----------
+        n, l, v : array_like, shape (..., 3)
+            Unit normal, unit direction to the light and unit direction to the viewer.
+        albedo : array_like, shape (3,) or (..., 3)
+            The surface's reflectance ``p_b`` per band.
+        factored : bool
+            For the ``"albedo"`` tint, leave out the factor ``p_b`` (return ``f``
+            in every band; the caller multiplies by ``p_b``, see
+            :func:`albedo_factors`). Other tints ignore it.
+
+        Returns
+        -------
+        numpy.ndarray, shape (..., 3)
+            ``f_b`` per band.
+        """
+        p = _param(albedo, "albedo")
+        if self.tint == "albedo":
+            f = self.evaluate(n, l, v)[..., None]
+            if factored:
+                return np.broadcast_to(f, np.broadcast_shapes(f.shape, p.shape)).copy()
+            return p * f
+        diffuse = p * self._diffuse(n, l, v)[..., None]
+        if self.specular == "none":
+            return diffuse
+        if self.tint == "white":
+            return diffuse + self.ks * self._specular(n, l, v)[..., None]
+        return diffuse + self.ks * ggx_bands(n, l, v, self.roughness, self.f0_rgb)
+
+
+def _material_groups(material_ids, materials, n, l, v):
+    ids = np.asarray(material_ids)
+    if ids.ndim != 1:
+        raise ValueError(f"material_ids must have shape (N,), got {ids.shape}")
+    if ids.size and not np.issubdtype(ids.dtype, np.integer):
+        raise ValueError("material_ids must be integers")
+    ids = ids.astype(np.intp, copy=False)
+    count = ids.shape[0]
+    n, l, v = _vectors(n, l, v)
+    try:
+        n = np.broadcast_to(n, (count, 3))
+        l = np.broadcast_to(l, (count, 3))
+        v = np.broadcast_to(v, (count, 3))
+    except ValueError as exc:
+        raise ValueError("n, l, v must be broadcastable to (N, 3)") from exc
+    if count and (ids.min() < 0 or ids.max() >= len(materials)):
+        raise ValueError(f"material ids must lie in [0, {len(materials)})")
+    groups = [(int(mid), np.flatnonzero(ids == mid)) for mid in np.unique(ids)]
+    return count, groups, n, l, v
 
 
 def evaluate_materials(material_ids, materials: Sequence[Material], n, l, v) -> np.ndarray:
@@ -414,24 +614,40 @@ def evaluate_materials(material_ids, materials: Sequence[Material], n, l, v) -> 
     ----------
     See :class:`Material`.
     """
-    ids = np.asarray(material_ids)
-    if ids.ndim != 1:
-        raise ValueError(f"material_ids must have shape (N,), got {ids.shape}")
-    if ids.size and not np.issubdtype(ids.dtype, np.integer):
-        raise ValueError("material_ids must be integers")
-    ids = ids.astype(np.intp, copy=False)
-    count = ids.shape[0]
-    n, l, v = _vectors(n, l, v)
-    try:
-        n = np.broadcast_to(n, (count, 3))
-        l = np.broadcast_to(l, (count, 3))
-        v = np.broadcast_to(v, (count, 3))
-    except ValueError as exc:
-        raise ValueError("n, l, v must be broadcastable to (N, 3)") from exc
-    if count and (ids.min() < 0 or ids.max() >= len(materials)):
-        raise ValueError(f"material ids must lie in [0, {len(materials)})")
+    count, groups, n, l, v = _material_groups(material_ids, materials, n, l, v)
     out = np.zeros(count, dtype=np.float64)
-    for mid in np.unique(ids):
-        sel = np.flatnonzero(ids == mid)
-        out[sel] = materials[int(mid)].evaluate(n[sel], l[sel], v[sel])
+    for mid, sel in groups:
+        out[sel] = materials[mid].evaluate(n[sel], l[sel], v[sel])
     return out
+
+
+def evaluate_materials_bands(
+    material_ids, materials: Sequence[Material], n, l, v, albedo, *, factored: bool = False
+) -> np.ndarray:
+    """Per-point, per-band BRDFs ``f_b`` (N, 3), grouped per material id.
+
+    ``out[i] = materials[material_ids[i]].evaluate_bands(n[i], l[i], v[i], albedo[i])``;
+    with ``factored`` the ``"albedo"``-tint rows leave out ``p_b`` (multiply by
+    :func:`albedo_factors` to get ``f_b``). Parameters as
+    :func:`evaluate_materials`, plus ``albedo`` (N, 3), the reflectance per band.
+    """
+    count, groups, n, l, v = _material_groups(material_ids, materials, n, l, v)
+    p = np.broadcast_to(np.asarray(albedo, np.float64), (count, 3))
+    out = np.zeros((count, 3), dtype=np.float64)
+    for mid, sel in groups:
+        out[sel] = materials[mid].evaluate_bands(n[sel], l[sel], v[sel], p[sel], factored=factored)
+    return out
+
+
+def albedo_factors(material_ids, materials: Sequence[Material], albedo) -> np.ndarray:
+    """Per-band factor (N, 3) that completes ``evaluate_materials_bands(..., factored=True)``.
+
+    ``albedo`` (the reflectance ``p_b``) on points of ``"albedo"``-tint materials,
+    1 elsewhere.
+    """
+    ids = np.asarray(material_ids, np.intp)
+    scaled = np.array([m.tint == "albedo" for m in materials], bool)
+    p = np.asarray(albedo, np.float64)
+    if not len(ids):
+        return np.ones((0, 3))
+    return np.where(scaled[ids][:, None], p, 1.0)

@@ -400,7 +400,7 @@ def _render_job(root, rig, rays, p, job, seed, nuis):
         if job.frames:
             transports = {
                 light.colour: light.radiance(hits.points)
-                * light_transport(geom, scene, hits, light.position)
+                * light_transport(geom, scene, hits, light.position)[:, COLOURS.index(light.colour)]
                 for light in rig.lights
             }
             signal = channel_signal(hits, cam, transports)
@@ -409,7 +409,8 @@ def _render_job(root, rig, rays, p, job, seed, nuis):
         if job.chromatic:
             base = light_transport(geom, scene, hits, rig.chromatic_lights["red"].position)
             for colour, light in rig.chromatic_lights.items():
-                signal = channel_signal(hits, cam, {colour: light.radiance(hits.points) * base})
+                T = light.radiance(hits.points) * base[:, COLOURS.index(colour)]
+                signal = channel_signal(hits, cam, {colour: T}, cam.chromatic_crosstalk)
                 rel = f"{job.chromatic}/{colour}/{cam.name}.png"
                 _write_image(root, rel, signal, seed, nuis, p)
         if job.mask:

@@ -2,13 +2,18 @@
 
 A camera pixel's channel c sums, over every light l that is on,
 
-    I_c = sum_l  rho_l(v_l) X[c, colour_l] sigma_c(v_cam) p_colour_l(x)
-                 f_r(v_l, v_cam) (n . v_l) / |c_l - x|^2 * visible_l(x)
+    I_c = sum_l  rho_l(v_l) X[c, b_l] sigma_c(v_cam)
+                 f_b_l(v_l, v_cam) (n . v_l) / |c_l - x|^2 * visible_l(x)
 
-with rho_l the light's radiance along its ray, X the camera's cross-talk
-matrix (channel response to each light colour), sigma_c the channel's
-sensitivity along the camera ray (vignetting), p the surface's reflectance in
-the light's band, f_r a reciprocal BRDF, and visible_l the shadow test.
+with rho_l the light's radiance along its ray, b_l its colour (light band), X
+the camera's cross-talk matrix (channel response to each light colour; the
+chromatic captures use the camera's matrix for the chromatic light's
+filters), sigma_c the channel's sensitivity along the camera ray
+(vignetting), f_b the reciprocal BRDF of band b and visible_l the shadow
+test. For the demo scenes' materials f_b = p_b f_r, the surface's reflectance
+p in the light's band times one BRDF (the paper's separable chromaticity);
+materials with a white or Fresnel-coloured specular lobe have their own BRDF
+per band (see :class:`~colourhs.synth.brdf.Material`).
 Visibility from the camera and shadowing from each light use open3d's
 ``RaycastingScene``. Each pixel averages s x s sub-pixel samples (box
 filter), as a sensor integrates over its pixel. There is no ambient light and
@@ -23,7 +28,7 @@ import numpy as np
 import open3d as o3d
 
 from colourhs.geometry import normalised_coordinates, pixel_grid
-from colourhs.synth.brdf import evaluate_materials
+from colourhs.synth.brdf import albedo_factors, evaluate_materials_bands
 from colourhs.synth.rig import COLOURS, CameraModel
 from colourhs.synth.scenes import SceneGeometry
 
@@ -58,6 +63,7 @@ class Hits:
     to_camera: np.ndarray  # (M, 3) unit vectors from the point to the camera
     albedo: np.ndarray  # (M, 3) reflectance p in the R, G, B light bands
     materials: np.ndarray  # (M,) material ids
+    band_factor: np.ndarray  # (M, 3) p for "albedo"-tint materials, 1 elsewhere
 
     def pixel_mean(self, values: np.ndarray) -> np.ndarray:
         """Box-filter per-hit ``values`` (M, ...) into pixels (H, W, ...); misses count 0."""
@@ -115,6 +121,8 @@ def trace_camera(
     flip = np.sum(fn * to_cam, axis=1) < 0
     fn[flip] *= -1
     normals[flip] *= -1
+    albedo = geom.albedo(points, tri)
+    material_ids = geom.material_ids[tri]
     return Hits(
         shape=rays.shape,
         xy=rays.xy,
@@ -124,8 +132,9 @@ def trace_camera(
         geometric_normals=fn,
         triangles=tri,
         to_camera=to_cam,
-        albedo=geom.albedo(points, tri),
-        materials=geom.material_ids[tri],
+        albedo=albedo,
+        materials=material_ids,
+        band_factor=albedo_factors(material_ids, geom.materials, albedo),
     )
 
 
@@ -136,12 +145,18 @@ def light_transport(
     position: np.ndarray,
     shadows: bool = True,
 ) -> np.ndarray:
-    """Per-hit f_r(v_l, v_cam) (n . v_l) / d_l^2 * visible for a light at ``position``.
+    """Per-hit, per-band f_b(v_l, v_cam) (n . v_l) / d_l^2 * visible for a light at ``position``.
 
     Everything of equation (4) that depends on the light's position but not
-    on its radiance or colour: the BRDF, the foreshortening, the
-    inverse-square falloff and the shadow test. Multiply by
-    ``LightModel.radiance(hits.points)`` for the light's contribution.
+    on its radiance or colour: the BRDF of each light band, the
+    foreshortening, the inverse-square falloff and the shadow test. For
+    ``"albedo"``-tint materials the band's reflectance p_b is left out (it is
+    ``hits.band_factor``, applied by :func:`channel_signal`). A light of colour
+    b contributes ``LightModel.radiance(hits.points) * light_transport(...)[:, b]``.
+
+    Returns
+    -------
+    (M, 3) transport per hit and light band R, G, B.
     """
     to_light = np.asarray(position, float) - hits.points
     d2 = np.sum(to_light**2, axis=1)
@@ -149,7 +164,7 @@ def light_transport(
     lv = to_light / d[:, None]
     cos = np.sum(hits.normals * lv, axis=1)
     lit = (cos > 0) & (np.sum(hits.geometric_normals * lv, axis=1) > 0)
-    out = np.zeros(len(d))
+    out = np.zeros((len(d), 3))
     idx = np.flatnonzero(lit)
     if shadows and len(idx):
         start = hits.points[idx] + SHADOW_EPS_M * hits.geometric_normals[idx]
@@ -157,15 +172,24 @@ def light_transport(
         # Nothing lies beyond a light, so the farthest light distance bounds every ray.
         occluded = scene.test_occlusions(rays, tnear=0.0, tfar=float(d[idx].max())).numpy()
         idx = idx[~occluded]
-    f = evaluate_materials(
-        hits.materials[idx], geom.materials, hits.normals[idx], lv[idx], hits.to_camera[idx]
+    f = evaluate_materials_bands(
+        hits.materials[idx],
+        geom.materials,
+        hits.normals[idx],
+        lv[idx],
+        hits.to_camera[idx],
+        hits.albedo[idx],
+        factored=True,
     )
-    out[idx] = f * cos[idx] / d2[idx]
+    out[idx] = f * cos[idx, None] / d2[idx, None]
     return out
 
 
 def channel_signal(
-    hits: Hits, camera: CameraModel, transports: dict[str, np.ndarray]
+    hits: Hits,
+    camera: CameraModel,
+    transports: dict[str, np.ndarray],
+    crosstalk: np.ndarray | None = None,
 ) -> np.ndarray:
     """Linear image (H, W, 3) from per-colour light transports, eq. (4).
 
@@ -173,18 +197,22 @@ def channel_signal(
     ----------
     hits : the camera's ray hits.
     camera : the camera, for its sensitivity sigma_c and cross-talk X.
-    transports : light colour -> (M,) radiance times transport of the light
-        of that colour that is on (``LightModel.radiance(points) *
-        light_transport(...)``); colours absent are off.
+    transports : light colour -> (M,) radiance times transport, in that light's
+        band, of the light of that colour that is on (``LightModel.radiance(points)
+        * light_transport(...)[:, band]``); colours absent are off.
+    crosstalk : the (3, 3) cross-talk matrix to use (default the camera's LED
+        matrix ``camera.crosstalk``; the chromatic captures pass
+        ``camera.chromatic_crosstalk``).
 
     Returns
     -------
     (H, W, 3) signal in fractions of full scale, channels R, G, B.
     """
+    X = camera.crosstalk if crosstalk is None else np.asarray(crosstalk, float)
     sens = camera.sensitivity(hits.xy[hits.sample])  # (M, 3)
     per_hit = np.zeros((len(hits.sample), 3))
     for colour, T in transports.items():
         b = COLOURS.index(colour)
-        # channel c responds to band b with X[c, b]; the surface reflects p_b.
-        per_hit += (T * hits.albedo[:, b])[:, None] * camera.crosstalk[:, b][None, :]
+        # channel c responds to band b with X[c, b]; the surface reflects f_b.
+        per_hit += (T * hits.band_factor[:, b])[:, None] * X[:, b][None, :]
     return hits.pixel_mean(per_hit * sens)

@@ -89,7 +89,7 @@ class LightModel:
     """A point light: position, colour, power and radiance profile.
 
     The profile's frame is ``R`` (world to light coordinates; the light looks
-    along its +z axis).
+    along its +z axis, which need not be its camera's optical axis).
     """
 
     position: np.ndarray  # (3,) world, metres
@@ -99,38 +99,59 @@ class LightModel:
     exponent_x: float = 0.0
     exponent_y: float = 0.0
     skew: tuple[float, float] = (0.0, 0.0)
+    ripple: tuple[float, float, float] = (0.0, 0.0, 0.0)  # amplitude, period (rad), phase (rad)
 
     def radiance(self, points: np.ndarray) -> np.ndarray:
         """Radiance rho(v) of the light towards world ``points`` (..., 3), eq. (1).
 
-        Returns power x profile; the profile is 1 on the light's axis.
+        Returns power x profile; the profile is 1 on the light's axis (up to the ripple).
         """
         d = (np.asarray(points, float) - self.position) @ self.R.T
-        return self.power * light_profile(d, self.exponent_x, self.exponent_y, self.skew)
+        prof = light_profile(d, self.exponent_x, self.exponent_y, self.skew, self.ripple)
+        return self.power * prof
 
 
-def light_profile(d_light: np.ndarray, mx: float, my: float, skew=(0.0, 0.0)) -> np.ndarray:
+def light_profile(
+    d_light: np.ndarray, mx: float, my: float, skew=(0.0, 0.0), ripple=(0.0, 0.0, 0.0)
+) -> np.ndarray:
     """Anisotropic LED-like angular profile for directions ``d_light`` (..., 3).
 
     ``cos(theta_x)^mx cos(theta_y)^my (1 + s_x theta_x + s_y theta_y)`` with
-    theta_x = atan2(d_x, d_z) and theta_y = atan2(d_y, d_z) in radians; zero
-    behind the light.
+    theta_x = atan2(d_x, d_z) and theta_y = atan2(d_y, d_z) in radians, times
+    the ripple ``1 + a cos(2 pi theta / T + phase)`` in the angle theta off the
+    axis when ``ripple = (a, T, phase)`` has a > 0; zero behind the light.
     """
     tx = np.arctan2(d_light[..., 0], d_light[..., 2])
     ty = np.arctan2(d_light[..., 1], d_light[..., 2])
     prof = np.cos(tx) ** mx * np.cos(ty) ** my * (1.0 + skew[0] * tx + skew[1] * ty)
+    amp, period, phase = ripple
+    if amp:
+        theta = np.arctan2(np.hypot(d_light[..., 0], d_light[..., 1]), d_light[..., 2])
+        prof = prof * (1.0 + amp * np.cos(2 * np.pi * theta / period + phase))
     return np.where(d_light[..., 2] > 0, np.clip(prof, 0.0, None), 0.0)
 
 
 @dataclass(frozen=True, eq=False)
 class CameraModel(Camera):
-    """A camera of the rig (geometry as in rig.json) and its photometric model."""
+    """A camera of the rig (geometry as in rig.json) and its photometric model.
+
+    ``crosstalk`` is the channel response to the rig's LEDs (it also gives the
+    true mu, eq. 2); ``chromatic_crosstalk`` the response to the chromatic
+    light's filters, used for the chromatic captures.
+    """
 
     gains: np.ndarray  # (3,) channel gains g_c
     vignetting: np.ndarray  # (3,) fractional loss k_c at the image corner
     vignetting_centre: np.ndarray  # (3, 2) per-channel centre offset, normalised coords
-    crosstalk: np.ndarray  # (3, 3) X[channel, light colour]
+    crosstalk: np.ndarray  # (3, 3) X[channel, light colour] for the rig's LEDs
     corner_radius: float  # normalised radius of the image corner
+    # (3, 3) the same for the chromatic light's three filters (their spectra differ
+    # from the LEDs'); None: the LED matrix.
+    chromatic_crosstalk: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if self.chromatic_crosstalk is None:
+            object.__setattr__(self, "chromatic_crosstalk", self.crosstalk)
 
     def sensitivity(self, xy: np.ndarray) -> np.ndarray:
         """Per-channel sensitivity sigma_c (..., 3) at normalised image coordinates ``xy``."""
@@ -286,8 +307,12 @@ def make_rig(
     return RigModel(tuple(cams), tuple(lights), chrom, width, height, n)
 
 
-def _power_for_exposure(light, cams, exposure, albedo, own=False) -> float:
-    """Light power giving reading ``exposure`` on white at the origin (mean of cameras)."""
+def _power_for_exposure(light, cams, exposure, albedo, own=False, profile=False) -> float:
+    """Light power giving reading ``exposure`` on white at the origin (mean of cameras).
+
+    The white surface faces the light. With ``profile`` the light's angular
+    profile towards the origin counts too (a light whose axis misses the origin).
+    """
     c = COLOURS.index(light.colour)
     d2 = float(np.sum(light.position**2))
     readings = [
@@ -295,7 +320,10 @@ def _power_for_exposure(light, cams, exposure, albedo, own=False) -> float:
         for cam in cams
         if own or cam.light_colour != light.colour
     ]
-    return exposure / float(np.mean(readings))
+    scale = 1.0
+    if profile:
+        scale = float(replace(light, power=1.0).radiance(np.zeros(3)))
+    return exposure / float(np.mean(readings)) / scale
 
 
 def sensor(

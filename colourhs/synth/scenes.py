@@ -49,6 +49,14 @@ class SceneGeometry:
     albedo: Callable[[np.ndarray, np.ndarray], np.ndarray]
 
 
+def axis_angle(axis, angle: float) -> np.ndarray:
+    """Rotation matrix (3, 3) by ``angle`` radians about ``axis`` (Rodrigues)."""
+    k = np.asarray(axis, float)
+    k = k / np.linalg.norm(k)
+    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
+
+
 def grid_mesh(nu: int, nv: int, wrap_u: bool = False) -> np.ndarray:
     """Triangles (T, 3) of an nu x nv vertex grid (row-major, u fastest)."""
     cols = nu if wrap_u else nu - 1
@@ -81,6 +89,41 @@ def _outward(vertices, triangles):
     v = vertices[triangles]
     vol = np.einsum("ij,ij->i", v[:, 0], np.cross(v[:, 1], v[:, 2])).sum()
     return triangles[:, ::-1].copy() if vol < 0 else triangles
+
+
+def transformed(
+    geom: SceneGeometry,
+    scale: float = 1.0,
+    R: np.ndarray | None = None,
+    t=(0.0, 0.0, 0.0),
+    origin=(0.0, 0.0, 0.0),
+) -> SceneGeometry:
+    """The geometry scaled by ``scale`` and rotated by ``R`` about ``origin``, then moved to ``t``.
+
+    World X' = scale R (X - origin) + t. Materials are kept; the reflectance
+    moves with the surface (textures and dirt scale with the object).
+    """
+    R = np.eye(3) if R is None else np.asarray(R, float)
+    o = np.asarray(origin, float)
+    tt = np.asarray(t, float)
+    v = scale * (geom.vertices - o) @ R.T + tt
+    nrm = geom.vertex_normals @ R.T
+    inner = geom.albedo
+
+    def albedo(points, tri):
+        return inner((points - tt) @ R / scale + o, tri)
+
+    return SceneGeometry(
+        geom.name, v, geom.triangles, nrm, geom.material_ids, geom.materials, albedo
+    )
+
+
+def with_materials(geom: SceneGeometry, materials) -> SceneGeometry:
+    """The same geometry and reflectance with another material table (same ids)."""
+    return SceneGeometry(
+        geom.name, geom.vertices, geom.triangles, geom.vertex_normals, geom.material_ids,
+        tuple(materials), geom.albedo,
+    )  # fmt: skip
 
 
 # --------------------------------------------------------------------------- board
@@ -130,10 +173,18 @@ def board_geometry(board: dict, R_b: np.ndarray, t_b: np.ndarray, name="board") 
     return merge(name, [(corners, tris, 0)], [MATTE], albedo)
 
 
-def white_reference(size_m: float = 0.6, z_m: float = 0.0) -> SceneGeometry:
-    """A large white matte plane facing the rig, for the chromatic reference."""
+def white_reference(
+    size_m: float = 0.6, z_m: float = 0.0, R: np.ndarray | None = None
+) -> SceneGeometry:
+    """A large white matte plane facing the rig, for the chromatic reference.
+
+    ``R`` tilts it about its centre (0, 0, z_m).
+    """
     h = size_m / 2
     v = np.array([[-h, -h, z_m], [h, -h, z_m], [h, h, z_m], [-h, h, z_m]])
+    if R is not None:
+        c = np.array([0.0, 0.0, z_m])
+        v = (v - c) @ np.asarray(R, float).T + c
     tris = np.array([[0, 1, 2], [0, 2, 3]], np.int32)
     return merge("white", [(v, tris, 0)], [MATTE], lambda p, _t: np.full((len(p), 3), WHITE_ALBEDO))
 
@@ -193,13 +244,16 @@ STATUE_FEATURES = (  # (direction, relative amplitude, angular width rad): a mon
 )
 
 
-def statue(level: int = 6, radius_m: float = 0.085, seed: int = 7) -> SceneGeometry:
+def statue(
+    level: int = 6, radius_m: float = 0.085, seed: int = 7, material: Material | None = None
+) -> SceneGeometry:
     """A closed monster-head statue of glossy white plaster with smooth dirt.
 
     A star-shaped closed surface r(u) = radius (1 + bumps(u) + wrinkles(u)) on
     an icosphere of the given subdivision ``level``, stretched to a head
-    shape; eye sockets and mouth are concave. Material: diffuse plaster with a
-    Blinn-Phong gloss lobe. Chromaticity: white with smooth brownish dirt.
+    shape; eye sockets and mouth are concave. Material (default): diffuse
+    plaster with a Blinn-Phong gloss lobe, or ``material``. Chromaticity:
+    white with smooth brownish dirt.
     """
     u, tris = _icosphere(level)
     elev = np.arcsin(np.clip(-u[:, 1], -1, 1))
@@ -219,7 +273,7 @@ def statue(level: int = 6, radius_m: float = 0.085, seed: int = 7) -> SceneGeome
         return 0.82 * (1 - dirt[:, None] * tint)
 
     gloss = Material(kd=1.0, specular="blinn_phong", ks=0.25, shininess=30.0)
-    return merge("statue", [(v, tris, 0)], [gloss], albedo)
+    return merge("statue", [(v, tris, 0)], [material or gloss], albedo)
 
 
 # --------------------------------------------------------------------------- toy
@@ -280,14 +334,15 @@ SPRING_TURNS = 7.0
 SPRING_NU = 16  # vertices around the spring's tube
 
 
-def toy() -> SceneGeometry:
+def toy(plastic: Material | None = None, metal: Material | None = None) -> SceneGeometry:
     """A multi-coloured toy dog like the paper's Slinky.
 
     Parts: a spring-like helix torso in cycling pure colours (high-frequency
     geometry), specular plastic chest, hips and legs in pure colours, a brown
     head with a fine fur texture and dark eyes, and a mirror-like metal disc on
     a hind leg. Plastics: Lambertian + GGX (roughness 0.35, F0 0.05); metal:
-    GGX (roughness 0.15, F0 0.9) with almost no diffuse part.
+    GGX (roughness 0.15, F0 0.9) with almost no diffuse part. ``plastic`` and
+    ``metal`` replace those materials.
     """
     parts, colour_of = [], []
     spring_v, spring_t, spring_s = helix_tube(
@@ -339,19 +394,28 @@ def toy() -> SceneGeometry:
                 out[sel] = np.where((d < 0.008)[:, None], 0.06, out[sel])
         return out
 
-    plastic = Material(kd=1.0, specular="ggx", ks=1.0, roughness=0.35, f0=0.05)
-    metal = Material(kd=0.05, specular="ggx", ks=1.0, roughness=0.15, f0=0.9)
+    plastic = plastic or Material(kd=1.0, specular="ggx", ks=1.0, roughness=0.35, f0=0.05)
+    metal = metal or Material(kd=0.05, specular="ggx", ks=1.0, roughness=0.15, f0=0.9)
     return merge("toy", parts, [plastic, metal], albedo)
 
 
 # --------------------------------------------------------------------------- sheet
-def sheet(phase: float, size=(0.26, 0.2), n=(131, 101)) -> SceneGeometry:
+def sheet(
+    phase: float,
+    size=(0.26, 0.2),
+    n=(131, 101),
+    tilt_rad: float = 0.15,
+    tilt_axis_rad: float = 0.0,
+    material: Material | None = None,
+) -> SceneGeometry:
     """A glossy white laminated sheet folding and doming, at ``phase`` in [0, 1].
 
     A height field facing the rig: a dome that rises and falls
     (3 cm peak at mid-sequence), a rounded fold whose crease rotates and
-    deepens, and a gentle travelling wave. Material: white diffuse with a
-    Ward gloss lobe (alpha 0.18).
+    deepens, and a gentle travelling wave; the whole sheet tilted by
+    ``tilt_rad`` about an axis in the x-y plane at ``tilt_axis_rad`` from x.
+    Material (default): white diffuse with a Ward gloss lobe (alpha 0.18), or
+    ``material``.
     """
     w, h = size
     x, y = np.meshgrid(np.linspace(-w / 2, w / 2, n[0]), np.linspace(-h / 2, h / 2, n[1]))
@@ -366,9 +430,12 @@ def sheet(phase: float, size=(0.26, 0.2), n=(131, 101)) -> SceneGeometry:
     v = np.stack([x, y, z], -1).reshape(-1, 3)
     tris = grid_mesh(n[0], n[1])
     # Tilt the whole sheet a little, as if held.
-    c, s = np.cos(0.15), np.sin(0.15)
-    v = v @ np.array([[1, 0, 0], [0, c, -s], [0, s, c]]).T
-    gloss = Material(kd=1.0, specular="ward", ks=0.15, alpha=0.18)
+    if tilt_axis_rad == 0.0:
+        c, s = np.cos(tilt_rad), np.sin(tilt_rad)
+        v = v @ np.array([[1, 0, 0], [0, c, -s], [0, s, c]]).T
+    else:
+        v = v @ axis_angle([np.cos(tilt_axis_rad), np.sin(tilt_axis_rad), 0.0], tilt_rad).T
+    gloss = material or Material(kd=1.0, specular="ward", ks=0.15, alpha=0.18)
     geom = merge("sheet", [(v, tris, 0)], [gloss], lambda p, _t: np.full((len(p), 3), SHEET_ALBEDO))
     # The sheet faces the rig (-z): make sure its normals do too.
     if geom.vertex_normals[:, 2].mean() > 0:
