@@ -230,7 +230,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("synth", help="render a synthetic dataset in the capture format")
     s.add_argument("out", type=Path, help="dataset folder to create")
-    s.add_argument("--preset", default="demo", help="tiny, demo or paper (default demo)")
+    s.add_argument(
+        "--preset",
+        default="demo",
+        help="tiny, demo, paper, random or random-tiny (default demo); the random presets "
+        "draw a different rig, board, encoding and scene set for every --seed",
+    )
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
     s.add_argument("--overwrite", action="store_true", help="replace an existing dataset")

@@ -18,7 +18,7 @@ import multiprocessing
 import os
 import shutil
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import cv2
@@ -61,7 +61,13 @@ TINY_BOARD = _board(
 
 @dataclass(frozen=True)
 class Preset:
-    """Size and content of a synthetic dataset."""
+    """Size and content of a synthetic dataset.
+
+    A ``randomised`` preset draws its rig, board, encoding and scenes from the
+    seed, from the ranges ``randomrig.RANGES_BY_NAME[random_ranges]`` (see
+    :mod:`colourhs.synth.randomrig`; ``focal_px``, ``board``, ``bit_depth`` and
+    ``black_level`` are then ignored).
+    """
 
     name: str
     width: int
@@ -74,13 +80,58 @@ class Preset:
     board: dict = field(default_factory=lambda: DEMO_BOARD)
     bit_depth: int = 16
     black_level: int = 512
+    randomised: bool = False
+    random_ranges: str = "random"
 
 
 PRESETS = {
     "tiny": Preset("tiny", 160, 120, 312.5, 3, sheet_frames=3, statue_level=5, board=TINY_BOARD),
     "demo": Preset("demo", 640, 480, 1250.0, 2, sheet_frames=12),
     "paper": Preset("paper", 1280, 960, 2500.0, 2, sheet_frames=201),
+    "random": Preset("random", 640, 480, 0.0, 2, sheet_frames=4, randomised=True),
+    "random-tiny": Preset(
+        "random-tiny",
+        160,
+        120,
+        0.0,
+        3,
+        sheet_frames=4,
+        statue_level=5,
+        randomised=True,
+        random_ranges="random-tiny",
+    ),  # fmt: skip
 }
+
+
+@dataclass(frozen=True)
+class Content:
+    """What a dataset's captures show, beyond the rig and the board poses.
+
+    Builders are callables returning a :class:`~colourhs.synth.scenes.SceneGeometry`
+    (``sheet`` takes the phase in [0, 1]). ``mask_mode``: ``"exact"``
+    (coverage >= 0.5), ``"none"`` (no ``masks/`` folder), ``"dilated"`` or
+    ``"eroded"`` (by 1 px, 3x3). ``extra_gt``: more about the draw for
+    ``gt/rig_model.json`` (key ``draw``).
+    """
+
+    white: object
+    statue: object
+    toy: object
+    sheet: object
+    mask_mode: str = "exact"
+    scene_meta: dict = field(default_factory=lambda: SCENE_META)
+    extra_gt: dict | None = None
+
+
+def fixed_content(preset: Preset) -> Content:
+    """The scenes of the fixed presets (tiny, demo, paper)."""
+    return Content(
+        white=sc.white_reference,
+        statue=lambda: sc.statue(preset.statue_level),
+        toy=sc.toy,
+        sheet=sc.sheet,
+    )
+
 
 PARTS = ("photometric", "chromatic", "scenes")
 
@@ -95,35 +146,97 @@ def rotation_xyz(ax: float, ay: float, az: float) -> np.ndarray:
 
 
 def board_poses(
-    rig: RigModel, board: dict, n: int, rng: np.random.Generator, margin_px: float = 4.0
+    rig: RigModel,
+    board: dict,
+    n: int,
+    rng: np.random.Generator,
+    margin_px: float = 4.0,
+    *,
+    depth_m: float = 0.07,
+    lateral_m: float = 0.05,
+    tilt_deg: float = 25.0,
+    roll_deg: float = 15.0,
+    max_incidence_deg: float = 60.0,
+    any_direction: bool = False,
+    min_cell_px: float = 0.0,
+    tries: int = 1000,
 ) -> list[tuple[np.ndarray, np.ndarray]]:
     """Random hand-held-like board poses filling the working volume.
 
-    Depths are stratified over +-7 cm around the working distance, lateral
-    offsets up to +-5 cm, tilts up to +-25 degrees and roll up to +-15
-    degrees. A pose is kept only if every camera sees the whole board (with
-    ``margin_px``) from its white side at less than 60 degrees incidence.
+    Depths are stratified over +-``depth_m`` around the working distance
+    (the world origin), lateral offsets of the board's centre up to
+    +-``lateral_m`` in x and y, and roll about the board's normal up to
+    +-``roll_deg``. The tilt is up to +-``tilt_deg`` about the x and the y
+    axis independently, or, with ``any_direction``, a slant of up to
+    ``tilt_deg`` about an axis in any direction of the board plane. A pose is
+    kept only if every camera sees the whole board (with ``margin_px``) from
+    its white side at less than ``max_incidence_deg`` incidence and, when
+    ``min_cell_px`` > 0, every marker's cells (the shortest projected side
+    over the cell count, border included) span at least that many pixels.
+    ``rig`` needs only ``cameras`` (K, dist, R, t) and ``width``, ``height``.
+    The defaults are those of the tiny, demo and paper presets.
 
     Returns a list of (R_b, t_b), world X = R_b X_board + t_b.
+
+    Raises
+    ------
+    RuntimeError
+        If some pose is not found in ``tries`` draws.
     """
     corners = sc.board_corners(board["size"])
     centre_b = corners.mean(axis=0)
-    depths = rng.permutation(np.linspace(-0.07, 0.07, n))
+    markers = _marker_quads(board) if min_cell_px > 0 else None
+    depths = rng.permutation(np.linspace(-depth_m, depth_m, n))
     out = []
     for z in depths:
-        for _ in range(1000):
-            R = rotation_xyz(*np.deg2rad(rng.uniform([-25, -25, -15], [25, 25, 15])))
-            c = np.array([*rng.uniform(-0.05, 0.05, 2), z])
+        for _ in range(tries):
+            if any_direction:
+                slant, azimuth, roll = rng.uniform([0, 0, -roll_deg], [tilt_deg, 360, roll_deg])
+                a = np.deg2rad(azimuth)
+                axis = [np.cos(a), np.sin(a), 0.0]
+                R = sc.axis_angle(axis, np.deg2rad(slant)) @ rotation_xyz(0, 0, np.deg2rad(roll))
+            else:
+                lim = [tilt_deg, tilt_deg, roll_deg]
+                R = rotation_xyz(*np.deg2rad(rng.uniform(np.negative(lim), lim)))
+            c = np.array([*rng.uniform(-lateral_m, lateral_m, 2), z])
             t = c - R @ centre_b
-            if _board_visible(rig, corners @ R.T + t, R @ [0, 0, -1.0], margin_px):
-                out.append((R, t))
-                break
+            if not _board_visible(
+                rig, corners @ R.T + t, R @ [0, 0, -1.0], margin_px, max_incidence_deg
+            ):
+                continue
+            if markers is not None and _min_cell_px(rig, markers, R, t) < min_cell_px:
+                continue
+            out.append((R, t))
+            break
         else:
             raise RuntimeError("could not place a board pose visible to every camera")
     return out
 
 
-def _board_visible(rig, corners_w, normal_w, margin):
+def _marker_quads(board: dict) -> tuple[np.ndarray, int]:
+    """Corners (n_markers, 4, 3) of the board's markers (board frame) and their cell count."""
+    d = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, board["dictionary"]))
+    h = board["marker_length"] / 2
+    quads = [
+        [[x - h, y - h, 0], [x + h, y - h, 0], [x + h, y + h, 0], [x - h, y + h, 0]]
+        for x, y in board["markers"].values()
+    ]
+    return np.array(quads, float), d.markerSize + 2
+
+
+def _min_cell_px(rig, markers, R, t) -> float:
+    """Smallest projected marker cell (shortest side / cells) over markers and cameras, px."""
+    quads, cells = markers
+    world = quads @ R.T + t
+    best = np.inf
+    for cam in rig.cameras:
+        uv = project(world, cam.K, cam.dist, cam.R, cam.t)
+        sides = np.linalg.norm(uv - np.roll(uv, -1, axis=1), axis=-1)
+        best = min(best, float(np.nanmin(sides)) / cells)
+    return best
+
+
+def _board_visible(rig, corners_w, normal_w, margin, max_incidence_deg=60.0):
     for cam in rig.cameras:
         uv = project(corners_w, cam.K, cam.dist, cam.R, cam.t)
         if not np.all(np.isfinite(uv)):
@@ -133,7 +246,7 @@ def _board_visible(rig, corners_w, normal_w, margin):
         if np.any(uv[:, 1] > rig.height - 1 - margin):
             return False
         view = cam.centre - corners_w.mean(axis=0)
-        if normal_w @ view / np.linalg.norm(view) < np.cos(np.deg2rad(60)):
+        if normal_w @ view / np.linalg.norm(view) < np.cos(np.deg2rad(max_incidence_deg)):
             return False
     return True
 
@@ -210,7 +323,9 @@ class _Job:
     gt_chroma: str | None = None  # relpath of the true chromaticity maps
 
 
-def _jobs(preset: Preset, poses, parts) -> list[_Job]:
+def _jobs(preset: Preset, poses, parts, content: Content | None = None) -> list[_Job]:
+    content = fixed_content(preset) if content is None else content
+    masks = content.mask_mode != "none"
     board = preset.board
     jobs = []
     if "photometric" in parts:
@@ -219,27 +334,24 @@ def _jobs(preset: Preset, poses, parts) -> list[_Job]:
                 _Job(lambda R=R, t=t: sc.board_geometry(board, R, t), (f"photometric/pose{k:02d}",))
             )
     if "chromatic" in parts:
-        jobs.append(_Job(sc.white_reference, chromatic="chromatic/white"))
+        jobs.append(_Job(content.white, chromatic="chromatic/white"))
     if "scenes" in parts:
         R, t = poses[-1]
         jobs.append(
             _Job(
                 lambda: sc.board_geometry(board, R, t, name="plane"),
                 ("scenes/plane/frames/000000",),
-                mask="scenes/plane/masks/000000",
+                mask="scenes/plane/masks/000000" if masks else None,
                 gt_mesh="scenes/plane/gt/000000.ply",
             )
         )
-    for name, build in (
-        ("statue", lambda: sc.statue(preset.statue_level)),
-        ("toy", sc.toy),
-    ):
+    for name, build in (("statue", content.statue), ("toy", content.toy)):
         jobs.append(
             _Job(
                 build,
                 ("scenes/" + name + "/frames/000000",) if "scenes" in parts else (),
                 chromatic=f"chromatic/{name}" if "chromatic" in parts else None,
-                mask=f"scenes/{name}/masks/000000" if "scenes" in parts else None,
+                mask=f"scenes/{name}/masks/000000" if "scenes" in parts and masks else None,
                 gt_mesh=f"scenes/{name}/gt/000000.ply" if "scenes" in parts else None,
                 gt_chroma=f"scenes/{name}/gt/chromaticity.h5" if "scenes" in parts else None,
             )
@@ -249,9 +361,9 @@ def _jobs(preset: Preset, poses, parts) -> list[_Job]:
         for f in range(n):
             jobs.append(
                 _Job(
-                    lambda f=f: sc.sheet(f / max(n - 1, 1)),
+                    lambda f=f: content.sheet(f / max(n - 1, 1)),
                     (f"scenes/sheet/frames/{f:06d}",),
-                    mask=f"scenes/sheet/masks/{f:06d}",
+                    mask=f"scenes/sheet/masks/{f:06d}" if masks else None,
                     gt_mesh=f"scenes/sheet/gt/{f:06d}.ply",
                 )
             )
@@ -276,6 +388,17 @@ SCENE_META = {
               "description": "glossy white sheet folding and doming"},
 }  # fmt: skip
 
+# The randomised presets' scenes: the same for every draw (materials vary).
+RANDOM_SCENE_META = {
+    "plane": SCENE_META["plane"],
+    "statue": {"chromatic": "statue", "dynamic": False,
+               "description": "white monster head with smooth dirt"},
+    "toy": {"chromatic": "toy", "dynamic": False,
+            "description": "multi-coloured toy dog: pure colours, specular plastic, metal"},
+    "sheet": {"chromatic": None, "dynamic": True,
+              "description": "white sheet folding and doming"},
+}  # fmt: skip
+
 
 def synthesise(
     out: str | Path,
@@ -287,6 +410,7 @@ def synthesise(
     overwrite: bool = False,
     workers: int | None = None,
     scenes: tuple[str, ...] | None = None,
+    exact: bool = False,
 ) -> Path:
     """Render a synthetic colour HS dataset into ``out`` (capture format v1).
 
@@ -297,15 +421,23 @@ def synthesise(
     Parameters
     ----------
     out : dataset folder to create.
-    preset : ``"tiny"``, ``"demo"``, ``"paper"`` or a :class:`Preset`.
-    seed : seed of every random choice (rig, poses, noise).
-    nuisances : effects to simulate (default: all on, :class:`Nuisances`).
+    preset : ``"tiny"``, ``"demo"``, ``"paper"``, ``"random"``, ``"random-tiny"`` or a
+        :class:`Preset`.
+    seed : seed of every random choice (rig, poses, noise; with a randomised
+        preset also the rig's design, board, encoding, masks and scenes).
+    nuisances : effects to simulate (default: all on, :class:`Nuisances`). With a
+        randomised preset only its switches count (and ``gain_spread``,
+        ``chromatic_filter_tilt`` as magnitudes); the geometry, scenes, poses
+        and encoding drawn do not depend on it.
     parts : subset of ``("photometric", "chromatic", "scenes")`` to render.
     scenes : render only these of ``plane``, ``statue``, ``toy``, ``sheet`` (their
         frames and chromatic captures); default all.
     progress : show a progress bar.
     overwrite : replace an existing ``out``.
     workers : processes rendering views in parallel (default: CPU count).
+    exact : randomised presets: force 16-bit images and exact masks, keeping
+        the rest of the seed's draw (for consistency tests). The fixed
+        presets are always so.
 
     Returns
     -------
@@ -320,15 +452,39 @@ def synthesise(
     if out.exists() and not overwrite:
         raise FileExistsError(f"{out}: already exists (pass overwrite=True to replace it)")
     workers = (os.cpu_count() or 1) if workers is None else int(workers)
-    rng = np.random.default_rng(seed)
-    rig = make_rig(p.width, p.height, p.focal_px, rng, nuis)
-    poses = board_poses(rig, p.board, p.n_poses + 1, rng)
+    if p.randomised:
+        from colourhs.synth.randomrig import RANGES_BY_NAME, describe, draw_random
+
+        d = draw_random(
+            seed,
+            p.width,
+            p.height,
+            nuis,
+            RANGES_BY_NAME[p.random_ranges],
+            n_poses=p.n_poses,
+            sheet_frames=p.sheet_frames,
+            statue_level=p.statue_level,
+            exact=exact,
+        )
+        rig, poses = d.rig, d.poses
+        p = replace(p, board=d.board, bit_depth=d.bit_depth, black_level=d.black_level)
+        nuis = rig.nuisances
+        b = d.builders
+        content = Content(
+            b["white"], b["statue"], b["toy"], b["sheet"], d.mask_mode, RANDOM_SCENE_META,
+            describe(d),
+        )  # fmt: skip
+    else:
+        rng = np.random.default_rng(seed)
+        rig = make_rig(p.width, p.height, p.focal_px, rng, nuis)
+        poses = board_poses(rig, p.board, p.n_poses + 1, rng)
+        content = fixed_content(p)
     tmp = out.with_name(out.name + ".partial")
     if tmp.exists():
         shutil.rmtree(tmp)
     tmp.mkdir(parents=True)
     try:
-        _write_dataset(tmp, rig, p, poses, seed, nuis, parts, progress, workers, scenes)
+        _write_dataset(tmp, rig, p, poses, seed, nuis, parts, progress, workers, scenes, content)
         if out.exists():
             shutil.rmtree(out)
         os.replace(tmp, out)
@@ -338,11 +494,17 @@ def synthesise(
     return out
 
 
-def _write_dataset(root, rig, p, poses, seed, nuis, parts, progress, workers, scenes=None):
+def _write_dataset(
+    root, rig, p, poses, seed, nuis, parts, progress, workers, scenes=None, content=None
+):
+    content = fixed_content(p) if content is None else content
     (root / "rig.json").write_text(json.dumps(rig_json(rig, p, p.board), indent=2))
     gt = root / "gt"
     gt.mkdir()
-    (gt / "rig_model.json").write_text(json.dumps(rig.to_json(), indent=1))
+    model = rig.to_json()
+    if content.extra_gt is not None:
+        model["draw"] = content.extra_gt
+    (gt / "rig_model.json").write_text(json.dumps(model, indent=1))
     names = [f"pose{k:02d}" for k in range(len(poses) - 1)] + ["plane"]
     (gt / "board_poses.json").write_text(
         json.dumps(
@@ -354,17 +516,17 @@ def _write_dataset(root, rig, p, poses, seed, nuis, parts, progress, workers, sc
         for key, mu in true_mu_maps(rig).items():
             f.create_dataset(key, data=mu, compression="gzip")
     if "scenes" in parts:
-        for name, meta in SCENE_META.items():
+        for name, meta in content.scene_meta.items():
             if scenes is not None and name not in scenes:
                 continue
             d = root / "scenes" / name
             d.mkdir(parents=True, exist_ok=True)
             (d / "scene.json").write_text(json.dumps(meta, indent=2))
-    jobs = _jobs(p, poses, parts)
+    jobs = _jobs(p, poses, parts, content)
     if scenes is not None:
         jobs = [j for j in jobs if _scene_of(j) in (None, *scenes)]
     rays = [camera_rays(c, p.width, p.height, p.supersample) for c in rig.cameras]
-    args = [(root, rig, rays, p, job, seed, nuis) for job in jobs]
+    args = [(root, rig, rays, p, job, seed, nuis, content.mask_mode) for job in jobs]
     bar = tqdm(total=len(jobs), desc=f"synth {p.name}", unit="view", disable=not progress)
     if workers <= 1:
         for a in args:
@@ -389,7 +551,7 @@ def _render_indexed(k: int) -> None:
     _render_job(*_ARGS[k])
 
 
-def _render_job(root, rig, rays, p, job, seed, nuis):
+def _render_job(root, rig, rays, p, job, seed, nuis, mask_mode="exact"):
     geom = job.geometry()
     scene = raycasting_scene(geom)
     if job.gt_mesh:
@@ -414,7 +576,7 @@ def _render_job(root, rig, rays, p, job, seed, nuis):
                 rel = f"{job.chromatic}/{colour}/{cam.name}.png"
                 _write_image(root, rel, signal, seed, nuis, p)
         if job.mask:
-            mask = (hits.coverage() >= 0.5).astype(np.uint8) * 255
+            mask = _mask(hits.coverage(), mask_mode)
             path = root / f"{job.mask}/{cam.name}.png"
             path.parent.mkdir(parents=True, exist_ok=True)
             cv2.imwrite(str(path), mask)
@@ -430,11 +592,25 @@ def _render_job(root, rig, rays, p, job, seed, nuis):
         path.parent.mkdir(parents=True, exist_ok=True)
         with h5py.File(path, "w") as f:
             f.attrs["note"] = (
-                "surface reflectance per light band relative to the white reference, "
-                "(1, 1, 1) = white; pixel mean over fully covered pixels, NaN elsewhere"
+                "diffuse surface reflectance per light band relative to the white "
+                "reference, (1, 1, 1) = white; pixel mean over fully covered pixels, NaN "
+                "elsewhere; a white or metallic specular lobe is not in it"
             )
             for name, m in chroma_maps.items():
                 f.create_dataset(name, data=m, compression="gzip")
+
+
+def _mask(coverage: np.ndarray, mode: str) -> np.ndarray:
+    """8-bit silhouette (0 / 255) from sample coverage: exact, or dilated / eroded by 1 px."""
+    mask = (coverage >= 0.5).astype(np.uint8) * 255
+    kernel = np.ones((3, 3), np.uint8)
+    if mode == "dilated":
+        mask = cv2.dilate(mask, kernel)
+    elif mode == "eroded":
+        mask = cv2.erode(mask, kernel, borderType=cv2.BORDER_CONSTANT, borderValue=0)
+    elif mode != "exact":
+        raise ValueError(f"unknown mask mode {mode!r}")
+    return mask
 
 
 def _write_image(root, rel, signal, seed, nuis, p):

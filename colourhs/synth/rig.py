@@ -17,8 +17,10 @@ vignetting             per-channel camera sensitivity                         8.
                        colour shading, centre shifted per channel, gains g_c  gains +-6 %
                        differ per camera
 cross-talk             3x3 matrix X[channel, light colour] per camera,        off-diagonal
-                       diagonal 1; includes the camera's own light leaking    3..8 %
-                       from its own-colour channel into the other two
+                       diagonal 1; includes the camera's own light leaking    3..8 %; the
+                       from its own-colour channel into the other two; a      same matrix for
+                       second matrix for the chromatic light's filters        the filters
+                       (``CameraModel.chromatic_crosstalk``)
 chromatic filters      the chromatic light's profile differs per filter       +-5 %/rad tilt
 sensor noise           shot noise (Poisson, full well in electrons) plus      15000 e-, 3 e-
                        Gaussian read noise
@@ -30,6 +32,11 @@ saturation             values at or above full scale clip to white_level      on
 
 With every switch off the images follow the paper's equation (4) exactly,
 with the ground-truth mu of equation (2) written to ``gt/photometric.h5``.
+
+These are the fixed presets' (tiny, demo, paper) values. The randomised
+presets draw the magnitudes per seed and add effects (LED axes tilted off
+the optical axes, a ripple in the LED profiles, distinct filter cross-talk):
+their ranges are the table of :mod:`colourhs.synth.randomrig`.
 """
 
 from __future__ import annotations
