@@ -12,6 +12,8 @@ true board poses (``gt/board_poses.json``) and true chromaticity maps
 
 from __future__ import annotations
 
+import contextlib
+import ctypes
 import hashlib
 import json
 import multiprocessing
@@ -484,7 +486,10 @@ def synthesise(
         shutil.rmtree(tmp)
     tmp.mkdir(parents=True)
     try:
-        _write_dataset(tmp, rig, p, poses, seed, nuis, parts, progress, workers, scenes, content)
+        with _single_threaded_blas():
+            _write_dataset(
+                tmp, rig, p, poses, seed, nuis, parts, progress, workers, scenes, content
+            )
         if out.exists():
             shutil.rmtree(out)
         os.replace(tmp, out)
@@ -528,6 +533,11 @@ def _write_dataset(
     rays = [camera_rays(c, p.width, p.height, p.supersample) for c in rig.cameras]
     args = [(root, rig, rays, p, job, seed, nuis, content.mask_mode) for job in jobs]
     bar = tqdm(total=len(jobs), desc=f"synth {p.name}", unit="view", disable=not progress)
+    _render_all(args, workers, bar)
+    bar.close()
+
+
+def _render_all(args, workers, bar):
     if workers <= 1:
         for a in args:
             _render_job(*a)
@@ -541,10 +551,36 @@ def _write_dataset(
             for _ in pool.map(_render_indexed, range(len(args))):
                 bar.update()
         _ARGS = None
-    bar.close()
 
 
 _ARGS = None
+
+
+@contextlib.contextmanager
+def _single_threaded_blas():
+    """Run the block with NumPy's bundled OpenBLAS on one thread, if it can be found.
+
+    The renderer's (M, 3) x (3, 3) products are several times slower with
+    OpenBLAS's threads (they compete with the worker processes for the cores);
+    one thread gives the same results. Without a bundled OpenBLAS this does
+    nothing.
+    """
+    lib = None
+    try:
+        libs = sorted((Path(np.__file__).parent.parent / "numpy.libs").glob("*openblas*.so*"))
+        if libs:
+            lib = ctypes.CDLL(str(libs[0]))
+            get = lib.scipy_openblas_get_num_threads64_
+            put = lib.scipy_openblas_set_num_threads64_
+            before = int(get())
+            put(1)
+    except (OSError, AttributeError):
+        lib = None
+    try:
+        yield
+    finally:
+        if lib is not None:
+            put(before)
 
 
 def _render_indexed(k: int) -> None:
@@ -559,20 +595,21 @@ def _render_job(root, rig, rays, p, job, seed, nuis, mask_mode="exact"):
     chroma_maps = {}
     for cam, cam_rays in zip(rig.cameras, rays, strict=True):
         hits = trace_camera(geom, scene, cam_rays)
+        sens = cam.sensitivity(hits.xy[hits.sample])  # (M, 3)
         if job.frames:
             transports = {
                 light.colour: light.radiance(hits.points)
                 * light_transport(geom, scene, hits, light.position)[:, COLOURS.index(light.colour)]
                 for light in rig.lights
             }
-            signal = channel_signal(hits, cam, transports)
+            signal = channel_signal(hits, cam, transports, sensitivity=sens)
             for rel in job.frames:
                 _write_image(root, f"{rel}/{cam.name}.png", signal, seed, nuis, p)
         if job.chromatic:
             base = light_transport(geom, scene, hits, rig.chromatic_lights["red"].position)
             for colour, light in rig.chromatic_lights.items():
                 T = light.radiance(hits.points) * base[:, COLOURS.index(colour)]
-                signal = channel_signal(hits, cam, {colour: T}, cam.chromatic_crosstalk)
+                signal = channel_signal(hits, cam, {colour: T}, cam.chromatic_crosstalk, sens)
                 rel = f"{job.chromatic}/{colour}/{cam.name}.png"
                 _write_image(root, rel, signal, seed, nuis, p)
         if job.mask:

@@ -148,6 +148,7 @@ __all__ = [
     "TINY_RANGES",
     "RandomDraw",
     "RandomRanges",
+    "describe",
     "draw_random",
 ]
 
@@ -217,7 +218,6 @@ class RandomRanges:
     vignetting_corner: tuple[float, float] = (0.05, 0.2)
     colour_shading: float = 0.02
     vignetting_centre_rel: float = 0.05  # disc radius, of the corner radius
-    gain_spread: float = 0.06
     crosstalk: tuple[float, float] = (0.02, 0.08)
     filter_crosstalk_factor: tuple[float, float] = (0.6, 1.4)
     full_well_e: tuple[float, float] = (8000.0, 20000.0)

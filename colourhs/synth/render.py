@@ -190,6 +190,7 @@ def channel_signal(
     camera: CameraModel,
     transports: dict[str, np.ndarray],
     crosstalk: np.ndarray | None = None,
+    sensitivity: np.ndarray | None = None,
 ) -> np.ndarray:
     """Linear image (H, W, 3) from per-colour light transports, eq. (4).
 
@@ -203,13 +204,15 @@ def channel_signal(
     crosstalk : the (3, 3) cross-talk matrix to use (default the camera's LED
         matrix ``camera.crosstalk``; the chromatic captures pass
         ``camera.chromatic_crosstalk``).
+    sensitivity : the (M, 3) ``camera.sensitivity`` of the hits, when already
+        computed (several signals of one camera's hits).
 
     Returns
     -------
     (H, W, 3) signal in fractions of full scale, channels R, G, B.
     """
     X = camera.crosstalk if crosstalk is None else np.asarray(crosstalk, float)
-    sens = camera.sensitivity(hits.xy[hits.sample])  # (M, 3)
+    sens = camera.sensitivity(hits.xy[hits.sample]) if sensitivity is None else sensitivity
     per_hit = np.zeros((len(hits.sample), 3))
     for colour, T in transports.items():
         b = COLOURS.index(colour)
