@@ -20,7 +20,7 @@ from colourhs.helmholtz import constraint_residual, pair_rows, sample_bilinear
 from colourhs.markers import to_grey8
 from colourhs.synth import randomrig as rr
 from colourhs.synth.brdf import Material
-from colourhs.synth.dataset import PRESETS, _mask, synthesise
+from colourhs.synth.dataset import PRESETS, SCENE_META, _mask, synthesise
 from colourhs.synth.rig import COLOURS, Nuisances
 
 TINY = PRESETS["random-tiny"]
@@ -83,6 +83,9 @@ def test_full_datasets_validate_and_have_the_layout(full_datasets):
         for cam in rig["cameras"]:
             assert set(cam) == {"name", "K", "dist", "R", "t", "light"}
             assert cam["light"]["offset"] == [0.0, 0.0, 0.0]
+        for name in ds.scenes:  # the same scene.json as the fixed presets'
+            meta = json.loads((root / "scenes" / name / "scene.json").read_text())
+            assert meta == SCENE_META[name]
         names = {p.name for p in root.rglob("*")}
         assert not any("random" in n or "seed" in n for n in names)
         model = json.loads((root / "gt" / "rig_model.json").read_text())

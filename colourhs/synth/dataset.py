@@ -379,20 +379,11 @@ def _scene_of(job: _Job) -> str | None:
     return parts[1] if parts[0] in ("scenes", "chromatic") and parts[1] != "white" else None
 
 
+# One description per scene for every preset (true whatever a random draw's
+# materials), so scene.json tells nothing about the preset.
 SCENE_META = {
     "plane": {"chromatic": None, "dynamic": False,
               "description": "held-out pose of the white marker board"},
-    "statue": {"chromatic": "statue", "dynamic": False,
-               "description": "glossy white plaster monster head with smooth dirt"},
-    "toy": {"chromatic": "toy", "dynamic": False,
-            "description": "multi-coloured toy dog: pure colours, specular plastic, metal"},
-    "sheet": {"chromatic": None, "dynamic": True,
-              "description": "glossy white sheet folding and doming"},
-}  # fmt: skip
-
-# The randomised presets' scenes: the same for every draw (materials vary).
-RANDOM_SCENE_META = {
-    "plane": SCENE_META["plane"],
     "statue": {"chromatic": "statue", "dynamic": False,
                "description": "white monster head with smooth dirt"},
     "toy": {"chromatic": "toy", "dynamic": False,
@@ -473,7 +464,7 @@ def synthesise(
         nuis = rig.nuisances
         b = d.builders
         content = Content(
-            b["white"], b["statue"], b["toy"], b["sheet"], d.mask_mode, RANDOM_SCENE_META,
+            b["white"], b["statue"], b["toy"], b["sheet"], d.mask_mode, SCENE_META,
             describe(d),
         )  # fmt: skip
     else:
