@@ -18,44 +18,51 @@ Two estimates, from data the capture format has:
 1. **Filter mixing field** (``chromatic/white/<colour>/<camera>.png``): the
    white reference under one coloured light b at a time gives
    ``I_c / I_b = M_filter[c, b](u)`` per pixel; a smooth 2-D Legendre
-   polynomial (total degree 4) in the pixel coordinates is fitted to it by
-   robust weighted least squares (:func:`fit_mixing_field`). These are the
-   chromatic light's *filters*, whose spectra differ from the rig's LEDs:
-   ``X_filter != X_LED``. The spatial factor sigma_c / sigma_b is the
-   sensor's, the same for both, so ``M_LED(u) = M_filter(u) * F``
-   elementwise, with F a constant 3x3 factor per camera (unit diagonal).
+   polynomial (total degree 3) in the pixel coordinates is fitted to
+   ``I_c = M[c, b](u) I_b`` (:func:`fit_mixing_field`: robust weighted least
+   squares, or, where the noise is below one raw step as in 8-bit images,
+   the maximum likelihood of the integer readings). These are the chromatic
+   light's *filters*, whose spectra differ from the rig's LEDs: X_filter !=
+   X_LED. The spatial factor sigma_c / sigma_b is the sensor's, the same for
+   both, so ``M_LED(u) = M_filter(u) * F`` elementwise, with F a constant 3x3
+   factor per camera (unit diagonal) that the chromatic captures cannot see.
 2. **LED factor F** (``photometric/<pose>/<camera>.png``, all lights on, the
    board pose of each from the markers stage): see :func:`led_factor`. On
    the flat white Lambertian board, eq. (1) with a constant BRDF says that
-   the correctly unmixed signal of camera k in the channel of light l is
+   the correctly unmixed signal of camera k in the channel of light l's
+   colour is
 
        T_{k<-l}(x) = sigma_{k,l}(u_k) rho_l(v_l) (n . v_l) / |c_l - x|^2,
 
-   a product of a sensor factor of camera k's pixel, the radiance of light l
-   along its ray and the known geometry. Two pose-invariances follow, at a
-   fixed pixel across the board poses:
+   a sensor factor of camera k's pixel, the radiance of light l along its
+   ray and the known geometry. Two pose invariances follow, at a fixed pixel
+   across the board poses:
 
    (a) own channel: light l sits at camera l, so rho_l(v_l) is a function of
        camera l's pixel u_l, and ``T_{l<-l}(x) |c_l - x|^2 / (n . v_l)`` depends
-       on u_l only (the quantity 1 / mu of eq. 2 for the camera's own colour);
+       on u_l only (1 / mu of eq. 2 for the camera's own colour);
    (b) same light, two cameras: ``T_{k<-l}(x) / T_{l<-l}(x) =
        sigma_{k,l}(u_k) / sigma_{l,l}(u_l)``: rho_l and the geometry cancel,
        leaving camera k's pixel (free per pixel) and a smooth vignetting
        function of camera l's pixel (a low-order polynomial).
 
-   Wrong unmixing leaves leaks ``e J_m`` of the other lights, whose ratio to
-   the signal J_m / J_l changes with the pose at a fixed pixel, so the fit of
-   F's 18 numbers (6 per camera) makes (a) and (b) pose-invariant (Gauss-
-   Newton, per-pixel constants eliminated, robust weights).
+   Wrong unmixing leaves leaks ``e J_m`` of the other lights, whose ratio
+   J_m / J_l to the signal changes with the pose at a fixed pixel, so the
+   18 numbers of F (6 per camera) are fitted to make (a) and (b) pose
+   invariant (Gauss-Newton with the per-pixel constants eliminated,
+   Jacobians from independent neighbouring pixels, robust weights), then
+   shrunk towards 1 by empirical Bayes.
 
-   Why (a) is needed: every constraint that divides out the lights' fields
+   Why (a) is needed: every constraint that divides the lights' fields out
    entirely -- (b), or the Helmholtz reciprocity ratio
-   ``T_{a<-b} T_{b<-a} / (T_{a<-a} T_{b<-b}) = s_a(u_a) s_b(u_b)`` (a product of
-   two (b) ratios) -- is blind to a mixing common to all cameras: unmixing
-   with ``M_k diag(sigma_k) A diag(sigma_k)^-1`` for any constant A gives
-   ``T_k = diag(sigma_k) A^-1 g`` with g the lights' fields, which is again
-   "sensor times some field", so 6 of the 18 numbers stay free. Only the
-   geometry of the lights (a) tells a light's own field from a mixture.
+   ``T_{a<-b} T_{b<-a} / (T_{a<-a} T_{b<-b}) = s_a(u_a) s_b(u_b)`` (a product
+   of two (b) ratios) -- is blind to a mixing common to all cameras:
+   unmixing with ``M_k diag(sigma_k) A diag(sigma_k)^-1`` for any constant A
+   (unit diagonal up to per-channel scales) gives ``T_k = diag(sigma_k)
+   A^-1 g`` with g the lights' fields, again "sensor times some field", and
+   such M_k are of the form M_filter * F'; so 6 of the 18 numbers stay free.
+   Only the geometry of the lights (a) tells a light's own field from a
+   mixture of fields.
 
 Unmixing is ``J = M(u)^-1 I`` per pixel (:func:`unmix`).
 """
@@ -368,6 +375,7 @@ def calibrate_crosstalk(
     poses_csv: str | Path | None = None,
     spatial: bool | None = None,
     degree: int = 3,
+    **led_params,
 ) -> dict:
     """Mixing per camera from ``chromatic/white/<colour>/<camera>.png`` (and the board).
 
@@ -376,14 +384,17 @@ def calibrate_crosstalk(
     (:func:`crosstalk_matrix`). With ``spatial``: the smooth filter mixing
     field (:func:`fit_mixing_field`). With ``poses_csv`` (the markers stage's
     board poses; implies ``spatial``): that field times the LED factor F of
-    :func:`led_factor`, from the board captures under the rig's own LEDs.
+    :func:`led_factor`, from the board captures under the rig's own LEDs
+    (``led_params``: its keyword parameters).
 
     Writes (atomically) a JSON file when ``out_json`` is given and returns the
     same dict: ``{"cameras": {name: {"M": 3x3, "spread": 3x3, ...}}, "method":
     ...}``. "M" is always a constant matrix (today's, or the median over the
     image of the final field), so readers of the first format still work; a
-    spatial calibration adds "field" (:meth:`MixingField.to_json`), and with
-    the board "filter_M", "led_factor" and "led_factor_sd".
+    spatial calibration adds "filter_M" (today's matrix), "field"
+    (:meth:`MixingField.to_json`), "field_rms" and "field_quantised"; with the board also
+    "led_factor" (F), "led_factor_sd" and "led_mixing_sd" (its standard errors,
+    and those of M), and at the top level "led_fit" (the fit's diagnostics).
     """
     ds = open_dataset(dataset_dir, check_images=False)
     if "white" not in ds.chromatic_objects:
@@ -405,13 +416,14 @@ def calibrate_crosstalk(
             fields[cam] = field
             out["cameras"][cam] |= {"M": field.median.tolist(), "filter_M": M.tolist(),
                                     "field": field.to_json(),
-                                    "field_rms": info["rms"].tolist()}  # fmt: skip
+                                    "field_rms": info["rms"].tolist(),
+                                    "field_quantised": info["quantised"].tolist()}  # fmt: skip
     if spatial:
         out["method"] = (
             f"per-pixel I_c / I_b under light b alone (white reference), Legendre degree {degree}"
         )
     if poses_csv is not None:
-        result = led_factor_from_dataset(ds, poses_csv, fields)
+        result = led_factor_from_dataset(ds, poses_csv, fields, **led_params)
         for cam, F in result["factor"].items():
             field = fields[cam].scaled(F)
             out["cameras"][cam] |= {
@@ -419,6 +431,8 @@ def calibrate_crosstalk(
                 "field": field.to_json(),
                 "led_factor": F.tolist(),
                 "led_factor_sd": result["sd"][cam].tolist(),
+                # standard error of M_LED from F's noise, at the field's median
+                "led_mixing_sd": (result["sd"][cam] * np.abs(fields[cam].median)).tolist(),
             }
         out["method"] += "; times the LED factor from the board captures (own-light and "
         out["method"] += "same-light pose invariance, eq. 1)"
@@ -756,11 +770,15 @@ def _build_led_problem(rig, shots, fields, opts) -> _LedProblem:
                               "group": nc * npx + (a * nc + m) * npx + idx, "u1": uv[idx],
                               "u2": ub, "pose": np.full(len(idx), j)})  # fmt: skip
     rows = {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}
+    block = np.floor(rows["u1"] / (8 * step)).astype(int)
+    rows["cluster"] = np.stack([rows["kind"], rows["cam"], rows["cam2"], rows["pose"],
+                                block[:, 0], block[:, 1]], axis=1)  # fmt: skip
     # a pixel seen in a single pose carries nothing once its h(u) is eliminated
     _, inv, counts = np.unique(rows["group"], return_inverse=True, return_counts=True)
     keep = counts[inv] >= 2
     rows = {key: v[keep] for key, v in rows.items()}
     rows["group"] = np.unique(rows["group"], return_inverse=True)[1]
+    rows["cluster"] = np.unique(rows["cluster"], axis=0, return_inverse=True)[1].ravel()
     if len(rows["group"]) < 100:
         raise ValueError(f"LED factor: too few usable board samples ({len(rows['group'])})")
     prob = _LedProblem(rows, nc, ncols)
@@ -787,11 +805,17 @@ def _solve_led_problem(prob: _LedProblem, theta, iterations: int, huber: float):
         scale = 1.4826 * np.median(np.abs(z[w > 0])) + 1e-15
         robust = np.minimum(1.0, huber * scale / np.maximum(np.abs(z), 1e-30))
         steps.append(float(np.max(np.abs(sol[:nth]))))
-    # sandwich covariance of theta (noise only), nuisances eliminated
+    # sandwich covariance of theta, nuisances eliminated, with the score summed over
+    # clusters of nearby rows (residuals of neighbouring samples are correlated:
+    # shared pixels of the partner camera, small model errors)
+    import scipy.sparse as sp
+
     Xt = prob.demean(X.toarray(), w)
     Hi = np.linalg.pinv(XtX, rcond=1e-13)
-    Xw = Xt * (w * r)[:, None]
-    cov = (Hi @ (Xw.T @ Xw) @ Hi)[:nth, :nth]
+    _, cl = np.unique(prob.cluster, return_inverse=True)
+    C = sp.csr_matrix((w * r, (cl, np.arange(prob.N))), shape=(int(cl.max()) + 1, prob.N))
+    score = C @ Xt
+    cov = (Hi @ (score.T @ score) @ Hi)[:nth, :nth]
     # identifiability of theta: the Schur complement with the nuisances eliminated
     red = np.linalg.pinv(Hi[:nth, :nth], rcond=1e-15)
     sv = np.linalg.svd(red / np.abs(red).max(), compute_uv=False)
@@ -883,8 +907,8 @@ def led_factor(rig, shots: list[BoardShot], fields: dict, **params) -> dict:
     Returns
     -------
     dict with ``factor`` (camera -> (3, 3) F, unit diagonal), ``sd`` (camera ->
-    (3, 3) standard errors from the noise: sandwich estimate, posterior with
-    ``shrink``), ``diagnostics``
+    (3, 3) standard errors: sandwich estimate over 8 x 8 blocks of samples,
+    posterior with ``shrink``), ``diagnostics``
     (JSON-able: rows per kind, iterations, RMS residual, singular values of
     the normal matrix of F with the nuisances eliminated, parameters).
     """
