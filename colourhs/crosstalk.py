@@ -708,6 +708,11 @@ def _build_led_problem(rig, shots, fields, opts) -> _LedProblem:
     for a, A in enumerate(cams):
         origin, d = backproject(uv, A.K, A.dist, A.R, A.t)
         MA = fields[A.name].at(uv)
+        # the light's rays: the camera's model moved to the light centre
+        collocated = bool(np.allclose(A.light_offset, 0.0))
+        l_origin, l_dir = origin, d
+        if not collocated:
+            l_origin, l_dir = backproject(uv, A.K, A.dist, A.R, -A.R @ A.light_centre)
         for j, shot in enumerate(shots):
             n = shot.normal
             x, s = ray_plane_intersection(origin, d, shot.t, n)
@@ -716,26 +721,46 @@ def _build_led_problem(rig, shots, fields, opts) -> _LedProblem:
                 vc = A.centre - x
                 cos_c = (vc @ n) / np.linalg.norm(vc, axis=1)
                 ok = (s > 0) & (cos_c > opts["min_cos"]) & okA
-            # (a) the camera's own channel against the geometry of its own light
+            # (a) the camera's own channel against the geometry of its own light, on a
+            # grid of the light's directions (the camera's own grid when collocated)
             o = A.light_channel
-            vl = A.light_centre - x
+            if collocated:
+                xo, so, uo, yo, qo, oko = x, s, uv, yA, qA, okA
+            else:
+                xo, so = ray_plane_intersection(l_origin, l_dir, shot.t, n)
+                uo = project(xo, A.K, A.dist, A.R, A.t)
+                box, ring, okimg = boxes[j][A.name]
+                yo, qo = sample_bilinear(box, uo), sample_bilinear(ring, uo)
+                with np.errstate(invalid="ignore"):
+                    oko = sample_bilinear(okimg.astype(np.float32), uo) > 1 - 1e-6
+                    oko &= (uo[:, 0] >= half) & (uo[:, 0] <= W - 1 - half)
+                    oko &= (uo[:, 1] >= half) & (uo[:, 1] <= H - 1 - half)
+            vl = A.light_centre - xo
             dl2 = np.sum(vl**2, axis=1)
+            vco = A.centre - xo
             with np.errstate(invalid="ignore", divide="ignore"):
                 cos_l = (vl @ n) / np.sqrt(dl2)
-                own = ok & (cos_l > opts["min_cos"]) & (yA[:, o] > opts["min_signal"])
+                own = (so > 0) & oko & (cos_l > opts["min_cos"]) & (yo[:, o] > opts["min_signal"])
+                own &= (vco @ n) / np.linalg.norm(vco, axis=1) > opts["min_cos"]
             idx = np.flatnonzero(own) if "own" in opts["constraints"] else np.zeros(0, int)
             z = np.zeros((len(idx), ncols))
             if n_pose_cols:
                 # the markers stage's plane error (depth, two tilts), shared by the cameras
-                z[:, 3 * j : 3 * j + 3] = _pose_derivatives(shot, rig.board, origin, d[idx], A)
+                dz = _pose_derivatives(shot, rig.board, l_origin, l_dir[idx], A)
+                z[:, 3 * j : 3 * j + 3] = dz
+            if not collocated:
+                # the camera's own-channel vignetting at its pixel, S_a, as in (b)
+                base = n_pose_cols + a * nbs
+                z[:, base : base + nbs] = legendre_basis(uo[idx], W, H, sdeg)[:, 1:]
             parts.append({"kind": np.zeros(len(idx), int), "cam": np.full(len(idx), a),
                           "cam2": np.full(len(idx), -1), "ch": np.full(len(idx), o),
-                          "Y1": yA[idx], "Q1": qA[idx], "M1": MA[idx],
+                          "Y1": yo[idx], "Q1": qo[idx],
+                          "M1": MA[idx] if collocated else fields[A.name].at(uo[idx]),
                           "Y2": np.ones((len(idx), 3)), "Q2": np.ones((len(idx), 3)),
                           "M2": np.broadcast_to(np.eye(3), (len(idx), 3, 3)),
                           "logG": np.log(cos_l[idx] / dl2[idx]), "Z": z,
                           "group": a * npx + idx, "u1": uv[idx],
-                          "u2": np.full((len(idx), 2), np.nan),
+                          "u2": np.full((len(idx), 2), np.nan) if collocated else uo[idx],
                           "pose": np.full(len(idx), j)})  # fmt: skip
             # (b) the light of camera m seen by camera a and by camera m itself
             for m, B in enumerate(cams):
