@@ -392,9 +392,11 @@ def calibrate_crosstalk(
     ...}``. "M" is always a constant matrix (today's, or the median over the
     image of the final field), so readers of the first format still work; a
     spatial calibration adds "filter_M" (today's matrix), "field"
-    (:meth:`MixingField.to_json`), "field_rms" and "field_quantised"; with the board also
-    "led_factor" (F), "led_factor_sd" and "led_mixing_sd" (its standard errors,
-    and those of M), and at the top level "led_fit" (the fit's diagnostics).
+    (:meth:`MixingField.to_json`), "field_rms" and "field_quantised"; with the
+    board "field" becomes the LED mixing, "filter_field" keeps the filters',
+    and "led_factor" (F), "led_factor_sd" and "led_mixing_sd" (its standard
+    errors, and those of M) join, with "led_fit" (the fit's diagnostics) at the
+    top level.
     """
     ds = open_dataset(dataset_dir, check_images=False)
     if "white" not in ds.chromatic_objects:
@@ -429,6 +431,7 @@ def calibrate_crosstalk(
             out["cameras"][cam] |= {
                 "M": field.median.tolist(),
                 "field": field.to_json(),
+                "filter_field": fields[cam].to_json(),
                 "led_factor": F.tolist(),
                 "led_factor_sd": result["sd"][cam].tolist(),
                 # standard error of M_LED from F's noise, at the field's median
@@ -442,16 +445,31 @@ def calibrate_crosstalk(
     return out
 
 
-def load_crosstalk(path: str | Path) -> dict:
+def load_crosstalk(path: str | Path, light: str = "led") -> dict:
     """Camera name -> mixing from a file written by :func:`calibrate_crosstalk`.
 
     A (3, 3) ndarray for a constant calibration (the first format), a
     :class:`MixingField` for a spatial one; :func:`unmix` takes either.
+    ``light="led"`` (default): the mixing of the rig's own lights, for the
+    all-lights-on images (board poses, scene frames). ``light="filter"``: the
+    mixing of the chromatic light's filters, for the chromatic captures (the
+    two differ by the LED factor).
     """
+    if light not in ("led", "filter"):
+        raise ValueError(f"load_crosstalk: light must be 'led' or 'filter', not {light!r}")
     data = json.loads(Path(path).read_text())
     out = {}
     for cam, v in data["cameras"].items():
-        out[cam] = MixingField.from_json(v["field"]) if "field" in v else np.asarray(v["M"], float)
+        if light == "filter" and "filter_field" in v:
+            out[cam] = MixingField.from_json(v["filter_field"])
+        elif light == "filter" and "led_factor" not in v and "field" in v:
+            out[cam] = MixingField.from_json(v["field"])  # a field without the board
+        elif light == "filter":
+            out[cam] = np.asarray(v.get("filter_M", v["M"]), float)
+        elif "field" in v:
+            out[cam] = MixingField.from_json(v["field"])
+        else:
+            out[cam] = np.asarray(v["M"], float)
     return out
 
 

@@ -229,6 +229,10 @@ def test_calibration_files_and_loaders(random_tiny):
         assert np.allclose(field.median, w["M"])
         F = np.array(w["led_factor"])
         assert np.allclose(np.diag(F), 1) and np.all(np.abs(F - 1) < 0.6)
+        # the chromatic captures' own mixing: the filter field, F apart
+        filt = load_crosstalk(root / "new.json", light="filter")[cam]
+        assert np.allclose(filt.scaled(F).dense(), field.dense())
+        assert np.allclose(load_crosstalk(root / "today.json", light="filter")[cam], v["M"])
     # the photometric stage (and reconstruction) unmix through load_crosstalk + unmix
     _, views = load_views(data, root / "marker_poses.csv", root / "new.json")
     assert views[0].images[next(iter(new["cameras"]))].shape == (120, 160, 3)
