@@ -78,6 +78,17 @@ def _markers(args) -> int:
     return 0
 
 
+def _noise(args) -> int:
+    from colourhs.noise import calibrate_noise
+
+    model = calibrate_noise(args.dataset, args.out)
+    for cam, gain in model.gain.items():
+        wells = ", ".join(f"{1 / g:.0f}" if g > 0 else "-" for g in gain)
+        print(f"{cam}: full well (electrons per full scale, R G B) {wells}")
+    print(f"wrote {args.out}")
+    return 0
+
+
 def _crosstalk(args) -> int:
     from colourhs.crosstalk import calibrate_crosstalk
 
@@ -121,20 +132,12 @@ def _reconstruct(args) -> int:
     params["progress"] = sys.stderr.isatty()  # a bar at a terminal, none in a rule's log
     result = reconstruct_frame(
         args.dataset, args.scene, args.frame, args.out, args.method, args.crosstalk,
-        args.photometric, args.chromaticity, args.hull, **params,
+        args.photometric, args.chromaticity, args.hull, noise_json=args.noise, **params,
     )  # fmt: skip
     info = result.info
     print(f"{args.scene}/{args.frame} {args.method}: {info['valid_pixels']} of {info['pixels']} "
           f"pixels, energy {info.get('energy', '-')}; wrote {args.out}")  # fmt: skip
     return 0
-
-
-def _bool(text: str) -> bool:
-    if text.lower() in ("1", "true", "yes", "on"):
-        return True
-    if text.lower() in ("0", "false", "no", "off"):
-        return False
-    raise argparse.ArgumentTypeError(f"expected true or false, got {text!r}")
 
 
 def _pairs(items: list[str], what: str) -> dict[str, str]:
@@ -217,8 +220,8 @@ def _config(args) -> int:
 RECONSTRUCT_PARAMS = {"reference": str, "n_labels": int, "alpha": float, "tau": float,
                       "working_radius_m": float, "data_weight": float, "max_cost": float,
                       "cost_scale": float, "erode_px": int, "edge_m": float,
-                      "refine_passes": int, "min_component": int, "align": _bool,
-                      "shape_weight": float, "link_m": float}  # fmt: skip
+                      "refine_passes": int, "min_component": int, "link_m": float,
+                      "surface_iterations": int, "spline_px": float}  # fmt: skip
 
 PHOTOMETRIC_PARAMS = ("grid_spacing_px", "step_px", "smoothness", "coupling", "margin_m",
                       "min_cos", "min_signal")  # fmt: skip
@@ -256,6 +259,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--min-markers", type=int, default=3, help="markers seen by >= 2 cameras a pose needs"
     )
     m.set_defaults(func=_markers)
+
+    nz = sub.add_parser("noise", help="sensor noise model of every camera channel (JSON)")
+    nz.add_argument("dataset", type=Path)
+    nz.add_argument("out", type=Path, help="noise model JSON to write")
+    nz.set_defaults(func=_noise)
 
     x = sub.add_parser("crosstalk", help="calibrate each camera's channel mixing matrix")
     x.add_argument("dataset", type=Path)
@@ -295,6 +303,12 @@ def build_parser() -> argparse.ArgumentParser:
     rc.add_argument("--crosstalk", type=Path, default=None, help="unmix with this calibration")
     rc.add_argument("--photometric", type=Path, default=None, help="mu maps (photometric.h5)")
     rc.add_argument("--chromaticity", type=Path, default=None, help="chromaticity maps (.h5)")
+    rc.add_argument(
+        "--noise",
+        type=Path,
+        default=None,
+        help="sensor noise model (colourhs noise); default: estimated from the frame",
+    )
     rc.add_argument("--hull", type=Path, default=None,
                     help="visual hull PLY: depth hypotheses over its depth range")  # fmt: skip
     for name, kind in RECONSTRUCT_PARAMS.items():

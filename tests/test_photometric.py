@@ -21,26 +21,15 @@ from colourhs.photometric import (
     read_mu_maps,
     white_board_mask,
 )
+from colourhs.synth.dataset import true_poses_csv
 
 TINY = {"grid_spacing_px": 8}
-
-
-def _truth_poses_csv(root, path):
-    """A marker-poses table built from the true board poses (isolates this stage)."""
-    poses = json.loads((root / "gt" / "board_poses.json").read_text())
-    rows = []
-    for name in sorted(p.name for p in (root / "photometric").iterdir()):
-        R, t = np.array(poses[name]["R"]), np.array(poses[name]["t"])
-        row = {"pose": name} | {f"R{i}{j}": R[i, j] for i in range(3) for j in range(3)}
-        rows.append(row | {"t_x": t[0], "t_y": t[1], "t_z": t[2]})
-    pd.DataFrame(rows).to_csv(path, index=False)
-    return path
 
 
 @pytest.fixture(scope="module")
 def tiny_calibration(tiny_dataset, tmp_path_factory):
     tmp = tmp_path_factory.mktemp("ph")
-    poses = _truth_poses_csv(tiny_dataset, tmp / "poses.csv")
+    poses = true_poses_csv(tiny_dataset, tmp / "poses.csv")
     xt = tmp / "crosstalk.json"
     calibrate_crosstalk(tiny_dataset, xt)
     rig, views = load_views(tiny_dataset, poses, xt)
@@ -103,10 +92,12 @@ def test_crosstalk_known_answer_and_unmix():
 def test_tiny_mu_maps_within_one_and_a_half_percent(tiny_calibration):
     """Recovered mu maps match the truth up to one scale per pair.
 
-    Target on the demo preset: RMS log error <= 1 % (measured 0.43-0.77 %).
-    On tiny (160x120, 8 px grid) measured 0.6-1.0 %; we allow 1.5 % because
-    a tiny pixel covers 16 demo pixels, so 16x fewer samples per control
-    point. Without calibration (mu = 1) the error is ~6 %.
+    Measured on tiny (160x120, 8 px grid): 0.18-0.36 % RMS log error over
+    the calibrated region, which covers 30-37 % of the image (a 2-pixel
+    margin around markers and board edges is 5-7 mm on this coarse rig);
+    no calibration (mu = 1) 3.2-4.9 % over the same region. Over the larger
+    region of the calibration before the colour-shading work (51-58 %, a
+    4 mm margin) the maps are 0.70-1.2 % off (that calibration: 0.64-0.98 %).
     """
     rig, views, truth, _, _ = tiny_calibration
     result = calibrate(rig, views, **TINY)
@@ -114,9 +105,9 @@ def test_tiny_mu_maps_within_one_and_a_half_percent(tiny_calibration):
     cal = err[err.method == "calibrated"]
     none = err[err.method == "no calibration"]
     assert len(cal) == 6
-    assert cal.rms_log_error.max() < 0.015
-    assert none.rms_log_error.min() > 0.04
-    assert (cal.calibrated_fraction > 0.4).all()
+    assert cal.rms_log_error.max() < 0.005
+    assert none.rms_log_error.min() > 5 * cal.rms_log_error.max()
+    assert (cal.calibrated_fraction > 0.28).all()
 
 
 def test_both_pairs_of_a_camera_are_needed(tiny_calibration):
@@ -154,7 +145,7 @@ def test_photometric_file_follows_the_contract(tiny_calibration, tiny_dataset, t
 
 
 def test_too_few_poses_is_an_error(tiny_dataset, tmp_path):
-    poses = _truth_poses_csv(tiny_dataset, tmp_path / "p.csv")
+    poses = true_poses_csv(tiny_dataset, tmp_path / "p.csv")
     table = pd.read_csv(poses).iloc[:2]
     table.to_csv(poses, index=False)
     with pytest.raises(ValueError, match="2 usable board poses"):

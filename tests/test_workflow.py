@@ -156,7 +156,13 @@ def report_jobs(*scenes: str) -> set[tuple[str, str]]:
 # Capture validation reads the whole dataset folder: whether a changed image reruns
 # it is test_validation_follows_the_capture_files's business, not the others'.
 VALIDATION = {("validate_dataset", f"results/{NAME}/capture/summary.json")}
-CALIBRATION_RULES = {"marker_poses", "photometric_maps", "crosstalk", "chromaticity_map"}
+CALIBRATION_RULES = {
+    "marker_poses",
+    "photometric_maps",
+    "crosstalk",
+    "chromaticity_map",
+    "noise_model",
+}
 
 
 # --------------------------------------------------------------------------- files
@@ -276,6 +282,7 @@ def test_board_image_reruns_photometric_maps_and_downstream(run):
         ("marker_poses", f"{calib}/marker_poses.csv"),
         ("photometric_maps", f"{calib}/photometric.h5"),
         ("photometric_maps", f"{calib}/photometric.png"),
+        ("noise_model", f"{calib}/noise.json"),  # estimated from the board images too
         *all_hs_jobs(),  # bayes_ph reads photometric.h5; vh reads no calibration
         *report_jobs("plane", "sheet"),
     }

@@ -28,6 +28,7 @@ from colourhs.capture import COLOURS, Camera, Rig, open_dataset, read_image, rea
 from colourhs.crosstalk import load_crosstalk, unmix
 from colourhs.geometry import normalised_coordinates, pixel_grid
 from colourhs.io import atomic_output, sha256_files
+from colourhs.noise import NoiseModel, estimate_noise, load_noise
 from colourhs.reconstruct.dataterm import INVALID_COST, data_term, pair_arrays, prepare_images
 
 METHODS = ("ml", "bayes")
@@ -44,6 +45,7 @@ class Frame:
     silhouettes: np.ndarray | None  # (C, H, W) bool
     mu: np.ndarray | None  # (P, 2, H, W) float32
     chroma: np.ndarray | None  # (C, 3, H, W) float32
+    variance: np.ndarray | None = None  # (C, 3, H, W) noise variance of ``images``
     inputs: list = field(default_factory=list)  # files read, for provenance
 
 
@@ -55,8 +57,14 @@ def load_frame(
     photometric_h5=None,
     chromaticity_h5=None,
     use_masks: bool = True,
+    noise_json=None,
 ) -> Frame:
-    """Read a frame's images and the calibrations that apply to it."""
+    """Read a frame's images and the calibrations that apply to it.
+
+    ``noise_json`` (:func:`colourhs.noise.calibrate_noise`) gives the images'
+    noise variance; without it the noise model is estimated from the frame's
+    own images (:func:`colourhs.noise.estimate_noise`).
+    """
     ds = open_dataset(dataset_dir, check_images=False)
     rig = ds.rig
     mixing = load_crosstalk(crosstalk_json) if crosstalk_json else {}
@@ -85,16 +93,27 @@ def load_frame(
     if chromaticity_h5:
         with h5py.File(chromaticity_h5) as f:
             chroma = np.stack([f[cam][()].transpose(2, 0, 1) for cam in rig.camera_names])
-    for extra in (crosstalk_json, photometric_h5, chromaticity_h5):
+    for extra in (crosstalk_json, photometric_h5, chromaticity_h5, noise_json):
         if extra:
             inputs.append(Path(extra))
+    images = np.stack(imgs).astype(np.float32)
+    model = load_noise(noise_json) if noise_json else None
+    variance = []
+    for c, cam in enumerate(rig.camera_names):
+        rgb = images[c].transpose(1, 2, 0)
+        if model is None:
+            gain, offset = estimate_noise([rgb])
+            variance.append(NoiseModel({cam: gain}, {cam: offset}).variance(cam, rgb))
+        else:
+            variance.append(model.variance(cam, rgb))
     return Frame(
         rig,
-        np.stack(imgs).astype(np.float32),
+        images,
         np.stack(sats),
         np.stack(sils) if sils else None,
         mu,
         None if chroma is None else chroma.astype(np.float32),
+        np.stack(variance).transpose(0, 3, 1, 2).astype(np.float32),
         inputs,
     )
 
@@ -117,6 +136,17 @@ def working_depth(rig: Rig, ref: Camera) -> float:
     return float((np.asarray(ref.R, float) @ x + np.asarray(ref.t, float))[2])
 
 
+def object_mask(frame: Frame, ref: int, threshold: float = 0.02) -> np.ndarray:
+    """The object in the reference camera (H, W): its silhouette, or the lit pixels.
+
+    Without masks, pixels brighter than ``threshold`` (fraction of full
+    scale) in some channel: the rig has no ambient light.
+    """
+    if frame.silhouettes is not None:
+        return frame.silhouettes[ref].astype(bool)
+    return frame.images[ref].max(axis=0) > threshold
+
+
 def foreground(frame: Frame, ref: int, threshold: float = 0.02) -> np.ndarray:
     """Pixels (H, W) of the reference camera to reconstruct.
 
@@ -129,9 +159,7 @@ def foreground(frame: Frame, ref: int, threshold: float = 0.02) -> np.ndarray:
     img = frame.images[ref]
     own = frame.rig.cameras[ref].light_channel
     recip = [c for c in range(3) if c != own]
-    fg = img.max(axis=0) > threshold
-    if frame.silhouettes is not None:
-        fg = frame.silhouettes[ref].astype(bool)
+    fg = object_mask(frame, ref, threshold)
     dark = np.min(img[recip], axis=0) <= threshold
     dark = (
         dark
@@ -234,15 +262,24 @@ def refine_depth(
     shape: tuple[int, int],
     data_weight: float = 0.05,
     edge_m: float = 0.004,
+    anchor_scale: float | None = None,
 ) -> np.ndarray:
-    """Continuous depth refinement with the depth-normal consistency prior.
+    """Integrate the normals into a surface, its depth anchored to ``z0``.
 
-    Minimises, over the depths z of the masked pixels,
-    ``sum_(p,q) (n_p . (X_q - X_p))^2 + data_weight^2 sum_p (z_p - z0_p)^2``
-    (X = c + z r; the camera centre cancels), over 4-neighbours whose
-    discrete depths differ by less than ``edge_m`` beyond what p's tangent
-    plane predicts (the truncation that keeps depth edges). A sparse
-    direct solve of the normal equations.
+    The tangent plane of p's normal n_p passes through neighbour q when
+    ``z_q (n_p . r_q) = z_p (n_p . r_p)`` (X = c + z r; the camera centre
+    cancels), which is linear in the log-depths:
+    ``log z_q - log z_p = log(n_p . r_p / n_p . r_q)``. Minimises, over the
+    masked pixels, the squared misfit of that over 4-neighbours plus
+    ``data_weight^2 sum_p (log z_p - log z0_p)^2``, skipping neighbours whose
+    depths differ by more than ``edge_m`` from what p's tangent plane
+    predicts (the truncation that keeps depth edges). In log-depth the
+    problem is scale-invariant, so the weak anchor does not pull the
+    surface towards the camera (as the same terms in metres would: they
+    shrink with the depth). A sparse direct solve of the normal equations.
+    With ``anchor_scale`` (a relative depth, e.g. two labels over the
+    depth) the anchor is robust (Cauchy weights, three reweighted solves),
+    so wrong labels do not move the surface.
 
     Parameters
     ----------
@@ -261,48 +298,25 @@ def refine_depth(
     pix = np.flatnonzero(mask)
     idx[pix] = np.arange(len(pix))
     p, q, a_p, a_q = surface_links(z0, normals, rays, mask, shape, edge_m)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        target = np.log(a_p / a_q)
+    keep = np.isfinite(target)
+    p, q, target = p[keep], q[keep], target[keep]
     r = len(p)
-    rows = [np.arange(r), np.arange(r)]
-    cols = [idx[q], idx[p]]
-    vals = [a_q, -a_p]
     A = sp.csr_matrix(
-        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+        (np.concatenate([np.ones(r), -np.ones(r)]),
+         (np.concatenate([np.arange(r)] * 2), np.concatenate([idx[q], idx[p]]))),
         shape=(r, len(pix)),
-    )
-    N = (A.T @ A + data_weight**2 * sp.identity(len(pix))).tocsr()
-    b = data_weight**2 * z0[pix]
-    z = spsolve(N.tocsc(), b)
+    )  # fmt: skip
+    u0 = np.log(np.maximum(z0[pix], 1e-9))
+    weight = np.ones(len(pix))
+    for _ in range(3 if anchor_scale else 1):
+        N = (A.T @ A + sp.diags(data_weight**2 * weight)).tocsc()
+        u = spsolve(N, A.T @ target + data_weight**2 * weight * u0)
+        if anchor_scale:
+            weight = 1.0 / (1.0 + ((u - u0) / anchor_scale) ** 2)
     out = z0.copy()
-    out[pix] = z
-    return out
-
-
-def align_components(z: np.ndarray, z0: np.ndarray, labels: np.ndarray) -> np.ndarray:
-    """Scale each connected surface along the rays onto the discrete solution.
-
-    The refinement with a weak data weight takes a smooth surface's shape from
-    its HS normals (the discrete labelling, anchored by a weak data term, can
-    tilt); its depth is then taken from the discrete solution, as the median
-    of ``z0 / z`` over each surface (``labels`` from :func:`surface_components`).
-
-    Parameters
-    ----------
-    z, z0 : (N,) refined and discrete depths, metres.
-    labels : (N,) surface label of each pixel, -1 for none.
-
-    Returns
-    -------
-    (N,) depths.
-    """
-    out = z.copy()
-    sel = labels >= 0
-    lab = labels[sel]
-    ratio = z0[sel] / z[sel]
-    order = np.lexsort((ratio, lab))
-    starts = np.searchsorted(lab[order], np.arange(lab.max() + 1))
-    counts = np.bincount(lab, minlength=lab.max() + 1)
-    med = ratio[order][np.minimum(starts + counts // 2, len(order) - 1)]
-    out[sel] = z[sel] * med[lab]
+    out[pix] = np.exp(u)
     return out
 
 
@@ -317,6 +331,49 @@ def _large_components(mask: np.ndarray, min_size: int) -> np.ndarray:
     keep = sizes >= min_size
     keep[0] = False
     return keep[lab]
+
+
+def refine_ml(
+    z: np.ndarray, cost, step_m: float, search: int = 0, iterations: int = 6
+) -> np.ndarray:
+    """Continuous per-pixel ML depth: the minimum of each pixel's own cost.
+
+    Beyond the paper (whose ML HS picks the best hypothesis): ``cost`` is
+    the noise-weighted per-pixel cost of eq. (5)
+    (:func:`colourhs.reconstruct.surface.whitened_cost`). The best label of
+    sigma_3 / sigma_2 can sit a few labels off that cost's minimum (a weak
+    row flattens sigma_3 / sigma_2), so the cost is first scanned over
+    ``search`` labels either side (default none); near its minimum it is a
+    parabola in the depth (0 at the true depth on exact data), so three
+    evaluations at z - h, z, z + h give the vertex, and ``iterations``
+    Newton-like rounds from h = half a label converge to the continuous
+    minimum.
+
+    Parameters
+    ----------
+    z : (N,) starting depths (best label plus its parabola), metres.
+    cost : callable (N,) depths -> (N,) cost (NaN where unusable).
+    step_m : the label spacing, metres.
+    """
+    offsets = np.arange(-search, search + 1) * step_m
+    scan = np.stack([cost(z + o) for o in offsets], axis=1)
+    scan = np.where(np.isfinite(scan), scan, np.inf)
+    best = np.argmin(scan, axis=1)
+    z = np.where(np.isfinite(scan.min(axis=1)), z + offsets[best], z)
+    h = np.full(len(z), step_m / 2.0)
+    for _ in range(iterations):
+        c = np.stack([cost(z - h), cost(z), cost(z + h)], axis=1)
+        ok = np.all(np.isfinite(c), axis=1)
+        cm, c0, cp = np.where(ok, c.T, 0.0)
+        den = cm - 2 * c0 + cp
+        with np.errstate(invalid="ignore", divide="ignore"):
+            off = np.where(den > 0, 0.5 * (cm - cp) / den, 0.0)
+        # The vertex of a parabola through the cost; at most two half-widths per
+        # step, and the next half-width follows the step (a Newton iteration).
+        off = np.clip(np.nan_to_num(off), -2.0, 2.0)
+        z = np.where(ok, z + off * h, z)
+        h = np.clip(np.abs(off) * h, h / 8.0, h)
+    return z
 
 
 def reconstruct(
@@ -336,9 +393,9 @@ def reconstruct(
     refine_passes: int = 3,
     min_component: int | None = None,
     erode_px: int | None = None,
-    align: bool = True,
-    shape_weight: float = 0.003,
     link_m: float = 0.002,
+    surface_iterations: int = 8,
+    spline_px: float | None = None,
     progress: bool = False,
 ) -> DepthResult:
     """Reconstruct one frame with ML or Bayesian colour HS.
@@ -354,11 +411,11 @@ def reconstruct(
     alpha : weight of the data term in the Bayesian energy.
     tau : truncation of the depth-normal prior, in labels.
     refine : continuous refinement after the Bayesian labelling.
-    data_weight : weight of the discrete solution in that refinement.
+    data_weight : weight of the discrete solution in the initial surface
+        (the normal integration that starts the refinement).
     max_cost : pixels whose chosen hypothesis costs more are left out.
-    edge_m, refine_passes : the continuous refinement's edge threshold
-        (metres) and number of passes (each re-evaluates the normals at the
-        refined depths).
+    edge_m, refine_passes : the initial surface's edge threshold (metres)
+        and number of passes (each re-evaluates the normals).
     min_component : connected groups of valid pixels smaller than this (e.g.
         the white cells inside a marker, cut off by its black ones) are left
         out of the Bayesian result; default 0.2 % of the image.
@@ -366,8 +423,21 @@ def reconstruct(
         default 1 per 320 pixels of image width (at least 1).
     cost_scale : the Bayesian data term is ``min(cost / cost_scale, 1 / cost_scale)``
         (sigma_3 / sigma_2 in units of its typical noise level).
+    link_m : neighbours within this distance of each other's tangent plane
+        belong to one surface (small unlinked pieces are left out).
+    surface_iterations, spline_px : the final refinement
+        (:func:`colourhs.reconstruct.surface.refine_surface`): Gauss-Newton
+        iterations and spline control spacing (default 1/40 of the width).
     progress : a progress bar (tqdm, on stderr) over the data term's chunks of
         pixels, the long part of a high-resolution frame.
+
+    Notes
+    -----
+    ML: the best hypothesis per pixel, then :func:`refine_ml` (continuous).
+    Bayesian: the MAP labelling of the MRF, a smooth initial surface from
+    the HS normals (:func:`refine_depth`, which integrates them; its depth
+    is still the labelling's), then the depth from the agreement of the
+    geometry with eq. (5) (:func:`colourhs.reconstruct.surface.refine_surface`).
     """
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
@@ -390,19 +460,20 @@ def reconstruct(
         frame.images, frame.saturated, pairs, frame.mu, frame.chroma, frame.silhouettes
     )
 
-    def evaluate(pixel_rays, hypotheses, normal_dtype):
+    def evaluate(pixel_rays, hypotheses, normal_dtype=np.float32, bar=False):
         """The data term in chunks of pixels (bounds its float32 normals buffer)."""
         cost = np.empty((len(pixel_rays), len(hypotheses)), np.float32)
         normals = np.empty((len(pixel_rays), len(hypotheses), 3), normal_dtype)
         chunks = range(0, len(pixel_rays), CHUNK)
-        for s in tqdm(chunks, desc="data term", unit="chunk", disable=not progress, leave=False):
+        for s in tqdm(chunks, desc="data term", unit="chunk", disable=not bar, leave=False):
             c, n = data_term(pixel_rays[s : s + CHUNK], ref.centre, hypotheses, rig.cameras,
                              prepared, pairs)  # fmt: skip
             cost[s : s + len(c)] = c
             normals[s : s + len(c)] = n
         return cost, normals
 
-    cost, normals = evaluate(rays[pix], depths, np.float16)  # float16: half the memory
+    # float16 normals: half the memory of the volume.
+    cost, normals = evaluate(rays[pix], depths, np.float16, progress)
     info = {"method": method, "reference": ref.name, "n_labels": n_labels,
             "depth_range_m": [float(depths[0]), float(depths[-1])], "alpha": alpha, "tau": tau,
             "pixels": int(len(pix))}  # fmt: skip
@@ -410,67 +481,54 @@ def reconstruct(
         labels = np.argmin(cost, axis=1)
         frac = _subpixel(cost, labels)
     else:
-        from colourhs.reconstruct.mrf import labelling_energy, sgm_depth_normal
-
-        # The MRF runs over the foreground's bounding box (plus a margin): the
-        # background carries no data, only path length.
-        rows, cols = np.divmod(pix, W)
-        r0, r1 = max(rows.min() - 2, 0), min(rows.max() + 3, H)
-        c0, c1 = max(cols.min() - 2, 0), min(cols.max() + 3, W)
-        h, w = r1 - r0, c1 - c0
-        local = (rows - r0) * w + (cols - c0)
-        box_cost = np.full((h * w, n_labels), INVALID_COST / cost_scale, np.float32)
-        box_cost[local] = cost / cost_scale
-        box_n = np.zeros((h * w, n_labels, 3), np.float16)
-        box_n[local] = normals
-        del normals
-        box_rays = rays.reshape(H, W, 3)[r0:r1, c0:c1]
-        lab, S = sgm_depth_normal(
-            box_cost.reshape(h, w, n_labels), box_n.reshape(h, w, n_labels, 3),
-            box_rays.astype(np.float32), depths.astype(np.float32), alpha, tau,
-        )  # fmt: skip
-        info["energy"] = float(
-            labelling_energy(lab, box_cost.reshape(h, w, n_labels),
-                             box_n.reshape(h, w, n_labels, 3), box_rays, depths, alpha, tau)
-        )  # fmt: skip
-        info["mrf_box"] = [int(r0), int(r1), int(c0), int(c1)]
-        lab = lab.ravel()
-        labels = lab[local]
-        frac = _subpixel(S.reshape(h * w, n_labels)[local], labels)
-        normals = box_n[local]
-        del S
+        labels, frac, normals = _bayes_labelling(
+            cost / cost_scale,
+            normals,
+            pix,
+            rays,
+            depths,
+            (H, W),
+            alpha,
+            tau,
+            info,
+            INVALID_COST / cost_scale,
+        )
     chosen = cost[np.arange(len(pix)), labels]
     valid = chosen < max_cost
     n_sel = normals[np.arange(len(pix)), labels].astype(float)
     n_sel /= np.maximum(np.linalg.norm(n_sel, axis=1, keepdims=True), 1e-12)
+    del normals
     z = np.full(H * W, np.nan)
     z[pix] = _depth_at(depths, frac)
     nrm = np.zeros((H * W, 3))
     nrm[pix] = n_sel
     ok = np.zeros(H * W, bool)
     ok[pix] = valid
-    if method == "bayes" and refine and ok.sum() > 10:
-        min_px = int(min_component or 0.002 * H * W)
-        ok &= _large_components(ok.reshape(H, W), min_px).ravel()
-        z = np.nan_to_num(z)
-        z0 = z.copy()
-        weights = [shape_weight if align else data_weight] * refine_passes
-        for i, weight in enumerate(weights):
-            z = refine_depth(z, nrm, rays, ok, (H, W), weight, edge_m)
-            if i == len(weights) - 1:
-                # Pieces of surface that the prior did not link to a large one
-                # (a rim between a marker and an edge, a speck) are left out.
-                links = surface_links(z, nrm, rays, ok, (H, W), link_m)
-                labels = surface_components(links[0], links[1], ok)
-                sizes = np.bincount(labels[ok])
-                labels[ok] = np.where(sizes[labels[ok]] >= min_px, labels[ok], -1)
-                ok &= labels >= 0
-                if align:
-                    z = align_components(z, z0, labels)
-            # Re-evaluate the HS normals at the refined depths (they depend on depth).
-            c, n = evaluate(rays[pix] * z[pix][:, None], np.ones(1), np.float32)
-            good = c[:, 0] < INVALID_COST  # else keep the previous normal
-            nrm[pix[good]] = n[good, 0]
+    conf = np.zeros(H * W, np.float32)
+    conf[pix] = np.clip(1.0 - chosen, 0, 1) * valid
+    if method == "ml":
+        from colourhs.reconstruct.surface import helmholtz_sides, whitened_cost
+
+        sides = helmholtz_sides(frame, frame.variance, pairs)
+        R = rays[pix]
+
+        def ml_cost(depth):
+            return whitened_cost(sides, ref.centre + R * depth[:, None], R)[0]
+
+        z[pix] = refine_ml(z[pix], ml_cost, float(depths[1] - depths[0]))
+        chi2, n_ml = whitened_cost(sides, ref.centre + R * z[pix][:, None], R)
+        good = np.isfinite(chi2)
+        nrm[pix[good]] = n_ml[good]
+    elif refine and ok.sum() > 10:
+        min_px = int(0.002 * H * W if min_component is None else min_component)
+        # Wrong labels (a few labels off or worse) must not move the surface.
+        anchor = 2.0 * float(depths[1] - depths[0]) / float(np.median(depths))
+        z, nrm, ok = _initial_surface(z, nrm, ok, rays, pix, (H, W), evaluate, data_weight,
+                                      edge_m, refine_passes, link_m, min_px, anchor)  # fmt: skip
+        z, nrm, ok, weights, sinfo = _consistent_surface(frame, z, ok, rays, ref, pairs,
+                                                         surface_iterations, spline_px)  # fmt: skip
+        conf = np.where(ok, weights, 0.0).astype(np.float32)
+        info["surface"] = sinfo
     erode_px = max(1, round(W / 320)) if erode_px is None else erode_px
     if method == "bayes" and erode_px > 0:
         from scipy.ndimage import binary_erosion
@@ -480,8 +538,6 @@ def reconstruct(
         ok &= binary_erosion(ok.reshape(H, W), iterations=erode_px).ravel()
     z[~ok] = np.nan
     nrm[~ok] = np.nan
-    conf = np.zeros(H * W, np.float32)
-    conf[pix] = np.clip(1.0 - chosen, 0, 1) * valid
     conf[~ok] = 0.0
     return DepthResult(
         z.reshape(H, W).astype(np.float32),
@@ -490,6 +546,93 @@ def reconstruct(
         ok.reshape(H, W),
         info | {"valid_pixels": int(ok.sum())},
     )
+
+
+def _bayes_labelling(cost, normals, pix, rays, depths, shape, alpha, tau, info, invalid):
+    """MAP labels of the MRF (SGM with the depth-normal prior) over the foreground's box.
+
+    ``cost`` is the scaled data cost of the foreground pixels, ``invalid``
+    the cost given to the box's background. Returns the labels, their
+    sub-label positions (a parabola through the aggregated cost) and the
+    normals volume of the foreground pixels.
+    """
+    from colourhs.reconstruct.mrf import labelling_energy, sgm_depth_normal
+
+    H, W = shape
+    n_labels = len(depths)
+    # The MRF runs over the foreground's bounding box (plus a margin): the
+    # background carries no data, only path length.
+    rows, cols = np.divmod(pix, W)
+    r0, r1 = max(rows.min() - 2, 0), min(rows.max() + 3, H)
+    c0, c1 = max(cols.min() - 2, 0), min(cols.max() + 3, W)
+    h, w = r1 - r0, c1 - c0
+    local = (rows - r0) * w + (cols - c0)
+    box_cost = np.full((h * w, n_labels), invalid, np.float32)
+    box_cost[local] = cost
+    box_n = np.zeros((h * w, n_labels, 3), np.float16)
+    box_n[local] = normals
+    box_rays = rays.reshape(H, W, 3)[r0:r1, c0:c1]
+    lab, S = sgm_depth_normal(
+        box_cost.reshape(h, w, n_labels), box_n.reshape(h, w, n_labels, 3),
+        box_rays.astype(np.float32), depths.astype(np.float32), alpha, tau,
+    )  # fmt: skip
+    info["energy"] = float(
+        labelling_energy(lab, box_cost.reshape(h, w, n_labels),
+                         box_n.reshape(h, w, n_labels, 3), box_rays, depths, alpha, tau)
+    )  # fmt: skip
+    info["mrf_box"] = [int(r0), int(r1), int(c0), int(c1)]
+    labels = lab.ravel()[local]
+    frac = _subpixel(S.reshape(h * w, n_labels)[local], labels)
+    return labels, frac, box_n[local]
+
+
+def _initial_surface(z, nrm, ok, rays, pix, shape, evaluate, data_weight, edge_m, passes,
+                     link_m, min_px, anchor_scale):  # fmt: skip
+    """A smooth surface from the labelling: the HS normals integrated (:func:`refine_depth`).
+
+    Each pass re-evaluates the HS normals at the refined depths; pieces the
+    tangent-plane links do not join to a surface of ``min_px`` pixels are
+    left out. Its depth is still the labelling's: it only starts
+    :func:`_consistent_surface`.
+    """
+    H, W = shape
+    ok &= _large_components(ok.reshape(H, W), min_px).ravel()
+    z = np.nan_to_num(z)
+    for i in range(passes):
+        z = refine_depth(z, nrm, rays, ok, (H, W), data_weight, edge_m, anchor_scale)
+        if i == passes - 1:
+            links = surface_links(z, nrm, rays, ok, (H, W), link_m)
+            labels = surface_components(links[0], links[1], ok)
+            sizes = np.bincount(labels[ok])
+            labels[ok] = np.where(sizes[labels[ok]] >= min_px, labels[ok], -1)
+            ok &= labels >= 0
+        c, n = evaluate(rays[pix] * z[pix][:, None], np.ones(1))
+        good = c[:, 0] < INVALID_COST  # else keep the previous normal
+        nrm[pix[good]] = n[good, 0]
+    return z, nrm, ok
+
+
+def _consistent_surface(frame, z, ok, rays, ref, pairs, iterations, spline_px):
+    """The depth from the agreement of geometry and eq. (5) (see :mod:`.surface`)."""
+    from colourhs.reconstruct.surface import helmholtz_sides, refine_surface
+
+    H, W = frame.rig.image.height, frame.rig.image.width
+    sides = helmholtz_sides(frame, frame.variance, pairs)
+    footprint = np.abs(z) / float(ref.K[0, 0])
+    fill = object_mask(frame, frame.rig.camera_names.index(ref.name)).ravel()
+    zr, nr, sinfo = refine_surface(z, ok, rays, ref.centre, (H, W), sides, footprint,
+                                   spline_px, iterations, fill=fill)  # fmt: skip
+    ok = (ok | sinfo["filled"]) & np.isfinite(zr) & sinfo["valid"]
+    z = np.where(ok, zr, np.nan)
+    nrm = np.where(ok[:, None], nr, np.nan)
+    info = {
+        "iterations": iterations,
+        "energy": sinfo["energy"],
+        "surfaces": sinfo["surfaces"],
+        "control_points": sinfo["control_points"],
+        "filled": int(sinfo["filled"].sum()),
+    }
+    return z, nrm, ok, sinfo["weights"], info
 
 
 def write_depth(path, result: DepthResult, camera: Camera, attrs: dict) -> None:
@@ -511,7 +654,7 @@ def write_depth(path, result: DepthResult, camera: Camera, attrs: dict) -> None:
 
 def reconstruct_frame(
     dataset_dir, scene, frame, out_h5, method="bayes", crosstalk_json=None,
-    photometric_h5=None, chromaticity_h5=None, hull_ply=None, **params,
+    photometric_h5=None, chromaticity_h5=None, hull_ply=None, noise_json=None, **params,
 ) -> DepthResult:  # fmt: skip
     """Load, reconstruct and write one frame (the Snakemake rule's function).
 
@@ -519,7 +662,8 @@ def reconstruct_frame(
     hypotheses span the hull's depth range in the reference camera
     (:func:`colourhs.hull.hull_depth_range`) instead of the working range.
     """
-    fr = load_frame(dataset_dir, scene, frame, crosstalk_json, photometric_h5, chromaticity_h5)
+    fr = load_frame(dataset_dir, scene, frame, crosstalk_json, photometric_h5, chromaticity_h5,
+                    noise_json=noise_json)  # fmt: skip
     if hull_ply is not None:
         from colourhs.groundtruth import load_mesh
         from colourhs.hull import hull_depth_range
@@ -535,7 +679,7 @@ def reconstruct_frame(
     result = reconstruct(fr, method, **params)
     ref = fr.rig.camera(result.info["reference"])
     calib = {"crosstalk": crosstalk_json, "photometric": photometric_h5,
-             "chromaticity": chromaticity_h5}  # fmt: skip
+             "chromaticity": chromaticity_h5, "noise": noise_json}  # fmt: skip
     attrs = {
         "method": method,
         "params": result.info,

@@ -290,6 +290,26 @@ def true_mu_maps(rig: RigModel) -> dict[str, np.ndarray]:
     return out
 
 
+def true_poses_csv(dataset_dir: str | Path, out_csv: str | Path) -> Path:
+    """A marker-poses table (``R00..R22``, ``t_x/y/z``) from a synthetic dataset's true poses.
+
+    Reads ``gt/board_poses.json``; the rows are the ``photometric/`` poses in
+    name order, so a stage fed this table instead of
+    :func:`colourhs.markers.marker_poses`'s is isolated from pose errors.
+    """
+    root = Path(dataset_dir)
+    poses = json.loads((root / "gt" / "board_poses.json").read_text())
+    rows = []
+    for name in sorted(p.name for p in (root / "photometric").iterdir()):
+        R, t = np.array(poses[name]["R"]), np.array(poses[name]["t"])
+        row = {"pose": name} | {f"R{i}{j}": R[i, j] for i in range(3) for j in range(3)}
+        rows.append(row | {"t_x": t[0], "t_y": t[1], "t_z": t[2]})
+    import pandas as pd
+
+    pd.DataFrame(rows).to_csv(out_csv, index=False)
+    return Path(out_csv)
+
+
 def _image_rng(seed: int, relpath: str) -> np.random.Generator:
     digest = hashlib.sha256(f"{seed}:{relpath}".encode()).digest()
     return np.random.default_rng(int.from_bytes(digest[:8], "little"))

@@ -40,6 +40,25 @@ rule crosstalk:
         "$COLOURHS_PYTHON -m colourhs crosstalk {params.dataset} {output} > {log} 2>&1"
 
 
+rule noise_model:
+    input:
+        lambda w: photometric_inputs(w.name) + chromatic_inputs(w.name, "white"),
+    output:
+        "results/{name}/calib/noise.json",
+    log:
+        "logs/calib/{name}/noise.log",
+    conda:
+        "../envs/colourhs.yaml"
+    threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=5,
+    params:
+        dataset=lambda w: dataset_path(w.name),
+    shell:
+        "$COLOURHS_PYTHON -m colourhs noise {params.dataset} {output} > {log} 2>&1"
+
+
 rule photometric_maps:
     input:
         images=lambda w: photometric_inputs(w.name),

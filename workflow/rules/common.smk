@@ -155,6 +155,7 @@ def calibration_targets(name):
     out = [
         f"results/{name}/calib/marker_poses.csv",
         f"results/{name}/calib/photometric.h5",
+        f"results/{name}/calib/noise.json",
     ]
     if unmix_crosstalk(name):
         out.append(f"results/{name}/calib/crosstalk.json")
@@ -200,7 +201,7 @@ def selected_scenes(name):
 def variant_calibration(name, scene, variant):
     """Calibration files a variant reads (inputs, so reruns follow their changes)."""
     v = VARIANTS[variant]
-    out = {}
+    out = {} if v["method"] == "vh" else {"noise": f"results/{name}/calib/noise.json"}
     if v["photometric"]:
         out["photometric"] = f"results/{name}/calib/photometric.h5"
         if unmix_crosstalk(name):
