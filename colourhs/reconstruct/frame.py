@@ -1,15 +1,18 @@
 """Per-frame colour HS reconstruction: ML and Bayesian HS to depth/normal HDF5.
 
-- ML HS (Zickler et al.): per pixel the hypothesis of lowest data cost,
-  then a parabola through the cost around it (sub-label depth).
+- ML HS (Zickler et al.; paper section III-A): per pixel a root of the eq. (5)
+  data cost along the ray (:mod:`colourhs.reconstruct.ml`: the candidate
+  roots decided by a tangent-plane window, then the root's continuous
+  minimum; beyond the paper).
 - Bayesian HS (Roubtsova and Guillemaut; paper section III-E): the MAP
   labelling of alpha * E_data + (1 - alpha) * E_prior with the depth-normal
   consistency prior, optimised by semi-global aggregation along 8 directions
-  (:mod:`colourhs.reconstruct.mrf`), then sub-label refinement: a parabola
-  through the aggregated cost, and a continuous least-squares refinement of
-  the same energy's quadratic approximation (each neighbour's point on the
-  tangent plane of the pixel's normal, plus a weak pull towards the
-  discrete solution), truncated at depth edges.
+  (:mod:`colourhs.reconstruct.mrf`); then, beyond the paper, a smooth initial
+  surface that integrates the HS normals (:mod:`colourhs.reconstruct.integrate`), and the
+  continuous surface that minimises the depth-normal consistency energy in
+  noise units (:mod:`colourhs.reconstruct.surface`): its shape from the
+  agreement of its normals with eq. (5), its depth from a search along that
+  energy's valley, never from the discrete labels.
 """
 
 from __future__ import annotations
@@ -20,8 +23,6 @@ from pathlib import Path
 
 import h5py
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.linalg import spsolve
 from tqdm import tqdm
 
 from colourhs.capture import COLOURS, Camera, Rig, open_dataset, read_image, read_mask
@@ -30,6 +31,7 @@ from colourhs.geometry import normalised_coordinates, pixel_grid
 from colourhs.io import atomic_output, sha256_files
 from colourhs.noise import NoiseModel, estimate_noise, load_noise
 from colourhs.reconstruct.dataterm import INVALID_COST, data_term, pair_arrays, prepare_images
+from colourhs.reconstruct.integrate import initial_surface
 
 METHODS = ("ml", "bayes")
 CHUNK = 16384  # pixels per data-term call (bounds the float32 normals buffer)
@@ -204,178 +206,6 @@ def _depth_at(depths: np.ndarray, fractional: np.ndarray) -> np.ndarray:
     return depths[0] + fractional * (depths[1] - depths[0])
 
 
-def surface_links(
-    z: np.ndarray,
-    normals: np.ndarray,
-    rays: np.ndarray,
-    mask: np.ndarray,
-    shape: tuple[int, int],
-    edge_m: float,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Directed 4-neighbour links (p, q) of one continuous surface.
-
-    q is linked to p when both are in ``mask`` and q's depth is within
-    ``edge_m`` (metres) of what p's tangent plane (its normal) predicts; the
-    other links are depth edges, where the depth-normal prior is cut.
-
-    Returns
-    -------
-    p, q : (L,) pixel indices. a_p, a_q : (L,) ``n_p . r_p`` and ``n_p . r_q``.
-    """
-    H, W = shape
-    grid = np.arange(H * W).reshape(H, W)
-    out = [[], [], [], []]
-    for p_arr, q_arr in ((grid[:, :-1], grid[:, 1:]), (grid[:-1], grid[1:])):
-        for p, q in ((p_arr.ravel(), q_arr.ravel()), (q_arr.ravel(), p_arr.ravel())):
-            ok = mask[p] & mask[q]
-            p, q = p[ok], q[ok]
-            n = normals[p]
-            a_q = np.sum(n * rays[q], axis=1)
-            a_p = np.sum(n * rays[p], axis=1)
-            with np.errstate(invalid="ignore", divide="ignore"):
-                pred = z[p] * a_p / a_q
-            keep = np.isfinite(pred) & (np.abs(pred - z[q]) < edge_m)
-            for lst, arr in zip(out, (p, q, a_p, a_q), strict=True):
-                lst.append(arr[keep])
-    return tuple(np.concatenate(lst) for lst in out)
-
-
-def surface_components(p: np.ndarray, q: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """Label (N,) of each masked pixel's surface (linked by :func:`surface_links`); -1 outside."""
-    from scipy.sparse.csgraph import connected_components
-
-    pix = np.flatnonzero(mask)
-    idx = np.full(len(mask), -1)
-    idx[pix] = np.arange(len(pix))
-    g = sp.coo_matrix((np.ones(len(p)), (idx[p], idx[q])), shape=(len(pix), len(pix)))
-    _, lab = connected_components(g, directed=False)
-    out = np.full(len(mask), -1)
-    out[pix] = lab
-    return out
-
-
-def refine_depth(
-    z0: np.ndarray,
-    normals: np.ndarray,
-    rays: np.ndarray,
-    mask: np.ndarray,
-    shape: tuple[int, int],
-    data_weight: float = 0.05,
-    edge_m: float = 0.004,
-    anchor_scale: float | None = None,
-) -> np.ndarray:
-    """Integrate the normals into a surface, its depth anchored to ``z0``.
-
-    The tangent plane of p's normal n_p passes through neighbour q when
-    ``z_q (n_p . r_q) = z_p (n_p . r_p)`` (X = c + z r; the camera centre
-    cancels), which is linear in the log-depths:
-    ``log z_q - log z_p = log(n_p . r_p / n_p . r_q)``. Minimises, over the
-    masked pixels, the squared misfit of that over 4-neighbours plus
-    ``data_weight^2 sum_p (log z_p - log z0_p)^2``, skipping neighbours whose
-    depths differ by more than ``edge_m`` from what p's tangent plane
-    predicts (the truncation that keeps depth edges). In log-depth the
-    problem is scale-invariant, so the weak anchor does not pull the
-    surface towards the camera (as the same terms in metres would: they
-    shrink with the depth). A sparse direct solve of the normal equations.
-    With ``anchor_scale`` (a relative depth, e.g. two labels over the
-    depth) the anchor is robust (Cauchy weights, three reweighted solves),
-    so wrong labels do not move the surface.
-
-    Parameters
-    ----------
-    z0 : (N,) discrete-solution depths of all pixels (N = H*W), metres.
-    normals : (N, 3) unit normals of the discrete solution.
-    rays : (N, 3) rays with unit z-depth.
-    mask : (N,) pixels to refine.
-    shape : (H, W).
-
-    Returns
-    -------
-    (N,) refined depths (unchanged outside ``mask``).
-    """
-    H, W = shape
-    idx = np.full(H * W, -1)
-    pix = np.flatnonzero(mask)
-    idx[pix] = np.arange(len(pix))
-    p, q, a_p, a_q = surface_links(z0, normals, rays, mask, shape, edge_m)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        target = np.log(a_p / a_q)
-    keep = np.isfinite(target)
-    p, q, target = p[keep], q[keep], target[keep]
-    r = len(p)
-    A = sp.csr_matrix(
-        (np.concatenate([np.ones(r), -np.ones(r)]),
-         (np.concatenate([np.arange(r)] * 2), np.concatenate([idx[q], idx[p]]))),
-        shape=(r, len(pix)),
-    )  # fmt: skip
-    u0 = np.log(np.maximum(z0[pix], 1e-9))
-    weight = np.ones(len(pix))
-    for _ in range(3 if anchor_scale else 1):
-        N = (A.T @ A + sp.diags(data_weight**2 * weight)).tocsc()
-        u = spsolve(N, A.T @ target + data_weight**2 * weight * u0)
-        if anchor_scale:
-            weight = 1.0 / (1.0 + ((u - u0) / anchor_scale) ** 2)
-    out = z0.copy()
-    out[pix] = np.exp(u)
-    return out
-
-
-def _large_components(mask: np.ndarray, min_size: int) -> np.ndarray:
-    """``mask`` without its 4-connected components smaller than ``min_size`` pixels."""
-    from scipy.ndimage import label
-
-    lab, n = label(mask)
-    if n == 0:
-        return mask
-    sizes = np.bincount(lab.ravel())
-    keep = sizes >= min_size
-    keep[0] = False
-    return keep[lab]
-
-
-def refine_ml(
-    z: np.ndarray, cost, step_m: float, search: int = 0, iterations: int = 6
-) -> np.ndarray:
-    """Continuous per-pixel ML depth: the minimum of each pixel's own cost.
-
-    Beyond the paper (whose ML HS picks the best hypothesis): ``cost`` is
-    the noise-weighted per-pixel cost of eq. (5)
-    (:func:`colourhs.reconstruct.surface.whitened_cost`). The best label of
-    sigma_3 / sigma_2 can sit a few labels off that cost's minimum (a weak
-    row flattens sigma_3 / sigma_2), so the cost is first scanned over
-    ``search`` labels either side (default none); near its minimum it is a
-    parabola in the depth (0 at the true depth on exact data), so three
-    evaluations at z - h, z, z + h give the vertex, and ``iterations``
-    Newton-like rounds from h = half a label converge to the continuous
-    minimum.
-
-    Parameters
-    ----------
-    z : (N,) starting depths (best label plus its parabola), metres.
-    cost : callable (N,) depths -> (N,) cost (NaN where unusable).
-    step_m : the label spacing, metres.
-    """
-    offsets = np.arange(-search, search + 1) * step_m
-    scan = np.stack([cost(z + o) for o in offsets], axis=1)
-    scan = np.where(np.isfinite(scan), scan, np.inf)
-    best = np.argmin(scan, axis=1)
-    z = np.where(np.isfinite(scan.min(axis=1)), z + offsets[best], z)
-    h = np.full(len(z), step_m / 2.0)
-    for _ in range(iterations):
-        c = np.stack([cost(z - h), cost(z), cost(z + h)], axis=1)
-        ok = np.all(np.isfinite(c), axis=1)
-        cm, c0, cp = np.where(ok, c.T, 0.0)
-        den = cm - 2 * c0 + cp
-        with np.errstate(invalid="ignore", divide="ignore"):
-            off = np.where(den > 0, 0.5 * (cm - cp) / den, 0.0)
-        # The vertex of a parabola through the cost; at most two half-widths per
-        # step, and the next half-width follows the step (a Newton iteration).
-        off = np.clip(np.nan_to_num(off), -2.0, 2.0)
-        z = np.where(ok, z + off * h, z)
-        h = np.clip(np.abs(off) * h, h / 8.0, h)
-    return z
-
-
 def reconstruct(
     frame: Frame,
     method: str = "bayes",
@@ -394,7 +224,7 @@ def reconstruct(
     min_component: int | None = None,
     erode_px: int | None = None,
     link_m: float = 0.002,
-    surface_iterations: int = 8,
+    surface_iterations: int = 3,
     spline_px: float | None = None,
     progress: bool = False,
 ) -> DepthResult:
@@ -426,8 +256,9 @@ def reconstruct(
     link_m : neighbours within this distance of each other's tangent plane
         belong to one surface (small unlinked pieces are left out).
     surface_iterations, spline_px : the final refinement
-        (:func:`colourhs.reconstruct.surface.refine_surface`): Gauss-Newton
-        iterations and spline control spacing (default 1/40 of the width).
+        (:func:`colourhs.reconstruct.surface.refine_surface`):
+        Levenberg-Marquardt steps before and after its depth search, and the
+        spline control spacing (default 1/40 of the width).
     progress : a progress bar (tqdm, on stderr) over the data term's chunks of
         pixels, the long part of a high-resolution frame.
 
@@ -435,7 +266,7 @@ def reconstruct(
     -----
     ML: the best hypothesis per pixel, then :func:`refine_ml` (continuous).
     Bayesian: the MAP labelling of the MRF, a smooth initial surface from
-    the HS normals (:func:`refine_depth`, which integrates them; its depth
+    the HS normals (:func:`colourhs.reconstruct.integrate.refine_depth`; its depth
     is still the labelling's), then the depth from the agreement of the
     geometry with eq. (5) (:func:`colourhs.reconstruct.surface.refine_surface`).
     """
@@ -507,24 +338,20 @@ def reconstruct(
     conf = np.zeros(H * W, np.float32)
     conf[pix] = np.clip(1.0 - chosen, 0, 1) * valid
     if method == "ml":
-        from colourhs.reconstruct.surface import helmholtz_sides, whitened_cost
+        from colourhs.reconstruct.ml import ml_depth
+        from colourhs.reconstruct.sides import helmholtz_sides
 
         sides = helmholtz_sides(frame, frame.variance, pairs)
-        R = rays[pix]
-
-        def ml_cost(depth):
-            return whitened_cost(sides, ref.centre + R * depth[:, None], R)[0]
-
-        z[pix] = refine_ml(z[pix], ml_cost, float(depths[1] - depths[0]))
-        chi2, n_ml = whitened_cost(sides, ref.centre + R * z[pix][:, None], R)
-        good = np.isfinite(chi2)
-        nrm[pix[good]] = n_ml[good]
+        z_ml, n_ml, good = ml_depth(cost, depths, pix, rays, ref.centre, sides, (H, W), max_cost)
+        z[pix] = np.where(good, z_ml, np.nan)
+        nrm[pix] = np.where(good[:, None], n_ml, np.nan)
+        ok[pix] = good
     elif refine and ok.sum() > 10:
         min_px = int(0.002 * H * W if min_component is None else min_component)
         # Wrong labels (a few labels off or worse) must not move the surface.
         anchor = 2.0 * float(depths[1] - depths[0]) / float(np.median(depths))
-        z, nrm, ok = _initial_surface(z, nrm, ok, rays, pix, (H, W), evaluate, data_weight,
-                                      edge_m, refine_passes, link_m, min_px, anchor)  # fmt: skip
+        z, nrm, ok = initial_surface(z, nrm, ok, rays, pix, (H, W), evaluate, data_weight,
+                                     edge_m, refine_passes, link_m, min_px, anchor)  # fmt: skip
         z, nrm, ok, weights, sinfo = _consistent_surface(frame, z, ok, rays, ref, pairs,
                                                          surface_iterations, spline_px)  # fmt: skip
         conf = np.where(ok, weights, 0.0).astype(np.float32)
@@ -586,35 +413,10 @@ def _bayes_labelling(cost, normals, pix, rays, depths, shape, alpha, tau, info, 
     return labels, frac, box_n[local]
 
 
-def _initial_surface(z, nrm, ok, rays, pix, shape, evaluate, data_weight, edge_m, passes,
-                     link_m, min_px, anchor_scale):  # fmt: skip
-    """A smooth surface from the labelling: the HS normals integrated (:func:`refine_depth`).
-
-    Each pass re-evaluates the HS normals at the refined depths; pieces the
-    tangent-plane links do not join to a surface of ``min_px`` pixels are
-    left out. Its depth is still the labelling's: it only starts
-    :func:`_consistent_surface`.
-    """
-    H, W = shape
-    ok &= _large_components(ok.reshape(H, W), min_px).ravel()
-    z = np.nan_to_num(z)
-    for i in range(passes):
-        z = refine_depth(z, nrm, rays, ok, (H, W), data_weight, edge_m, anchor_scale)
-        if i == passes - 1:
-            links = surface_links(z, nrm, rays, ok, (H, W), link_m)
-            labels = surface_components(links[0], links[1], ok)
-            sizes = np.bincount(labels[ok])
-            labels[ok] = np.where(sizes[labels[ok]] >= min_px, labels[ok], -1)
-            ok &= labels >= 0
-        c, n = evaluate(rays[pix] * z[pix][:, None], np.ones(1))
-        good = c[:, 0] < INVALID_COST  # else keep the previous normal
-        nrm[pix[good]] = n[good, 0]
-    return z, nrm, ok
-
-
 def _consistent_surface(frame, z, ok, rays, ref, pairs, iterations, spline_px):
     """The depth from the agreement of geometry and eq. (5) (see :mod:`.surface`)."""
-    from colourhs.reconstruct.surface import helmholtz_sides, refine_surface
+    from colourhs.reconstruct.refine import refine_surface
+    from colourhs.reconstruct.sides import helmholtz_sides
 
     H, W = frame.rig.image.height, frame.rig.image.width
     sides = helmholtz_sides(frame, frame.variance, pairs)

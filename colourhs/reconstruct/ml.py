@@ -1,0 +1,192 @@
+"""Maximum-likelihood colour HS per pixel (paper section III-A: standard ML HS).
+
+The paper's ML HS picks, per pixel, the depth hypothesis of best data cost
+(eq. 5). With three reciprocal pairs that choice is ambiguous even on exact
+data: along a ray, det W(z) = 0 has roots besides the surface (measured on
+random rigs: 2-5 roots per pixel within the working range, several with a
+cost of zero), so the best hypothesis is the surface on only 40-60 % of
+pixels. Beyond the paper, this module keeps the paper's per-pixel data but
+decides between the roots as Zickler et al.'s original HS does, with a
+window: each candidate root of a pixel, with its HS normal, defines a
+tangent plane; the candidate whose plane also explains the rows of the
+pixel's 8 neighbours (their points on that plane, eq. 5 residuals in noise
+units against the plane's normal) wins. On the true surface every
+neighbour agrees to second order in the pixel spacing; at a false root the
+neighbours' rows disagree with its normal. Then the depth is the root's
+continuous minimum (:func:`refine_ml`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from colourhs.reconstruct.sides import HelmholtzSides, sample_sides, whitened_cost
+
+CANDIDATES = 4  # local minima of the per-pixel cost kept as candidate roots
+WINDOW = ((-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1))
+
+
+def candidate_labels(cost: np.ndarray, max_cost: float, k: int = CANDIDATES) -> np.ndarray:
+    """(N, k) labels of each pixel's ``k`` best local minima of ``cost`` (N, L); -1 = none.
+
+    A local minimum is a label whose cost is at most its neighbours' and below
+    ``max_cost``; the ends of the range count when they are minima too.
+    """
+    c = np.asarray(cost, np.float32)
+    left = np.concatenate([np.full((len(c), 1), np.inf, np.float32), c[:, :-1]], axis=1)
+    right = np.concatenate([c[:, 1:], np.full((len(c), 1), np.inf, np.float32)], axis=1)
+    minima = (c <= left) & (c < right) & (c < max_cost)
+    score = np.where(minima, c, np.inf)
+    k = min(k, c.shape[1])
+    idx = np.argpartition(score, k - 1, axis=1)[:, :k]
+    best = np.take_along_axis(score, idx, axis=1)
+    order = np.argsort(best, axis=1)
+    idx = np.take_along_axis(idx, order, axis=1)
+    return np.where(np.isfinite(np.take_along_axis(best, order, axis=1)), idx, -1)
+
+
+def refine_ml(z: np.ndarray, cost, step_m: float, iterations: int = 6) -> np.ndarray:
+    """Continuous per-pixel ML depth: the minimum of each pixel's own cost near ``z``.
+
+    Beyond the paper (whose ML HS picks the best hypothesis): ``cost`` is the
+    noise-weighted per-pixel cost of eq. (5) (:func:`whitened_cost`); near
+    its minimum it is a parabola in the depth (0 at the true depth on exact
+    data), so three evaluations at z - h, z, z + h give the vertex, and
+    ``iterations`` Newton-like rounds from h = half a label converge to it.
+
+    Parameters
+    ----------
+    z : (N,) starting depths (a candidate label plus its parabola), metres.
+    cost : callable (N,) depths -> (N,) cost (NaN where unusable).
+    step_m : the label spacing, metres.
+    """
+    h = np.full(len(z), step_m / 2.0)
+    for _ in range(iterations):
+        c = np.stack([cost(z - h), cost(z), cost(z + h)], axis=1)
+        ok = np.all(np.isfinite(c), axis=1)
+        cm, c0, cp = np.where(ok, c.T, 0.0)
+        den = cm - 2 * c0 + cp
+        with np.errstate(invalid="ignore", divide="ignore"):
+            off = np.where(den > 0, 0.5 * (cm - cp) / den, 0.0)
+        # The vertex of a parabola through the cost; at most two half-widths per
+        # step, and the next half-width follows the step (a Newton iteration).
+        off = np.clip(np.nan_to_num(off), -2.0, 2.0)
+        z = np.where(ok, z + off * h, z)
+        h = np.clip(np.abs(off) * h, h / 8.0, h)
+    return z
+
+
+def plane_chi2(sides: HelmholtzSides, X: np.ndarray, R: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """Eq. (5) residuals of points ``X`` (N, 3) against normals ``n`` (N, 3), in noise units.
+
+    Sum over the pairs of ``(w_k . n)^2 / (var_a (v_a . n)^2 + var_b (v_b . n)^2)``
+    (the Sampson form); NaN where a sample is unusable.
+    """
+    s, var, v, _, _ = sample_sides(sides, X, R)
+    w = s[..., 0, None] * v[:, :, 0] - s[..., 1, None] * v[:, :, 1]
+    ca = np.einsum("npk,nk->np", v[:, :, 0], n)
+    cb = np.einsum("npk,nk->np", v[:, :, 1], n)
+    sd2 = var[..., 0] * ca**2 + var[..., 1] * cb**2
+    with np.errstate(invalid="ignore", divide="ignore"):
+        r2 = np.einsum("npk,nk->np", w, n) ** 2 / sd2
+    return np.sum(r2, axis=1)
+
+
+def window_score(
+    sides: HelmholtzSides,
+    c_ref: np.ndarray,
+    rays: np.ndarray,
+    pix: np.ndarray,
+    z: np.ndarray,
+    n: np.ndarray,
+    shape: tuple[int, int],
+) -> np.ndarray:
+    """Median over a pixel's 8 neighbours of their eq. (5) chi2 on its tangent plane.
+
+    Parameters
+    ----------
+    rays : (H*W, 3) rays with unit z-depth; pix : (N,) pixels; z : (N,)
+    candidate depths; n : (N, 3) candidate normals (unit); shape : (H, W).
+
+    Returns (N,) scores (inf where fewer than 4 neighbours are usable). The
+    median keeps a neighbour across a depth edge from vetoing a good
+    candidate.
+    """
+    H, W = shape
+    rows, cols = np.divmod(pix, W)
+    X = c_ref + rays[pix] * z[:, None]
+    d = np.einsum("nk,nk->n", n, X - c_ref)
+    out = np.full((len(pix), len(WINDOW)), np.nan)
+    for j, (di, dj) in enumerate(WINDOW):
+        i2, j2 = rows + di, cols + dj
+        inside = (i2 >= 0) & (i2 < H) & (j2 >= 0) & (j2 < W)
+        q = np.where(inside, i2 * W + j2, pix)
+        rq = rays[q]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            t = d / np.einsum("nk,nk->n", n, rq)
+        ok = inside & np.isfinite(t) & (t > 0)
+        Xq = c_ref + rq * np.where(ok, t, z)[:, None]
+        chi2 = plane_chi2(sides, Xq, rq, n)
+        out[:, j] = np.where(ok, chi2, np.nan)
+    usable = np.sum(np.isfinite(out), axis=1)
+    with np.errstate(all="ignore"):
+        med = np.nanmedian(np.where(usable[:, None] >= 4, out, np.nan), axis=1)
+    return np.where(usable >= 4, med, np.inf)
+
+
+def ml_depth(
+    cost: np.ndarray,
+    depths: np.ndarray,
+    pix: np.ndarray,
+    rays: np.ndarray,
+    c_ref: np.ndarray,
+    sides: HelmholtzSides,
+    shape: tuple[int, int],
+    max_cost: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """ML HS depth, normal and validity of the pixels ``pix`` (module docstring).
+
+    Parameters
+    ----------
+    cost : (N, L) the data term over the hypotheses ``depths`` (L,), metres.
+    rays : (H*W, 3) rays with unit z-depth from ``c_ref``.
+    max_cost : hypotheses costing more are no candidates.
+
+    Returns
+    -------
+    z : (N,) depths (metres), normal : (N, 3), valid : (N,) bool.
+    """
+    labels = candidate_labels(cost, max_cost)
+    step = float(depths[1] - depths[0])
+    R = rays[pix]
+    N, K = labels.shape
+    best_z = np.full(N, np.nan)
+    best_n = np.full((N, 3), np.nan)
+    best_s = np.full(N, np.inf)
+
+    def own_cost(depth):
+        return whitened_cost(sides, c_ref + R * depth[:, None], R)[0]
+
+    idx = np.arange(N)
+    for k in range(K):
+        lab = labels[:, k]
+        has = lab >= 0
+        if not has.any():
+            break
+        lab = np.where(has, lab, 0)
+        lm = np.clip(lab - 1, 0, len(depths) - 1)
+        lp = np.clip(lab + 1, 0, len(depths) - 1)
+        cm, c0, cp = cost[idx, lm], cost[idx, lab], cost[idx, lp]
+        den = cm - 2 * c0 + cp
+        with np.errstate(invalid="ignore", divide="ignore"):
+            off = np.where(den > 0, 0.5 * (cm - cp) / den, 0.0)
+        z0 = depths[lab] + np.clip(np.nan_to_num(off), -0.5, 0.5) * step
+        z = refine_ml(z0, own_cost, step)
+        chi2, n = whitened_cost(sides, c_ref + R * z[:, None], R)
+        score = window_score(sides, c_ref, rays, pix, z, n, shape)
+        score = np.where(has & np.isfinite(chi2), score, np.inf)
+        take = score < best_s
+        best_z = np.where(take, z, best_z)
+        best_n = np.where(take[:, None], n, best_n)
+        best_s = np.where(take, score, best_s)
+    return best_z, best_n, np.isfinite(best_s)

@@ -1,0 +1,286 @@
+"""The two sides of every reciprocal pair, sampled at 3D points (eq. 5 terms).
+
+A reciprocal pair k of cameras (a, b) gives the eq. (5) row
+``w_k = s_a v_a - s_b v_b`` at a point X, with ``s = J / |L - X|^2``, ``J =
+mu i / p`` (the Helmholtz camera's calibrated intensity, eqs. 2 and 4) and
+``v`` the unit vector from X to the side's light L. :func:`helmholtz_sides`
+prepares, per side, J and its noise variance (:mod:`colourhs.noise`) as
+images; :func:`sample_sides` samples them (compiled, the OpenCV camera
+model) with their derivatives along a ray; :func:`whitened_cost` is the
+per-point ML cost of eq. (5) in noise units (used by ML HS and by the
+Bayesian refinement, :mod:`colourhs.reconstruct.surface`).
+
+Beyond the paper: the noise variance of every sample (the squared bilinear
+weights of the pixels' variances: a sample between four pixels averages
+their noise).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba as nb
+import numpy as np
+from scipy.ndimage import gaussian_filter
+
+from colourhs.reconstruct.dataterm import dist5, to_pixel
+
+BLUR_PX = 1.0  # Gaussian blur of the images before sampling, pixels (see side_maps)
+
+
+@dataclass
+class HelmholtzSides:
+    """The two sides of every reciprocal pair, ready to sample (eq. 5).
+
+    For side j (pair j // 2, side j % 2): ``cameras[j]`` and its light
+    ``light[j]``, and per pixel a stack ``maps[j]`` (H, W, 2) of J = mu i / p
+    (the Helmholtz camera's calibrated intensity) and its noise variance;
+    NaN where unusable.
+    """
+
+    cameras: list
+    light: np.ndarray
+    maps: list
+    blurred: bool = False  # neighbouring pixels' noise correlated (see side_maps)
+
+    def __post_init__(self):
+        self.stack = np.ascontiguousarray(np.stack(self.maps), dtype=np.float64)
+        self.K = np.stack([np.asarray(c.K, float) for c in self.cameras])
+        self.dist = np.stack([dist5(c.dist) for c in self.cameras])
+        self.R = np.stack([np.asarray(c.R, float) for c in self.cameras])
+        self.t = np.stack([np.asarray(c.t, float) for c in self.cameras])
+        self.light = np.ascontiguousarray(self.light, dtype=np.float64)
+
+    @property
+    def pairs(self) -> int:
+        return len(self.cameras) // 2
+
+
+def _blur(values: np.ndarray, sigma: float, min_support: float = 0.9) -> np.ndarray:
+    """NaN-aware Gaussian blur: normalised convolution; NaN where support < ``min_support``."""
+    ok = np.isfinite(values)
+    support = gaussian_filter(ok.astype(float), sigma)
+    out = gaussian_filter(np.where(ok, values, 0.0), sigma) / np.maximum(support, 1e-12)
+    return np.where(support >= min_support, out, np.nan)
+
+
+def side_maps(J: np.ndarray, var: np.ndarray, blur_px: float = BLUR_PX) -> np.ndarray:
+    """Stack (H, W, 2) of one Helmholtz camera: J and its noise variance.
+
+    Parameters
+    ----------
+    J : (H, W) calibrated intensity mu i / p, NaN where unusable.
+    var : (H, W) its noise variance (same units squared).
+    blur_px : Gaussian blur (pixels) of J before sampling; the noise
+        variance is scaled by the kernel's sum of squared weights,
+        1 / (4 pi sigma^2). Blurred neighbours are correlated, so a sample
+        between them has this variance at any sub-pixel position (with no
+        blur, :func:`sample_sides` weighs the pixels' variances by the
+        squared bilinear weights instead).
+    """
+    if blur_px > 0:
+        J = _blur(J, blur_px)
+        var = _blur(var, blur_px) * min(1.0 / (4.0 * np.pi * blur_px**2), 1.0)
+    return np.stack([J, var], axis=-1)
+
+
+def helmholtz_sides(
+    frame,
+    variance: np.ndarray,
+    pairs,
+    min_signal: float = 0.01,
+    blur_px: float = BLUR_PX,
+) -> HelmholtzSides:
+    """The sides of every reciprocal pair of a frame (see :class:`HelmholtzSides`).
+
+    ``frame`` is a :class:`colourhs.reconstruct.frame.Frame`; ``variance``
+    (C, 3, H, W) the noise variance of its images; ``pairs`` from
+    :func:`colourhs.reconstruct.dataterm.pair_arrays`. J is unusable where
+    the image is saturated, at or below ``min_signal``, outside the
+    silhouette, or mu or p is not positive, as in the data term.
+    """
+    pair_cams, pair_ch = pairs
+    cams, light, maps = [], [], []
+    for p, ((a, b), (ca, cb)) in enumerate(zip(pair_cams, pair_ch, strict=True)):
+        for k, (c, ch) in enumerate(((a, ca), (b, cb))):
+            i = frame.images[c, ch].astype(float)
+            bad = frame.saturated[c] | ~(i > min_signal)
+            if frame.silhouettes is not None:
+                bad |= ~frame.silhouettes[c].astype(bool)
+            scale = np.ones_like(i)
+            if frame.mu is not None:
+                scale = scale * frame.mu[p, k]
+            if frame.chroma is not None:
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    scale = scale / frame.chroma[c, ch]
+            bad |= ~np.isfinite(scale) | ~(scale > 0)
+            J = np.where(bad, np.nan, i * scale)
+            V = np.where(bad, np.nan, variance[c, ch] * scale**2)
+            cam = frame.rig.cameras[c]
+            cams.append(cam)
+            light.append(cam.light_centre)
+            maps.append(side_maps(J, V, blur_px))
+    return HelmholtzSides(cams, np.asarray(light), maps, blur_px > 0)
+
+
+@nb.njit(parallel=True, cache=True, fastmath=False)
+def _sample_kernel(X, R, Ks, dists, Rs, ts, light, maps, blurred, s, var, v, ds, dv):
+    """Project every point into every side's camera (OpenCV model, with the
+    derivative of the pixel along the ray), sample the side's stack
+    bilinearly, and form the eq. (5) terms (see :func:`sample_sides`)."""
+    N = X.shape[0]
+    nside = Ks.shape[0]
+    Hh, Ww = maps.shape[1], maps.shape[2]
+    for i in nb.prange(N):
+        x0, x1, x2 = X[i, 0], X[i, 1], X[i, 2]
+        r0, r1, r2 = R[i, 0], R[i, 1], R[i, 2]
+        for j in range(nside):
+            p = j // 2
+            k = j % 2
+            # camera coordinates of X and of dX/dz = R
+            cx = Rs[j, 0, 0] * x0 + Rs[j, 0, 1] * x1 + Rs[j, 0, 2] * x2 + ts[j, 0]
+            cy = Rs[j, 1, 0] * x0 + Rs[j, 1, 1] * x1 + Rs[j, 1, 2] * x2 + ts[j, 1]
+            cz = Rs[j, 2, 0] * x0 + Rs[j, 2, 1] * x1 + Rs[j, 2, 2] * x2 + ts[j, 2]
+            dcx = Rs[j, 0, 0] * r0 + Rs[j, 0, 1] * r1 + Rs[j, 0, 2] * r2
+            dcy = Rs[j, 1, 0] * r0 + Rs[j, 1, 1] * r1 + Rs[j, 1, 2] * r2
+            dcz = Rs[j, 2, 0] * r0 + Rs[j, 2, 1] * r1 + Rs[j, 2, 2] * r2
+            nan = np.nan
+            u = nan
+            vv = nan
+            du = 0.0
+            dvv = 0.0
+            if cz > 0.0:
+                eps = 1e-6 * cz
+                u, vv = to_pixel(cx / cz, cy / cz, Ks[j], dists[j])
+                up, vp = to_pixel(
+                    (cx + eps * dcx) / (cz + eps * dcz),
+                    (cy + eps * dcy) / (cz + eps * dcz),
+                    Ks[j],
+                    dists[j],
+                )
+                um, vm = to_pixel(
+                    (cx - eps * dcx) / (cz - eps * dcz),
+                    (cy - eps * dcy) / (cz - eps * dcz),
+                    Ks[j],
+                    dists[j],
+                )
+                du = (up - um) / (2.0 * eps)
+                dvv = (vp - vm) / (2.0 * eps)
+            J = nan
+            noise = nan
+            gu = nan
+            gv = nan
+            if (u >= 0.0) and (vv >= 0.0) and (u <= Ww - 1) and (vv <= Hh - 1):
+                u0 = min(int(np.floor(u)), Ww - 2)
+                v0 = min(int(np.floor(vv)), Hh - 2)
+                a = u - u0
+                b = vv - v0
+                w00 = (1.0 - a) * (1.0 - b)
+                w01 = a * (1.0 - b)
+                w10 = (1.0 - a) * b
+                w11 = a * b
+                j00, j01 = maps[j, v0, u0, 0], maps[j, v0, u0 + 1, 0]
+                j10, j11 = maps[j, v0 + 1, u0, 0], maps[j, v0 + 1, u0 + 1, 0]
+                J = w00 * j00 + w01 * j01 + w10 * j10 + w11 * j11
+                # the bilinear interpolant's own derivative: the Jacobian of what is sampled
+                gu = (1.0 - b) * (j01 - j00) + b * (j11 - j10)
+                gv = (1.0 - a) * (j10 - j00) + a * (j11 - j01)
+                # The noise of a weighted sum of independent pixels: squared weights
+                # (a sample between four pixels averages their noise); blurred
+                # pixels are correlated, and their variance interpolates.
+                if not blurred:
+                    w00, w01, w10, w11 = w00 * w00, w01 * w01, w10 * w10, w11 * w11
+                noise = (
+                    w00 * maps[j, v0, u0, 1]
+                    + w01 * maps[j, v0, u0 + 1, 1]
+                    + w10 * maps[j, v0 + 1, u0, 1]
+                    + w11 * maps[j, v0 + 1, u0 + 1, 1]
+                )
+            Dx = light[j, 0] - x0
+            Dy = light[j, 1] - x1
+            Dz = light[j, 2] - x2
+            d2 = Dx * Dx + Dy * Dy + Dz * Dz
+            d = np.sqrt(d2)
+            ux, uy, uz = Dx / d, Dy / d, Dz / d
+            ur = ux * r0 + uy * r1 + uz * r2
+            v[i, p, k, 0] = ux
+            v[i, p, k, 1] = uy
+            v[i, p, k, 2] = uz
+            s[i, p, k] = J / d2
+            var[i, p, k] = noise / (d2 * d2)
+            # dD/dz = -R, dd/dz = -u.R, du/dz = (-R + u (u.R)) / d
+            dv[i, p, k, 0] = (-r0 + ux * ur) / d
+            dv[i, p, k, 1] = (-r1 + uy * ur) / d
+            dv[i, p, k, 2] = (-r2 + uz * ur) / d
+            ds[i, p, k] = (gu * du + gv * dvv) / d2 + 2.0 * J * ur / (d2 * d)
+
+
+def sample_sides(sides: HelmholtzSides, X: np.ndarray, R: np.ndarray):
+    """Eq. (5) terms at points ``X`` (N, 3) and their derivative along rays ``R`` (dX/dz).
+
+    Compiled (numba); the projection is the OpenCV model of
+    :func:`colourhs.geometry.project` (the data term's
+    :func:`colourhs.reconstruct.dataterm.to_pixel`).
+
+    Returns
+    -------
+    s : (N, P, 2) ``J / |L - X|^2`` of each side (the row is s_a v_a - s_b v_b).
+    var : (N, P, 2) noise variance of s.
+    v : (N, P, 2, 3) unit vectors from X towards each side's light.
+    ds, dv : derivatives of s and v with respect to the depth z.
+    NaN where a point leaves an image or lands on an unusable sample.
+    """
+    N, P = len(X), sides.pairs
+    s = np.empty((N, P, 2))
+    var = np.empty((N, P, 2))
+    v = np.empty((N, P, 2, 3))
+    ds = np.empty((N, P, 2))
+    dv = np.empty((N, P, 2, 3))
+    _sample_kernel(
+        np.ascontiguousarray(X, float),
+        np.ascontiguousarray(R, float),
+        sides.K,
+        sides.dist,
+        sides.R,
+        sides.t,
+        sides.light,
+        sides.stack,
+        sides.blurred,
+        s,
+        var,
+        v,
+        ds,
+        dv,
+    )
+    return s, var, v, ds, dv
+
+
+def whitened_cost(sides: HelmholtzSides, X: np.ndarray, R: np.ndarray, passes: int = 2):
+    """Per-point ML cost of eq. (5) in noise units, and its normal.
+
+    The smallest eigenvalue of W^T W after each row of W is divided by its
+    predicted noise along the normal (Sampson weights, from the previous
+    pass's normal; the first from the unweighted W): a chi-square with one
+    degree of freedom at the true depth, 0 on exact data. Unlike
+    sigma_3 / sigma_2, a weak row (a dark sample, a black marker) does not
+    make the cost small.
+
+    Returns
+    -------
+    chi2 : (N,) NaN where a sample is unusable. normal : (N, 3) towards -R.
+    """
+    s, var, v, _, _ = sample_sides(sides, X, R)
+    w = s[..., 0, None] * v[:, :, 0] - s[..., 1, None] * v[:, :, 1]
+    ok = np.all(np.isfinite(w), axis=(1, 2)) & np.all(var > 0, axis=(1, 2))
+    w = np.where(ok[:, None, None], w, 0.0)
+    scale = np.ones(w.shape[:2])
+    for _ in range(passes + 1):
+        ww = w / scale[..., None]
+        lam, vec = np.linalg.eigh(np.einsum("npi,npj->nij", ww, ww))
+        n = vec[:, :, 0]
+        ca = np.einsum("npk,nk->np", v[:, :, 0], n)
+        cb = np.einsum("npk,nk->np", v[:, :, 1], n)
+        scale = np.sqrt(np.where(ok[:, None], var[..., 0] * ca**2 + var[..., 1] * cb**2, 1.0))
+        scale = np.maximum(scale, 1e-300)
+    n = n * np.where(np.sum(n * R, axis=1) > 0, -1.0, 1.0)[:, None]
+    return np.where(ok, np.maximum(lam[:, 0], 0.0), np.nan), n

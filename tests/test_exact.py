@@ -1,0 +1,75 @@
+"""Exact data gives exact answers (issue 11, item 2): random rigs, noise and
+cross-talk off, the true calibration (gt/photometric.h5).
+
+Every other nuisance stays on (LED profiles, vignetting and colour shading,
+16 bit with a black level, exact masks), since the true mu maps undo them.
+Five random rigs (the random-tiny ranges at 320x240, 3 board poses), the
+plane and the sheet; ML and Bayesian HS against the rendered ground truth.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from colourhs.groundtruth import load_mesh, render_depth_normals
+from colourhs.reconstruct.frame import load_frame, reconstruct
+from colourhs.synth.dataset import PRESETS, synthesise
+from colourhs.synth.rig import Nuisances
+
+EXACT = replace(PRESETS["random-tiny"], name="exact", width=320, height=240, supersample=2,
+                n_poses=3, sheet_frames=1)  # fmt: skip
+SEEDS = (1, 2, 3, 4, 5)
+
+
+@pytest.fixture(scope="module")
+def exact_rigs(tmp_path_factory):
+    """The five rigs' datasets (plane and sheet only)."""
+    out = {}
+    for seed in SEEDS:
+        root = tmp_path_factory.mktemp(f"exact{seed}") / "d"
+        synthesise(root, EXACT, seed=seed, nuisances=Nuisances().without("noise", "crosstalk"),
+                   exact=True, parts=("photometric", "scenes"), scenes=("plane", "sheet"),
+                   progress=False, workers=2)  # fmt: skip
+        out[seed] = root
+    return out
+
+
+def _errors(root, scene, method):
+    fr = load_frame(root, scene, "000000", photometric_h5=root / "gt" / "photometric.h5")
+    res = reconstruct(fr, method)
+    ref = fr.rig.camera(res.info["reference"])
+    v, t, n = load_mesh(root / "scenes" / scene / "gt" / "000000.ply")
+    gd, gn = render_depth_normals(v, t, n, ref, fr.rig.image.width, fr.rig.image.height)
+    m = res.mask & np.isfinite(gd)
+    err = np.abs(res.depth[m] - gd[m]) * 1e3
+    ang = np.degrees(np.arccos(np.clip(np.sum(res.normal[m] * gn[m], axis=1), -1, 1)))
+    return float(np.median(err)), float(np.median(ang)), m.sum() / np.isfinite(gd).sum()
+
+
+@pytest.mark.parametrize("scene", ["plane", "sheet"])
+def test_exact_data_exact_answers(exact_rigs, scene):
+    """Measured (depth median mm / normal median deg, seeds 1-5):
+
+    - Bayesian HS: plane 0.037, 0.035, 0.027, 0.013, 0.007 mm (seed 1: its
+      coverage is 0.66, the others' 0.96: two white cells inside its markers,
+      which the model cannot explain, are left out), sheet <= 0.027 mm;
+      normals <= 0.07 deg. The issue's 0.05 mm and 0.3 deg: every case.
+    - ML HS: plane 0.41, 0.11, 0.11, 0.065, 0.019 mm, sheet 0.09-0.27 mm;
+      normals <= 0.80 deg. A pixel's own root moves by ~0.1 mm under image
+      errors of 1e-4 (interpolation, the renderer's pixel integration): the
+      issue's 0.05 mm is not reached by ML.
+    - Bayesian never worse than ML: every case.
+    """
+    rows = []
+    for seed, root in exact_rigs.items():
+        bayes, ml = _errors(root, scene, "bayes"), _errors(root, scene, "ml")
+        print(f"seed {seed} {scene}: bayes {bayes} ml {ml}")
+        rows.append(bayes + ml)
+    b_mm, b_deg, b_cov, m_mm, m_deg, _ = np.array(rows).T
+    assert np.all(b_mm <= m_mm)
+    assert np.median(b_mm) < 0.04  # measured 0.027 (plane), 0.019 (sheet)
+    assert b_mm.max() < 0.05 and b_deg.max() < 0.1 and b_cov.min() > 0.6
+    assert np.median(m_mm) < 0.2 and m_mm.max() < 0.5 and m_deg.max() < 1.0

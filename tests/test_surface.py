@@ -1,0 +1,111 @@
+"""The Bayesian refinement's pieces (colourhs.reconstruct.surface, .sides, .spline, .ml)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from colourhs.crosstalk import calibrate_crosstalk
+from colourhs.groundtruth import load_mesh, render_depth_normals
+from colourhs.reconstruct.dataterm import pair_arrays
+from colourhs.reconstruct.frame import foreground, load_frame, reference_rays
+from colourhs.reconstruct.ml import candidate_labels
+from colourhs.reconstruct.sides import helmholtz_sides, whitened_cost
+from colourhs.reconstruct.spline import SplineSurface
+from colourhs.reconstruct.surface import SurfaceGraph, fill_holes, hs_residuals
+
+
+def _plane_depth(rays, c, n, d):
+    """z-depth along ``rays`` (unit z) from ``c`` of the plane n . X = d."""
+    return (d - n @ c) / (rays @ n)
+
+
+def test_fill_holes_is_exact_on_a_plane():
+    """1 / z of a plane is linear in the ray: the quadric fill reproduces it (to 1e-9 m)."""
+    H, W = 60, 80
+    v, u = np.mgrid[0:H, 0:W]
+    x, y = (u - 40.3) / 300.0, (v - 29.7) / 310.0
+    R = np.array([[0.98, -0.1, 0.17], [0.12, 0.99, -0.05], [-0.16, 0.07, 0.98]])
+    R, _ = np.linalg.qr(R)
+    rays = np.stack([x.ravel(), y.ravel(), np.ones(H * W)], 1) @ R
+    c = np.array([0.1, -0.05, -0.8])
+    n = np.array([0.2, -0.3, 0.93])
+    n /= np.linalg.norm(n)
+    z = _plane_depth(rays, c, n, 0.05)
+    mask = np.ones((H, W), bool)
+    mask[20:35, 30:50] = False  # a marker-sized hole
+    fp = z / 300.0
+    graph = SurfaceGraph(mask.ravel(), (H, W), z, fp)
+    filled = fill_holes(z[graph.pix], graph, np.ones(H * W, bool), rays)
+    hole = ~mask.ravel()
+    assert np.all(np.isfinite(filled[hole])) and not np.isfinite(filled[~hole]).any()
+    assert np.abs(filled[hole] - z[hole]).max() < 1e-9
+
+
+def test_spline_reproduces_smooth_depths_and_numbers_surfaces():
+    rows, cols = np.mgrid[0:40, 0:50]
+    rows, cols = rows.ravel(), cols.ravel()
+    surface = (cols >= 25).astype(int)
+    spline = SplineSurface(rows, cols, surface, 8.0)
+    z = 0.8 + 1e-3 * rows + 2e-4 * cols + 1e-5 * rows * cols
+    c = np.linalg.lstsq(spline.basis.toarray(), z, rcond=None)[0]
+    assert np.abs(spline.basis @ c - z).max() < 1e-12  # cubic B-splines hold bilinear maps
+    assert set(spline.surface_of) == {0, 1}
+    D, prior_surface = spline.second_differences()
+    assert D.shape[0] == len(prior_surface) and np.abs(D @ np.ones(spline.size)).max() < 1e-12
+
+
+def test_candidate_labels_are_the_best_local_minima():
+    cost = np.array([[0.5, 0.2, 0.4, 0.1, 0.3, 0.05], [1.0, 1.0, 1.0, 1.0, 1.0, 1.0]])
+    lab = candidate_labels(cost, max_cost=0.9, k=3)
+    assert lab[0].tolist() == [5, 3, 1]
+    assert lab[1].tolist() == [-1, -1, -1]
+
+
+@pytest.fixture(scope="module")
+def plane_sides(tiny_dataset, tmp_path_factory):
+    root = tiny_dataset
+    xt = tmp_path_factory.mktemp("sides") / "crosstalk.json"
+    calibrate_crosstalk(root, xt)
+    fr = load_frame(root, "plane", "000000", photometric_h5=root / "gt" / "photometric.h5",
+                    crosstalk_json=xt)  # fmt: skip
+    ref = fr.rig.cameras[0]
+    W, H = fr.rig.image.width, fr.rig.image.height
+    v, t, n = load_mesh(root / "scenes" / "plane" / "gt" / "000000.ply")
+    gd, gn = render_depth_normals(v, t, n, ref, W, H)
+    mask = foreground(fr, 0).ravel() & np.isfinite(gd.ravel())
+    sides = helmholtz_sides(fr, fr.variance, pair_arrays(fr.rig))
+    return fr, ref, reference_rays(ref, W, H), gd.ravel(), gn.reshape(-1, 3), mask, sides
+
+
+def test_whitened_normals_at_the_truth(plane_sides):
+    """The noise-weighted ML normal of eq. (5) at true points (tiny, every nuisance,
+    cross-talk unmixed, true mu): measured usable 0.894 of the plane's pixels, median
+    0.69 deg from the true normal (7.5 deg without unmixing the cross-talk)."""
+    fr, ref, rays, gd, gn, mask, sides = plane_sides
+    pix = np.flatnonzero(mask)
+    chi2, n = whitened_cost(sides, ref.centre + rays[pix] * gd[pix, None], rays[pix])
+    ok = np.isfinite(chi2)
+    ang = np.degrees(np.arccos(np.clip(np.sum(n[ok] * gn[pix][ok], axis=1), -1, 1)))
+    assert ok.mean() > 0.87 and np.median(ang) < 0.9
+
+
+def test_jacobian_predicts_the_residuals(plane_sides):
+    """J dz against the residuals' change for a smooth 0.2 mm perturbation of the depths
+    (weights fixed). Measured: the linear prediction misses 2.9 % of the change at
+    0.2 mm, 0.9 % at 2 um (the Jacobian leaves out the sampled noise variance's change;
+    with the gradients of central differences instead of the bilinear interpolant's own,
+    11 %)."""
+    fr, ref, rays, gd, _, mask, sides = plane_sides
+    W = fr.rig.image.width
+    graph = SurfaceGraph(mask, (fr.rig.image.height, W), np.nan_to_num(gd),
+                         np.nan_to_num(gd) / ref.K[0, 0])  # fmt: skip
+    z = gd[graph.pix]
+    R = rays[graph.pix]
+    J, r, info = hs_residuals(z, graph, R, sides, ref.centre)
+    dz = 2e-4 * np.sin(graph.cols / 7.0) * np.cos(graph.rows / 5.0)
+    _, r2, _ = hs_residuals(z + dz, graph, R, sides, ref.centre, weights=info["weights"],
+                            scale=info["scale"])  # fmt: skip
+    keep = (r != 0) & (r2 != 0)
+    change, pred = (r2 - r)[keep], (J @ dz)[keep]
+    assert np.linalg.norm(change - pred) < 0.04 * np.linalg.norm(change)
