@@ -215,9 +215,11 @@ def test_plane_accuracy_at_demo_resolution(plane_calibrated):
     """Issue 4's targets on the demo plane (640x480, every nuisance, pipeline calibration).
 
     Measured: Bayesian HS with photometric calibration 0.029 mm median, 0.055 mm
-    RMS, 0.18 deg, 110119 pixels (markers filled); without calibration 5.8 /
-    10.5 mm; ML HS 20.6 / 39.5 mm. (Before the continuous consistency refinement:
-    0.12 / 0.68 mm, 1.5 deg.)
+    RMS, 0.18 deg, 110119 pixels (markers filled). (Before the continuous
+    consistency refinement: 0.12 / 0.68 mm, 1.5 deg.) ML HS (20.6 / 39.5 mm
+    here) and Bayesian HS without calibration (5.8 / 10.5 mm) are compared on
+    tiny, to keep the suite short (:func:`test_ml_is_clearly_worse_than_bayes`,
+    :func:`test_calibrations_help`).
     """
     data, calib = plane_calibrated
     ph = load_frame(data, "plane", "000000", **calib)
@@ -226,8 +228,3 @@ def test_plane_accuracy_at_demo_resolution(plane_calibrated):
     assert n > 100000  # 82 % of the board's pixels
     assert med <= 0.05 and rms <= 0.08  # measured 0.029, 0.055
     assert normal < 0.25  # measured 0.18
-    _, ml_med, _, _ = _evaluate(data, "plane", ph, reconstruct(ph, "ml"))
-    assert ml_med > 100 * med
-    none = load_frame(data, "plane", "000000")
-    _, none_med, _, _ = _evaluate(data, "plane", none, reconstruct(none, "bayes"))
-    assert none_med > 50 * med
