@@ -228,3 +228,26 @@ def test_plane_accuracy_at_demo_resolution(plane_calibrated):
     assert n > 100000  # 82 % of the board's pixels
     assert med <= 0.05 and rms <= 0.08  # measured 0.029, 0.055
     assert normal < 0.25  # measured 0.18
+
+
+def test_foreground_drops_dark_channels_and_does_not_wrap(tiny_dataset, calib):
+    """A reciprocal channel at most 2 % of full scale carries no signal; the
+    one-pixel dilation of those pixels stops at the image border."""
+    from dataclasses import replace
+
+    from colourhs.reconstruct.frame import foreground
+
+    fr = load_frame(tiny_dataset, "plane", "000000", **calib)
+    C, _, H, W = fr.images.shape
+    own = fr.rig.cameras[0].light_channel
+    recip = [c for c in range(3) if c != own]
+    img = np.full((C, 3, H, W), 0.5, np.float32)
+    img[0, recip[0], :, 40:50] = 0.015  # too dark
+    img[0, recip[1], :, 60:70] = 0.03  # kept
+    img[0, recip[0], 50, W - 1] = 0.0  # dark pixels on the right and bottom borders
+    img[0, recip[1], H - 1, 5] = 0.0
+    fg = foreground(replace(fr, images=img, silhouettes=None), 0)
+    assert not fg[:, 39:51].any()  # dark columns plus one of dilation
+    assert fg[:, 51:].sum() == (W - 51) * H - 4 and fg[:, 60:70].all()
+    assert not fg[50, W - 2 :].any() and not fg[49, W - 1] and not fg[51, W - 1]
+    assert fg[50, 0] and fg[0, 5]  # np.roll's dilation wrapped these round (issue 12)

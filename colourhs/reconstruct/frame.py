@@ -155,22 +155,27 @@ def foreground(frame: Frame, ref: int, threshold: float = 0.02) -> np.ndarray:
     The silhouette when the dataset has masks, otherwise pixels brighter than
     ``threshold`` (fraction of full scale) in some channel, since the rig has
     no ambient light; in both cases without the pixels too dark to measure in
-    either reciprocal channel of the reference camera (black markers,
-    shadows), dilated by one pixel, since their rows carry no signal.
+    either reciprocal channel of the reference camera (at most ``threshold``:
+    black markers, shadows), dilated by one pixel, since their rows carry no
+    signal.
+
+    ``threshold`` is a fraction of the sensor's range, not of its noise.
+    Tried (random rigs 0-3, 640x480): "too dark" as 3 noise sigmas instead
+    doubled a toy's coverage (0.33 to 0.58: saturated plastics read 1-3 % of
+    full scale in the other lights' channels) but raised the toys' median
+    depth error over seeds from 0.39 to 1.68 mm, and on exact data (noise
+    only the quantisation) it took in the black markers, whose mixed
+    footprints moved a board from 0.037 to 0.065 mm; kept as it is.
     """
+    from scipy.ndimage import binary_dilation
+
     img = frame.images[ref]
     own = frame.rig.cameras[ref].light_channel
     recip = [c for c in range(3) if c != own]
     fg = object_mask(frame, ref, threshold)
     dark = np.min(img[recip], axis=0) <= threshold
-    dark = (
-        dark
-        | np.roll(dark, 1, 0)
-        | np.roll(dark, -1, 0)
-        | np.roll(dark, 1, 1)
-        | np.roll(dark, -1, 1)
-    )
-    return fg & ~dark
+    # One pixel of dilation (4-neighbours; no wrap-around at the border).
+    return fg & ~binary_dilation(dark)
 
 
 @dataclass
