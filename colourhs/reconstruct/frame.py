@@ -261,9 +261,10 @@ def reconstruct(
     link_m : neighbours within this distance of each other's tangent plane
         belong to one surface (small unlinked pieces are left out).
     surface_iterations, spline_px : the final refinement
-        (:func:`colourhs.reconstruct.surface.refine_surface`):
+        (:func:`colourhs.reconstruct.refine.refine_surface`):
         Levenberg-Marquardt steps before and after its depth search, and the
-        spline control spacing (default 1/40 of the width).
+        spline control spacing (default 1/80 of the width,
+        :func:`colourhs.reconstruct.spline.default_spacing`).
     progress : a progress bar (tqdm, on stderr) over the data term's chunks of
         pixels, the long part of a high-resolution frame.
 
@@ -273,7 +274,7 @@ def reconstruct(
     Bayesian: the MAP labelling of the MRF, a smooth initial surface from
     the HS normals (:func:`colourhs.reconstruct.integrate.refine_depth`; its depth
     is still the labelling's), then the depth from the agreement of the
-    geometry with eq. (5) (:func:`colourhs.reconstruct.surface.refine_surface`).
+    geometry with eq. (5) (:func:`colourhs.reconstruct.refine.refine_surface`).
     """
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
