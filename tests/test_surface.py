@@ -109,3 +109,15 @@ def test_jacobian_predicts_the_residuals(plane_sides):
     keep = (r != 0) & (r2 != 0)
     change, pred = (r2 - r)[keep], (J @ dz)[keep]
     assert np.linalg.norm(change - pred) < 0.04 * np.linalg.norm(change)
+
+
+def test_explained_surfaces_by_median_chi2():
+    """A surface is kept when the median chi2 of its usable pixels is under the
+    robust scale; one with no usable pixel is not."""
+    from colourhs.reconstruct.refine import explained_surfaces
+
+    chi2 = np.array([1.0, 2.0, 3.0, 100.0, 200.0, 5.0])
+    usable = np.array([1, 1, 1, 1, 1, 0], bool)
+    surface = np.array([0, 0, 0, 1, 1, 2])
+    assert explained_surfaces(chi2, usable, surface, 50.0).tolist() == [True, False, False]
+    assert explained_surfaces(chi2, usable, surface, 151.0).tolist() == [True, True, False]

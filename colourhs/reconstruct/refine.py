@@ -270,12 +270,14 @@ def explained_surfaces(chi2, usable, surface, scale) -> np.ndarray:
     (its pixels may still be filled as a hole of a surface around it)
     rather than reported at a depth the data do not support.
     """
+    from scipy.ndimage import median
+
     n = int(surface.max()) + 1 if len(surface) else 0
-    out = np.zeros(n, bool)
-    for k in range(n):
-        c = chi2[(surface == k) & usable]
-        out[k] = len(c) > 0 and float(np.median(c)) < scale
-    return out
+    if n == 0 or not usable.any():
+        return np.zeros(n, bool)
+    med = np.asarray(median(chi2[usable], surface[usable], np.arange(n)), float)
+    has = np.bincount(surface[usable], minlength=n) > 0  # no usable pixel: not explained
+    return has & (med < scale)
 
 
 def refine_surface(
