@@ -121,3 +121,29 @@ def test_explained_surfaces_by_median_chi2():
     surface = np.array([0, 0, 0, 1, 1, 2])
     assert explained_surfaces(chi2, usable, surface, 50.0).tolist() == [True, False, False]
     assert explained_surfaces(chi2, usable, surface, 151.0).tolist() == [True, True, False]
+
+
+def test_lm_stops_on_a_converged_surface(plane_sides, monkeypatch):
+    """Surfaces of one pixel (no triangle, so no data gradient) converge at once:
+    Levenberg-Marquardt must not raise their damping LM_TRIES times per step, one
+    sparse solve each (measured before refine.CONVERGED: 8 solves per step, 42 of a
+    640x480 board's 104). Here at most one solve per step beyond the first two."""
+    import colourhs.reconstruct.refine as rf
+
+    fr, ref, rays, gd, _, mask, sides = plane_sides
+    H, W = fr.rig.image.height, fr.rig.image.width
+    pix = np.flatnonzero(mask)
+    r, c = np.divmod(pix, W)
+    pick = pix[(r % 9 == 0) & (c % 9 == 0)][:5]  # isolated pixels: 5 surfaces
+    single = np.zeros(H * W, bool)
+    single[pick] = True
+    z = np.nan_to_num(gd)
+    graph = SurfaceGraph(single, (H, W), z, z / ref.K[0, 0])
+    assert graph.n_surfaces == 5
+    problem = rf._problem(graph, rays[graph.pix], sides, ref.centre, 8.0, 1e-3, rf.ROBUST)
+    solves = []
+    real = rf.spsolve
+    monkeypatch.setattr(rf, "spsolve", lambda A, b: solves.append(1) or real(A, b))
+    c, energy = problem.lm(problem.fit(z[graph.pix]), 4)
+    assert len(solves) <= 4 + 2, len(solves)
+    assert np.all(np.isfinite(c)) and energy[-1] <= energy[0]

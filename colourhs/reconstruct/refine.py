@@ -29,7 +29,9 @@ LM_UP, LM_DOWN, LM_TRIES = 10.0, 0.3, 8
 SEARCH_STEP = 0.005  # depth search step, relative (0.5 % of the depth)
 SEARCH_STEPS = 12  # at most 6 % of the depth either way
 SEARCH_FITS = 3  # LM steps that re-fit the shape at each depth of the search
+SEARCH_PARABOLAS = (1.0, 0.25)  # half-widths of the parabolas through E, in steps
 COARSE = 8.0  # the first fit's control spacing, in units of the final spacing
+CONVERGED = 1e-6  # predicted decrease of E (chi2 units) below which a surface has converged
 """Why these values hold on any rig:
 
 - ``CURVATURE_TOL_PER_M``: the prior's unit is a curvature (1/m) times the
@@ -39,6 +41,11 @@ COARSE = 8.0  # the first fit's control spacing, in units of the final spacing
   only decides where there are no data (measured: 10x weaker changed no
   statue by more than 0.08 mm).
 - ``LM_*``: dimensionless (relative to the Gauss-Newton diagonal).
+- ``CONVERGED``: E is in units of the noise (chi2), so 1e-6 is a millionth
+  of one pixel's noise-level residual on any rig: nothing any estimate
+  could notice. Without it a converged surface (measured: a one-pixel
+  surface, E ~ 1e-27) raised its damping ``LM_TRIES`` times per step, one
+  solve each: 42 of 104 solves of a 640x480 board.
 - ``SEARCH_STEP``: a relative depth, so the same at any working distance;
   the labelling's error on smooth surfaces is a few labels to a few per cent
   of the depth (measured 9 mm at 0.8 m on a noisy sheet; 28 mm at 0.6 m on an
@@ -53,7 +60,17 @@ COARSE = 8.0  # the first fit's control spacing, in units of the final spacing
   coarse 8x first 0.035 mm, p95 0.05 mm; 16x then 4x 0.10 mm.
 - ``SEARCH_FITS``: with 1 re-fitting step per depth the valley's energy was
   noisy enough to move a sheet by 1 mm; 3 converge the shape (measured on 4
-  random rigs, sheet 0.46 mm worst against 1.6).
+  random rigs, sheet 0.46 mm worst against 1.6). 2 fits and one parabola
+  measured as good under noise (4 random rigs x plane, sheet, statue, toy,
+  every nuisance on, pipeline calibration: sheet 0.23 / 0.08 / 0.23 / 0.03
+  mm against 0.33 / 0.34 / 0.29 / 0.03, the rest within 0.07 mm, 21 % less
+  time) but not on exact data, where E's minimum is sharp: plane 0.55 and
+  0.083 mm (seeds 1, 2 of tests/test_exact.py) against 0.037 and 0.035;
+  with 3 fits but one parabola 0.46 and 0.062, with 2 fits and both
+  parabolas 0.15 and 0.057. Exact data decide: 3 fits, two parabolas.
+- ``SEARCH_PARABOLAS``: half-widths (in steps) of the parabolas fitted
+  through E around the best depth, each through the previous vertex (see
+  ``SEARCH_FITS`` for the second one's measured worth).
 """
 
 
@@ -77,11 +94,16 @@ class _Problem:
         self.prior_surface = prior_surface
         self.n = graph.n_surfaces
 
-    def state(self, c, scale) -> tuple[np.ndarray, np.ndarray]:
+    def state(self, c, scale, info=None) -> tuple[np.ndarray, np.ndarray]:
         """Each pixel's robust energy rho (NaN where unusable) and each surface's
-        prior energy (n_surfaces,), at Geman-McClure ``scale``."""
-        _, rho, _ = hs_residuals(self.B @ c, self.graph, self.R, self.sides, self.c_ref,
-                                 jacobian=False, scale=scale)  # fmt: skip
+        prior energy (n_surfaces,), at Geman-McClure ``scale``; ``info`` from
+        :func:`hs_residuals` at ``c`` saves sampling the images again."""
+        if info is None:
+            _, rho, _ = hs_residuals(self.B @ c, self.graph, self.R, self.sides, self.c_ref,
+                                     jacobian=False, scale=scale)  # fmt: skip
+        else:
+            chi2 = info["chi2"]
+            rho = np.where(info["valid"], chi2 / (1.0 + chi2 / scale), np.nan)
         prior = self.prior(scale) @ c
         return rho, np.bincount(self.prior_surface, prior * prior, self.n)
 
@@ -137,7 +159,7 @@ class _Problem:
             Jz, r, info = hs_residuals(self.B @ c, self.graph, self.R, self.sides, self.c_ref,
                                        self.robust, scale=scale)  # fmt: skip
             sc = info["scale"]
-            s0 = self.state(c, sc)
+            s0 = self.state(c, sc, info)
             Dw = self.prior(sc)
             A = (self.B.T @ (Jz.T @ Jz) @ self.B + Dw.T @ Dw).tocsc()
             g = self.B.T @ (Jz.T @ r) + Dw.T @ (Dw @ c)
@@ -145,10 +167,15 @@ class _Problem:
             pending = np.ones(self.n, bool)
             for _ in range(LM_TRIES):
                 damp = sp.diags(lam[self.ctrl_surface] * diag)
-                cc = c + spsolve((A + damp).tocsc(), -g)
+                h = spsolve((A + damp).tocsc(), -g)
+                cc = c + h
                 s1 = self.state(cc, sc)
                 e0, e = self.compare([s0, s1])
                 better = pending & (e < e0)
+                # A surface whose quadratic model predicts no decrease worth
+                # noticing has converged: more damping cannot make it improve.
+                predicted = np.bincount(self.ctrl_surface, -h * (g + 0.5 * (A @ h)), self.n)
+                pending &= predicted > CONVERGED
                 c = np.where(better[self.ctrl_surface], cc, c)
                 s0 = (np.where(better[self.graph.surface], s1[0], s0[0]),
                       np.where(better, s1[1], s0[1]))  # fmt: skip
@@ -181,10 +208,11 @@ def depth_search(problem: _Problem, c, step=SEARCH_STEP, max_steps=SEARCH_STEPS)
     valley E still has a clear minimum, at the true depth (there alone the
     rows are rank 2 and the normals integrable). So every surface walks its
     own scale factor in relative steps of ``step`` (re-fitting its shape at
-    each depth with one LM step, the robust scale fixed so that energies
-    compare), downhill until E rises, at most ``max_steps`` steps; a
-    parabola through the best and its two neighbours, then one through the
-    vertex and points a quarter step either side, gives the minimum.
+    each depth with ``SEARCH_FITS`` LM steps, the robust scale fixed so that
+    energies compare), downhill until E rises, at most ``max_steps`` steps;
+    parabolas through the best depth and its neighbours ``SEARCH_PARABOLAS``
+    steps either side (a step, then a quarter step about the first vertex)
+    give the minimum.
 
     Returns the control points at each surface's best depth (shape re-fitted)
     and the factors (n_surfaces,) applied.
@@ -241,7 +269,7 @@ def depth_search(problem: _Problem, c, step=SEARCH_STEP, max_steps=SEARCH_STEPS)
         improved = active & (pick(list(zip(best, nxt, strict=True))) == nxt)
         best = np.where(improved, nxt, best)
         active = improved
-    for h in (step, step / 4.0):
+    for h in step * np.asarray(SEARCH_PARABOLAS):
         for side in (-1.0, 1.0):
             need = np.array([key(best[k] + side * h) not in tried[k] for k in range(n)])
             if need.any():
