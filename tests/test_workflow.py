@@ -231,9 +231,10 @@ class Run:
 def run(tiny_dataset, tmp_path_factory) -> Run:
     """The whole workflow, run once for real on a copy of the tiny dataset."""
     root = tmp_path_factory.mktemp("workflow")
-    data = root / "capture"
+    # Spaces in both paths: every rule's shell command must quote them.
+    data = root / "my capture"
     shutil.copytree(tiny_dataset, data)
-    workdir = root / "run"
+    workdir = root / "my run"
     workdir.mkdir()
     config = dict(RUN_CONFIG, datasets={NAME: {"path": str(data)}})
     (workdir / "run-config.yaml").write_text(yaml.safe_dump(config))
@@ -331,41 +332,59 @@ def test_reconstruction_parameter_reruns_reconstruction_and_downstream(run, chan
     assert not planned_jobs(run.workdir, run.configfiles)
 
 
-def test_failed_stage_leaves_no_partial_output_and_rerun_resumes(run):
+def test_malformed_capture_stops_the_run_before_any_stage(run, capsys):
+    """A truncated frame image: the run stops before any job with the validator's
+    message naming the file (common.smk's onstart), and nothing is written."""
     image = run.data / "scenes" / "sheet" / "frames" / "000001" / "cam1.png"
-    failed_depth = f"results/{NAME}/sheet/bayes_ph/depth/000001.h5"
-    downstream = (hs_jobs("sheet", "000001") | report_jobs("sheet")) - {
-        ("reconstruct_frame", failed_depth)
-    }
-    optional = vh_jobs("sheet", "000001") | VALIDATION  # reads the image (see above)
     before = snapshot(run.workdir)
     with replaced(image, lambda p: p.write_bytes(p.read_bytes()[:200]), run.workdir):
+        capsys.readouterr()
+        ok, _, updated = _snakemake(run.workdir, run.configfiles, dryrun=False, keep_going=True)
+        message = capsys.readouterr().out
+        after = snapshot(run.workdir)
+    assert not ok, "the run with a truncated frame image succeeded"
+    assert "malformed" in message and str(image) in message, message[-2000:]
+    assert after == before  # (updated lists what was planned, not written)
+    assert not planned_jobs(run.workdir, run.configfiles)
+
+
+def test_failed_stage_leaves_no_partial_output_and_rerun_resumes(run):
+    """A corrupt depth file (a stage's output, not a capture): its mesh job fails,
+    nothing after it runs, and the rerun does the failed job and what follows."""
+    depth = run.workdir / f"results/{NAME}/sheet/bayes_ph/depth/000001.h5"
+    failed_mesh = f"results/{NAME}/sheet/bayes_ph/mesh/000001.ply"
+    failed_jobs = hs_jobs("sheet", "000001") - {
+        ("reconstruct_frame", f"results/{NAME}/sheet/bayes_ph/depth/000001.h5")
+    }
+    downstream = (failed_jobs | report_jobs("sheet")) - {("frame_mesh", failed_mesh)}
+    before = snapshot(run.workdir)
+    original = depth.read_bytes()
+    with replaced(depth, lambda p: p.write_bytes(p.read_bytes()[:200]), run.workdir):
         ok, _, _ = _snakemake(run.workdir, run.configfiles, dryrun=False, keep_going=True)
         failed = snapshot(run.workdir)
-    assert not ok, "the run with a truncated frame image succeeded"
-    assert not (run.workdir / failed_depth).exists()
+    # The good depth file back, newer than what reads it (as when its stage reruns).
+    depth.write_bytes(original)
+    stamp = newest_output(run.workdir) + 1.0
+    os.utime(depth, (stamp, stamp))
+    assert not ok, "the run with a truncated depth file succeeded"
+    assert not (run.workdir / failed_mesh).exists()
     # Nothing downstream of the failure was written (the old files are still there, stale).
     assert not under(changed(before, failed), downstream)
     assert all(failed[p] == before[p] for p in under(before, downstream))
-    # Only the failed frame's jobs that do not read the broken image may have run.
-    assert changed(before, failed) - {failed_depth} <= under(
-        before.keys() | failed.keys(), optional
-    )
     assert not [p for p in failed if ".tmp" in Path(p).name]
 
-    # The image restored (its old mtime too): the rerun does the failed frame and what
-    # follows, nothing else.
+    # The rerun does the failed job and what follows, nothing else.
     plan = planned_jobs(run.workdir, run.configfiles)
-    assert_plan(plan, hs_jobs("sheet", "000001") | report_jobs("sheet"), optional=optional)
+    assert_plan(plan, failed_jobs | report_jobs("sheet"))
     ok, _, updated = _snakemake(run.workdir, run.configfiles, dryrun=False)
     assert ok
     assert set(updated) == {path for _, path in plan.outputs}
     after = snapshot(run.workdir)
     assert set(after) == set(run.first)  # every output exists again
     rerun = changed(failed, after)
-    assert failed_depth in rerun
+    assert failed_mesh in rerun
+    assert rerun - {depth.relative_to(run.workdir).as_posix()} <= under(after, plan.outputs)
     assert under(rerun, downstream) == under(after, downstream)  # all rewritten
-    assert rerun <= under(after, plan.outputs)
     assert not [p for p in after if ".tmp" in Path(p).name]
     assert not planned_jobs(run.workdir, run.configfiles)
 
@@ -375,3 +394,29 @@ def test_validation_follows_the_capture_files(run):
     with replaced(image, tweak_png, run.workdir):
         plan = planned_jobs(run.workdir, run.configfiles)
     assert plan.of("validate_dataset") == {path for _, path in VALIDATION}
+
+
+def test_object_mask_reruns_its_chromaticity_map(run):
+    """The chromaticity map reads the object's silhouette (the first frame's masks
+    of the scene that shows it): a changed mask reruns that map, and only it."""
+    import json
+
+    scenes = sorted((run.data / "scenes").iterdir())
+    obj, scene = next(
+        (json.loads((d / "scene.json").read_text()).get("chromatic"), d)
+        for d in scenes
+        if json.loads((d / "scene.json").read_text()).get("chromatic")
+    )
+    first = sorted((scene / "masks").iterdir())[0]
+
+    def tweak_mask(path: Path) -> None:  # one corner pixel flipped (masks are 8 bit)
+        img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+        img[0, 0] = 255 - img[0, 0]
+        assert cv2.imwrite(str(path), img)
+
+    with replaced(first / "cam2.png", tweak_mask, run.workdir):
+        plan = planned_jobs(run.workdir, run.configfiles)
+    calib = f"results/{NAME}/calib/chromaticity"
+    assert plan.of("chromaticity_map") == {f"{calib}/{obj}.h5", f"{calib}/{obj}.png"}
+    assert not (CALIBRATION_RULES - {"chromaticity_map"}) & set(plan.rules)
+    assert not planned_jobs(run.workdir, run.configfiles)

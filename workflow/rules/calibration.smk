@@ -18,7 +18,7 @@ rule marker_poses:
     params:
         dataset=lambda w: dataset_path(w.name),
     shell:
-        "$COLOURHS_PYTHON -m colourhs markers {params.dataset} {output} > {log} 2>&1"
+        '"$COLOURHS_PYTHON" -m colourhs markers {params.dataset:q} {output:q} > {log:q} 2>&1'
 
 
 rule crosstalk:
@@ -37,7 +37,7 @@ rule crosstalk:
     params:
         dataset=lambda w: dataset_path(w.name),
     shell:
-        "$COLOURHS_PYTHON -m colourhs crosstalk {params.dataset} {output} > {log} 2>&1"
+        '"$COLOURHS_PYTHON" -m colourhs crosstalk {params.dataset:q} {output:q} > {log:q} 2>&1'
 
 
 rule noise_model:
@@ -56,7 +56,7 @@ rule noise_model:
     params:
         dataset=lambda w: dataset_path(w.name),
     shell:
-        "$COLOURHS_PYTHON -m colourhs noise {params.dataset} {output} > {log} 2>&1"
+        '"$COLOURHS_PYTHON" -m colourhs noise {params.dataset:q} {output:q} > {log:q} 2>&1'
 
 
 rule photometric_maps:
@@ -83,13 +83,13 @@ rule photometric_maps:
         dataset=lambda w: dataset_path(w.name),
         options=lambda w, input: photometric_options(w.name, input.crosstalk),
     shell:
-        "$COLOURHS_PYTHON -m colourhs photometric {params.dataset} {input.poses} {output.h5} "
-        "--figure {output.png} {params.options} > {log} 2>&1"
+        '"$COLOURHS_PYTHON" -m colourhs photometric {params.dataset:q} {input.poses:q} {output.h5:q} '
+        "--figure {output.png:q} {params.options} > {log:q} 2>&1"
 
 
 rule chromaticity_map:
     input:
-        lambda w: chromatic_inputs(w.name, w.object) + chromatic_inputs(w.name, "white"),
+        lambda w: chromaticity_inputs(w.name, w.object),
     output:
         h5="results/{name}/calib/chromaticity/{object}.h5",
         png="results/{name}/calib/chromaticity/{object}.png",
@@ -107,5 +107,5 @@ rule chromaticity_map:
         dataset=lambda w: dataset_path(w.name),
         min_signal=lambda w: calibration(w.name)["chromaticity"]["min_signal"],
     shell:
-        "$COLOURHS_PYTHON -m colourhs chromaticity {params.dataset} {wildcards.object} {output.h5} "
-        "--figure {output.png} --min-signal {params.min_signal} > {log} 2>&1"
+        '"$COLOURHS_PYTHON" -m colourhs chromaticity {params.dataset:q} {wildcards.object} {output.h5:q} '
+        "--figure {output.png:q} --min-signal {params.min_signal} > {log:q} 2>&1"

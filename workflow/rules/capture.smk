@@ -17,4 +17,4 @@ rule validate_dataset:
     params:
         dataset=lambda w: dataset_path(w.name),
     shell:
-        "$COLOURHS_PYTHON -m colourhs validate {params.dataset} --summary {output} > {log} 2>&1"
+        '"$COLOURHS_PYTHON" -m colourhs validate {params.dataset:q} --summary {output:q} > {log:q} 2>&1'

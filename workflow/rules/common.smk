@@ -1,9 +1,18 @@
 import json
+import shlex
 import sys
 from pathlib import Path
 
-# Rules run the package with the Python that runs Snakemake (the project's venv).
-shell.prefix(f"export COLOURHS_PYTHON={sys.executable}; ")
+# Rules run the package with the Python that runs Snakemake (the project's
+# venv); with `--sdm conda` with the Python of the rule's conda environment
+# (workflow/envs/colourhs.yaml), which Snakemake activates before the command.
+from snakemake_interface_executor_plugins.settings import DeploymentMethod
+
+_settings = getattr(workflow, "deployment_settings", None)
+if _settings is not None and DeploymentMethod.CONDA in _settings.deployment_method:
+    shell.prefix("export COLOURHS_PYTHON=python; ")
+else:
+    shell.prefix(f"export COLOURHS_PYTHON={shlex.quote(sys.executable)}; ")
 DATASETS = config.get("only") or list(config["datasets"])
 _unknown = sorted(set(DATASETS) - set(config["datasets"]))
 if _unknown:
@@ -51,6 +60,19 @@ def capture_files(name):
         | set(_files(name, "scenes/*/scene.json"))
         | set(_files(name, "scenes/*/gt/*.ply"))
     )
+
+
+def chromaticity_inputs(name, obj):
+    """What `colourhs chromaticity` reads: rig.json, the object's and the white
+    reference's captures, every scene.json (to find the object's scene) and
+    the first frame's masks of the scenes that show the object (its silhouette,
+    chromaticity.object_silhouette)."""
+    out = chromatic_inputs(name, obj) + _files(name, f"chromatic/white/*/*.png")
+    out += _files(name, "scenes/*/scene.json")
+    for scene, (frames, chromatic) in scene_info(name).items():
+        if chromatic == obj and frames:
+            out += _files(name, f"scenes/{scene}/masks/{frames[0]}/*.png")
+    return out
 
 
 def silhouette_inputs(name, scene, frame):
@@ -127,7 +149,7 @@ def unmix_crosstalk(name):
 
 def photometric_options(name, crosstalk):
     """Command-line options of `colourhs photometric` (plain values, no arrays)."""
-    opts = [f"--crosstalk {crosstalk}"] if crosstalk else []
+    opts = [f"--crosstalk {shlex.quote(crosstalk)}"] if crosstalk else []
     for key, value in sorted(calibration(name)["photometric"].items()):
         if value is not None:
             opts.append(f"--{key.replace('_', '-')} {value}")
@@ -216,7 +238,7 @@ def reconstruct_options(name, scene, variant):
     """Command-line options of `colourhs reconstruct` (plain values)."""
     opts = [f"--method {VARIANTS[variant]['method']}"]
     for key, path in variant_calibration(name, scene, variant).items():
-        opts.append(f"--{key} {path}")
+        opts.append(f"--{key} {shlex.quote(path)}")
     for key, value in sorted(
         config.get("reconstruction", {}).get("params", {}).items()
     ):
@@ -316,7 +338,7 @@ def figure_options(name, scene):
         ]
     if inp["animation"]:
         opts += ["--animate"] + [f"{f}={p}" for f, p in zip(frames, inp["animation"])]
-    return " ".join(opts)
+    return shlex.join(opts)
 
 
 def report_inputs(name):
@@ -339,3 +361,37 @@ def report_targets(name):
     """The report, requested once the dataset's scenes are known (after synthesis)."""
     selected_scenes(name)
     return [f"reports/{name}/index.html"]
+
+
+def unvalidated_captures():
+    """Datasets (given by `path`) whose validation summary is missing or older than
+    one of their capture files."""
+    out = []
+    for name in DATASETS:
+        if "synth" in config["datasets"][name]:
+            continue  # rendered by the workflow, then validated by its rule
+        summary = Path(f"results/{name}/capture/summary.json")
+        done = summary.stat().st_mtime if summary.exists() else -1.0
+        if any(Path(f).stat().st_mtime > done for f in capture_files(name)):
+            out.append(name)
+    return out
+
+
+# A malformed dataset stops the run before any stage, with the validator's
+# message (the file and the problem). Checked here rather than by making every
+# rule depend on validate_dataset's summary: as an `ancient` input that stops
+# Snakemake 9.27 from rerunning a changed image's own jobs (it masks the
+# dependents of a job that must run, then skips them for the ancient input), and
+# as a plain input every stage would rerun whenever any capture file changes.
+onstart:
+    from snakemake.exceptions import WorkflowError
+
+    from colourhs.capture import CaptureFormatError, validate
+
+    for _name in unvalidated_captures():
+        try:
+            validate(dataset_path(_name))
+        except CaptureFormatError as e:
+            raise WorkflowError(
+                f"dataset {_name!r} is malformed, no stage was run: {e}"
+            )

@@ -24,12 +24,12 @@ rule evaluate_frame:
         mem_mb=3000,
         runtime=10,
     params:
-        gt=lambda w, input: f"--gt {input.gt}" if input.gt else "",
+        gt=lambda w, input: f"--gt {shlex.quote(str(input.gt))}" if input.gt else "",
         options=lambda w: cli_options(section("evaluation")),
     shell:
-        "$COLOURHS_PYTHON -m colourhs evaluate {input.depth} {input.mesh} {output.json} {params.gt} "
-        "--coloured {output.ply} --scene {wildcards.scene} --frame {wildcards.frame} "
-        "--variant {wildcards.variant} {params.options} > {log} 2>&1"
+        '"$COLOURHS_PYTHON" -m colourhs evaluate {input.depth:q} {input.mesh:q} {output.json:q} {params.gt} '
+        "--coloured {output.ply:q} --scene {wildcards.scene} --frame {wildcards.frame} "
+        "--variant {wildcards.variant} {params.options} > {log:q} 2>&1"
 
 
 rule metrics_table:
@@ -50,4 +50,4 @@ rule metrics_table:
         mem_mb=1000,
         runtime=5,
     shell:
-        "$COLOURHS_PYTHON -m colourhs metrics {output} {input} > {log} 2>&1"
+        '"$COLOURHS_PYTHON" -m colourhs metrics {output:q} {input:q} > {log:q} 2>&1'

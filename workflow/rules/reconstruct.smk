@@ -26,7 +26,9 @@ rule reconstruct_frame:
     params:
         dataset=lambda w: dataset_path(w.name),
         options=lambda w: reconstruct_options(w.name, w.scene, w.variant),
-        hull=lambda w, input: f"--hull {input.hull}" if input.hull else "",
+        hull=lambda w, input: (
+            f"--hull {shlex.quote(str(input.hull))}" if input.hull else ""
+        ),
     shell:
-        "NUMBA_NUM_THREADS={threads} $COLOURHS_PYTHON -m colourhs reconstruct {params.dataset} {wildcards.scene} {wildcards.frame} "
-        "{output} {params.options} {params.hull} > {log} 2>&1"
+        'NUMBA_NUM_THREADS={threads} "$COLOURHS_PYTHON" -m colourhs reconstruct {params.dataset:q} {wildcards.scene} {wildcards.frame} '
+        "{output:q} {params.options} {params.hull} > {log:q} 2>&1"

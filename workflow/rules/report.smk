@@ -15,7 +15,7 @@ rule effective_config:
     params:
         config=lambda w: json.dumps(config, sort_keys=True),
     shell:
-        "$COLOURHS_PYTHON -m colourhs config {output} {params.config:q} > {log} 2>&1"
+        '"$COLOURHS_PYTHON" -m colourhs config {output:q} {params.config:q} > {log:q} 2>&1'
 
 
 rule scene_figures:
@@ -42,7 +42,7 @@ rule scene_figures:
     params:
         options=lambda w: figure_options(w.name, w.scene),
     shell:
-        "$COLOURHS_PYTHON -m colourhs figures {output} {params.options} > {log} 2>&1"
+        '"$COLOURHS_PYTHON" -m colourhs figures {output:q} {params.options} > {log:q} 2>&1'
 
 
 rule report:
@@ -64,10 +64,11 @@ rule report:
         runtime=5,
     params:
         figures=lambda w: " ".join(
-            f"{Path(d).name}={d}" for d in report_inputs(w.name)["figures"]
+            shlex.quote(f"{Path(d).name}={d}")
+            for d in report_inputs(w.name)["figures"]
         ),
     shell:
-        "$COLOURHS_PYTHON -m colourhs report {output} --name {wildcards.name} "
-        "--metrics {input.metrics} --config {input.config} "
-        "--calibration {input.calibration} --figures {params.figures} "
-        "--benchmarks benchmarks/snakemake > {log} 2>&1"
+        '"$COLOURHS_PYTHON" -m colourhs report {output:q} --name {wildcards.name} '
+        "--metrics {input.metrics:q} --config {input.config:q} "
+        "--calibration {input.calibration:q} --figures {params.figures} "
+        "--benchmarks benchmarks/snakemake > {log:q} 2>&1"

@@ -25,8 +25,8 @@ rule visual_hull:
         dataset=lambda w: dataset_path(w.name),
         options=lambda w: cli_options(section("surfaces").get("hull", {})),
     shell:
-        "$COLOURHS_PYTHON -m colourhs hull {params.dataset} {wildcards.scene} {wildcards.frame} "
-        "{output.ply} --depth {output.depth} {params.options} > {log} 2>&1"
+        '"$COLOURHS_PYTHON" -m colourhs hull {params.dataset:q} {wildcards.scene} {wildcards.frame} '
+        "{output.ply:q} --depth {output.depth:q} {params.options} > {log:q} 2>&1"
 
 
 rule frame_mesh:
@@ -50,8 +50,10 @@ rule frame_mesh:
         mem_mb=3000,
         runtime=10,
     params:
-        hull=lambda w, input: f"--hull {input.hull}" if input.hull else "",
+        hull=lambda w, input: (
+            f"--hull {shlex.quote(str(input.hull))}" if input.hull else ""
+        ),
         options=lambda w: cli_options(section("surfaces").get("mesh", {})),
     shell:
-        "$COLOURHS_PYTHON -m colourhs mesh {input.depth} {output} {params.hull} {params.options} "
-        "> {log} 2>&1"
+        '"$COLOURHS_PYTHON" -m colourhs mesh {input.depth:q} {output:q} {params.hull} {params.options} '
+        "> {log:q} 2>&1"

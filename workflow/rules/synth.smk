@@ -18,5 +18,5 @@ checkpoint synth_dataset:
         preset=lambda w: synth_settings(w.name)["preset"],
         seed=lambda w: synth_settings(w.name).get("seed", 0),
     shell:
-        "$COLOURHS_PYTHON -m colourhs synth --preset {params.preset} --seed {params.seed} "
-        "--workers {threads} {output} 2> {log}"
+        '"$COLOURHS_PYTHON" -m colourhs synth --preset {params.preset} --seed {params.seed} '
+        "--workers {threads} {output:q} 2> {log:q}"
