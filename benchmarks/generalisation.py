@@ -121,6 +121,10 @@ def calibration_errors(data: Path, files: dict) -> dict:
     err = mu_map_errors(est, read_mu_maps(data / "gt" / "photometric.h5"), rig)
     cal = err[err["method"] == "calibrated"]["rms_log_error"]
     out = {"mu_rms_log_worst": float(cal.max()), "mu_rms_log_median": float(cal.median())}
+    # How far the rig is from mu = 1 (what bayes_nocalib assumes): the ablation's
+    # bayes_nocalib error grows with it (see the summary's ablation_links).
+    nocal = err[err["method"] == "no calibration"]["rms_log_error"]
+    out["mu_uncalibrated_rms_log_worst"] = float(nocal.max())
     chroma = []
     for key, path in files.items():
         if not key.startswith("chroma/"):
@@ -234,14 +238,22 @@ def summarise(table: pd.DataFrame) -> dict:
                 "target": TARGETS.get((scene, variant, m)),
             }
         out["scenes"].setdefault(scene, {})[variant] = entry
-    order = {}
+    order, links = {}, {}
     for (seed, scene), g in table.groupby(["seed", "scene"]):
         d = dict(zip(g["variant"], g["depth_median_mm"].astype(float), strict=True))
         chain = d["vh"] > d["ml_full"] > d["bayes_nocalib"] > d["bayes_ph"]
         order[f"{seed}/{scene}"] = bool(chain and d["bayes_ph"] >= d["bayes_full"] * 0.999)
+        # Which links of the order break (e.g. "ml_full > bayes_nocalib").
+        pairs = [("vh", "ml_full"), ("ml_full", "bayes_nocalib"), ("bayes_nocalib", "bayes_ph")]
+        broken = [f"{a} > {b}" for a, b in pairs if not d[a] > d[b]]
+        if not d["bayes_ph"] >= d["bayes_full"] * 0.999:
+            broken.append("bayes_ph >= bayes_full")
+        links[f"{seed}/{scene}"] = broken
     out["ablation_order_holds"] = order
+    out["ablation_links_broken"] = links
     out["ablation_order_all_seeds"] = all(order.values())
-    cal = table.groupby("seed")[["mu_rms_log_worst", "chromaticity_median_rel"]].first()
+    cols = ["mu_rms_log_worst", "mu_uncalibrated_rms_log_worst", "chromaticity_median_rel"]
+    cal = table.groupby("seed")[[c for c in cols if c in table]].first()
     out["calibration"] = {
         c: {"median": float(cal[c].median()), "worst": float(cal[c].max())}
         for c in cal
