@@ -37,6 +37,17 @@ include: "workflow/rules/report.smk"
 report: "workflow/report/workflow.rst"
 
 
+# A malformed dataset stops the run before any stage, with the validator's
+# message (the file and the problem): common.smk's check_captures. Checked here
+# rather than by making every rule depend on validate_dataset's summary: as an
+# `ancient` input that stops Snakemake 9.27 from rerunning a changed image's own
+# jobs (it masks the dependents of a job that must run, then skips them for the
+# ancient input), and as a plain input every stage would rerun whenever any
+# capture file changes.
+onstart:
+    check_captures()
+
+
 rule all:
     default_target: True
     input:

@@ -377,21 +377,15 @@ def unvalidated_captures():
     return out
 
 
-# A malformed dataset stops the run before any stage, with the validator's
-# message (the file and the problem). Checked here rather than by making every
-# rule depend on validate_dataset's summary: as an `ancient` input that stops
-# Snakemake 9.27 from rerunning a changed image's own jobs (it masks the
-# dependents of a job that must run, then skips them for the ancient input), and
-# as a plain input every stage would rerun whenever any capture file changes.
-onstart:
+def check_captures():
+    """Validate every path dataset that unvalidated_captures() names; a malformed
+    one raises a WorkflowError with the validator's message (file and problem)."""
     from snakemake.exceptions import WorkflowError
 
     from colourhs.capture import CaptureFormatError, validate
 
-    for _name in unvalidated_captures():
+    for name in unvalidated_captures():
         try:
-            validate(dataset_path(_name))
+            validate(dataset_path(name))
         except CaptureFormatError as e:
-            raise WorkflowError(
-                f"dataset {_name!r} is malformed, no stage was run: {e}"
-            )
+            raise WorkflowError(f"dataset {name!r} is malformed, no stage was run: {e}")
