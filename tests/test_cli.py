@@ -86,6 +86,25 @@ def test_workflow_lint_is_clean(tmp_path):
     assert "Lints for" not in done.stdout + done.stderr
 
 
+def test_missing_dataset_stops_the_run_before_any_job(tmp_path):
+    """A configured dataset path that does not exist: the run stops at once with the
+    path named (Snakefile onstart), and writes nothing."""
+    config = {"datasets": {"mine": {"path": str(tmp_path / "nowhere")}}, "only": ["mine"]}
+    cfg = tmp_path / "cfg.yaml"
+    cfg.write_text(yaml.safe_dump(config))
+    work = tmp_path / "work"
+    done = subprocess.run(
+        [sys.executable, "-m", "snakemake", "--cores", "1", "--snakefile",
+         str(PROJECT_ROOT / "Snakefile"), "--directory", str(work), "--configfile",
+         str(PROJECT_ROOT / "config.yaml"), str(cfg)],
+        capture_output=True, text=True,
+    )  # fmt: skip
+    out = done.stdout + done.stderr
+    assert done.returncode != 0
+    assert "nowhere" in out and "dataset folder not found" in out, out[-2000:]
+    assert not (work / "results").exists()
+
+
 def test_invalid_config_names_the_key(tmp_path):
     config = yaml.safe_load((PROJECT_ROOT / "config.yaml").read_text())
     config["datasets"]["demo"]["synth"]["preset"] = "huge"

@@ -118,6 +118,25 @@ for _name, _entry in config["datasets"].items():
         raise ValueError(f"config: datasets.{_name}: needs `path` (or a `synth` entry)")
 
 
+def _check_layout(name):
+    """A path dataset's folders, rig.json and scene.json files against the capture
+    format, before the jobs are planned (cheap: no image is opened; the images are
+    checked by check_captures when the run starts)."""
+    from colourhs.capture import CaptureFormatError, open_dataset
+
+    try:
+        open_dataset(dataset_path(name), check_images=False)
+    except CaptureFormatError as e:
+        raise ValueError(
+            f"dataset {name!r} is malformed, no stage was run: {e}"
+        ) from None
+
+
+for _name in DATASETS:
+    if "synth" not in config["datasets"][_name]:
+        _check_layout(_name)
+
+
 CALIBRATION_DEFAULTS = {
     "unmix_crosstalk": True,
     "photometric": {},
@@ -371,8 +390,12 @@ def unvalidated_captures():
         if "synth" in config["datasets"][name]:
             continue  # rendered by the workflow, then validated by its rule
         summary = Path(f"results/{name}/capture/summary.json")
-        done = summary.stat().st_mtime if summary.exists() else -1.0
-        if any(Path(f).stat().st_mtime > done for f in capture_files(name)):
+        if not summary.exists():  # also a wrong path: validate names what is missing
+            out.append(name)
+        elif any(
+            Path(f).stat().st_mtime > summary.stat().st_mtime
+            for f in capture_files(name)
+        ):
             out.append(name)
     return out
 
