@@ -92,7 +92,7 @@ def _noise(args) -> int:
 def _crosstalk(args) -> int:
     from colourhs.crosstalk import calibrate_crosstalk
 
-    result = calibrate_crosstalk(args.dataset, args.out)
+    result = calibrate_crosstalk(args.dataset, args.out, poses_csv=args.poses)
     print(json.dumps(result, indent=2))
     return 0
 
@@ -268,6 +268,13 @@ def build_parser() -> argparse.ArgumentParser:
     x = sub.add_parser("crosstalk", help="calibrate each camera's channel mixing matrix")
     x.add_argument("dataset", type=Path)
     x.add_argument("out", type=Path, help="JSON file to write")
+    x.add_argument(
+        "--poses",
+        type=Path,
+        default=None,
+        help="the markers stage's board poses: also fit the LED factor (the rig's own "
+        "lights' channel mixing relative to the chromatic light)",
+    )
     x.set_defaults(func=_crosstalk)
 
     ph = sub.add_parser("photometric", help="mu maps of the Helmholtz cameras (eqs. 6-8)")

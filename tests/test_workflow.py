@@ -284,15 +284,14 @@ def test_board_image_reruns_photometric_maps_and_downstream(run):
         ("photometric_maps", f"{calib}/photometric.h5"),
         ("photometric_maps", f"{calib}/photometric.png"),
         ("noise_model", f"{calib}/noise.json"),  # estimated from the board images too
+        ("crosstalk", f"{calib}/crosstalk.json"),  # its LED factor: from the board poses
         *all_hs_jobs(),  # bayes_ph reads photometric.h5; vh reads no calibration
         *report_jobs("plane", "sheet"),
     }
     assert_plan(plan, required, optional=VALIDATION)
     assert plan.rules["reconstruct_frame"] == 4
     assert plan.rules["frame_mesh"] == plan.rules["evaluate_frame"] == 4
-    assert not {"crosstalk", "chromaticity_map", "visual_hull", "effective_config"} & set(
-        plan.rules
-    )
+    assert not {"chromaticity_map", "visual_hull", "effective_config"} & set(plan.rules)
     assert not [p for p in plan.of("frame_mesh") if "/vh/" in p]
     # Undone: nothing to do again.
     assert not planned_jobs(run.workdir, run.configfiles)

@@ -23,7 +23,8 @@ rule marker_poses:
 
 rule crosstalk:
     input:
-        lambda w: chromatic_inputs(w.name, "white"),
+        images=lambda w: chromatic_inputs(w.name, "white") + photometric_inputs(w.name),
+        poses="results/{name}/calib/marker_poses.csv",
     output:
         "results/{name}/calib/crosstalk.json",
     log:
@@ -37,7 +38,7 @@ rule crosstalk:
     params:
         dataset=lambda w: dataset_path(w.name),
     shell:
-        '"$COLOURHS_PYTHON" -m colourhs crosstalk {params.dataset:q} {output:q} > {log:q} 2>&1'
+        '"$COLOURHS_PYTHON" -m colourhs crosstalk {params.dataset:q} {output:q} --poses {input.poses:q} > {log:q} 2>&1'
 
 
 rule noise_model:
