@@ -20,6 +20,7 @@ from colourhs.reconstruct.surface import (
     SurfaceGraph,
     fill_holes,
     hs_residuals,
+    robust_energy,
     surface_normals,
 )
 
@@ -102,8 +103,7 @@ class _Problem:
             _, rho, _ = hs_residuals(self.B @ c, self.graph, self.R, self.sides, self.c_ref,
                                      jacobian=False, scale=scale)  # fmt: skip
         else:
-            chi2 = info["chi2"]
-            rho = np.where(info["valid"], chi2 / (1.0 + chi2 / scale), np.nan)
+            rho = robust_energy(info["chi2"], info["valid"], scale)
         prior = self.prior(scale) @ c
         return rho, np.bincount(self.prior_surface, prior * prior, self.n)
 

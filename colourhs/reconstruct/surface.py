@@ -214,6 +214,11 @@ def _triangle_rows(X, R, s, var, v, ds, dv, valid, nb_a, nb_b, weights, count, r
                 vals[row, 2] = (gx * dbx + gy * dby + gz * dbz) * wt
 
 
+def robust_energy(chi2, usable, scale):
+    """Geman-McClure rho(chi2) = chi2 / (1 + chi2 / scale) per pixel, NaN where unusable."""
+    return np.where(usable, chi2 / (1.0 + chi2 / scale), np.nan)
+
+
 def hs_residuals(
     z,
     graph: SurfaceGraph,
@@ -268,9 +273,8 @@ def hs_residuals(
         level = max(1.0, float(np.median(used)) / (P - 2.0 / 3.0)) if len(used) else 1.0
         scale = level * robust**2 * P
     if not jacobian:
-        # Geman-McClure, rho(x) = x / (1 + x / scale); NaN where unusable.
-        rho = np.where(usable, chi2 / (1.0 + chi2 / scale), np.nan)
-        return None, rho, {"valid": usable, "chi2": chi2, "scale": scale}
+        return None, robust_energy(chi2, usable, scale), {"valid": usable, "chi2": chi2,
+                                                          "scale": scale}  # fmt: skip
     if weights is None:
         weights = 1.0 / (1.0 + chi2 / scale) ** 2  # rho'(chi2): IRLS
     w = np.ascontiguousarray(weights, float)
