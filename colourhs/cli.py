@@ -218,8 +218,9 @@ def _config(args) -> int:
 
 
 RECONSTRUCT_PARAMS = {"reference": str, "n_labels": int, "alpha": float, "tau": float,
-                      "working_radius_m": float, "data_weight": float, "max_cost": float,
-                      "cost_scale": float, "erode_px": int, "edge_m": float,
+                      "working_radius": float, "working_radius_m": float,
+                      "data_weight": float, "max_cost": float, "cost_scale": float,
+                      "erode_px": int, "edge_m": float,
                       "refine_passes": int, "min_component": int, "link_m": float,
                       "surface_iterations": int, "spline_px": float}  # fmt: skip
 

