@@ -563,6 +563,12 @@ def _parse_camera(value: Any, index: int, path: Path) -> Camera:
             f"{where}.dist has {dist.size} coefficients, expected one of "
             f"{', '.join(map(str, DIST_LENGTHS))}",
         )
+    if dist.size == 14 and np.any(dist[12:] != 0):
+        raise CaptureFormatError(
+            path,
+            f"{where}.dist: the tilted-sensor model (tau_x, tau_y = {dist[12:].tolist()}) is "
+            "not supported; use at most 12 coefficients (or 14 with the last two zero)",
+        )
     dist = np.concatenate([dist, np.zeros(max(0, 5 - dist.size))])
     R = _float_array(_field(obj, "R", where, path), (3, 3), f"{where}.R", path)
     _check_rotation(R, f"{where}.R", path)

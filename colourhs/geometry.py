@@ -6,6 +6,16 @@ rotation ``R`` (3, 3) and translation ``t`` (3,) in metres, so that a world
 point X maps to camera coordinates ``R @ X + t``) and is vectorised over
 leading dimensions. Pixel coordinates follow OpenCV: (u, v) = (column, row),
 and pixel (0, 0) is the *centre* of the top-left pixel.
+
+The camera model, one for the whole package: OpenCV's distortion with up to
+12 coefficients (k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4: radial,
+rational, tangential and thin prism; :func:`distort`), then ``K`` with its
+skew ``K[0, 1]`` (which ``cv2.projectPoints`` and ``cv2.undistortPoints``
+ignore: :func:`project` and :func:`normalised_coordinates` apply it
+themselves). The tilted-sensor model (14 coefficients with a non-zero tau)
+is refused (:func:`model_coefficients`). The compiled kernels inline the same
+formulas (:func:`colourhs.reconstruct.dataterm.to_pixel`; a test pins them
+to :func:`project`).
 """
 
 from __future__ import annotations
@@ -55,10 +65,51 @@ def look_at(
     return R, -R @ c
 
 
+N_COEFFICIENTS = 12  # k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4
+
+
+def model_coefficients(dist) -> np.ndarray:
+    """The 12 distortion coefficients of the package's camera model (zero-padded).
+
+    Raises ValueError for a tilted sensor (coefficients 13-14, tau_x and
+    tau_y, not zero): no stage models it.
+    """
+    d = np.zeros(0) if dist is None else np.asarray(dist, float).ravel()
+    if d.size > N_COEFFICIENTS and np.any(d[N_COEFFICIENTS:] != 0):
+        raise ValueError(
+            f"tilted-sensor distortion (tau_x, tau_y = {d[N_COEFFICIENTS:].tolist()}) "
+            "is not supported: give at most 12 coefficients"
+        )
+    out = np.zeros(N_COEFFICIENTS)
+    out[: min(d.size, N_COEFFICIENTS)] = d[:N_COEFFICIENTS]
+    return out
+
+
+def distort(x: np.ndarray, y: np.ndarray, dist) -> tuple[np.ndarray, np.ndarray]:
+    """OpenCV's distortion of normalised coordinates (x/z, y/z): radial k1-k3
+    over the rational k4-k6, tangential p1, p2 and thin prism s1-s4."""
+    # Python floats keep float32 coordinates float32 (the hull's millions of points).
+    k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4 = map(float, model_coefficients(dist))
+    r2 = x * x + y * y
+    r4 = r2 * r2
+    radial = (1 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1 + r2 * (k4 + r2 * (k5 + r2 * k6)))
+    xy2 = 2 * x * y
+    xd = x * radial + p1 * xy2 + p2 * (r2 + 2 * x * x) + s1 * r2 + s2 * r4
+    yd = y * radial + p1 * (r2 + 2 * y * y) + p2 * xy2 + s3 * r2 + s4 * r4
+    return xd, yd
+
+
+def pixels_of(x: np.ndarray, y: np.ndarray, K: np.ndarray, dist) -> tuple[np.ndarray, np.ndarray]:
+    """Pixels (u, v) of normalised camera coordinates (x/z, y/z): :func:`distort`, then K."""
+    (fx, sk, cx), (_, fy, cy) = np.asarray(K, float)[:2].tolist()
+    xd, yd = distort(x, y, dist)
+    return fx * xd + sk * yd + cx, fy * yd + cy
+
+
 def project(
     X: np.ndarray, K: np.ndarray, dist: np.ndarray, R: np.ndarray, t: np.ndarray
 ) -> np.ndarray:
-    """Project world points into pixels with the OpenCV camera model.
+    """Project world points into pixels with the camera model (module docstring).
 
     Parameters
     ----------
@@ -69,23 +120,29 @@ def project(
     -------
     (..., 2) pixel coordinates (u, v). Points behind the camera get NaN.
     """
-    X = np.asarray(X, float)
-    shape = X.shape[:-1]
-    pts = X.reshape(-1, 3)
-    rvec, _ = cv2.Rodrigues(np.asarray(R, float))
-    uv, _ = cv2.projectPoints(pts, rvec, np.asarray(t, float), np.asarray(K, float), _dist(dist))
-    uv = uv.reshape(-1, 2)
-    behind = world_to_camera(pts, R, t)[:, 2] <= 0
-    uv[behind] = np.nan
-    return uv.reshape(*shape, 2)
+    Xc = world_to_camera(X, R, t)
+    z = Xc[..., 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u, v = pixels_of(Xc[..., 0] / z, Xc[..., 1] / z, K, dist)
+    uv = np.stack([u, v], axis=-1)
+    uv[z <= 0] = np.nan
+    return uv
 
 
 def normalised_coordinates(uv: np.ndarray, K: np.ndarray, dist: np.ndarray) -> np.ndarray:
-    """Undistorted normalised image coordinates (x/z, y/z) of pixels ``uv`` (..., 2)."""
-    uv = np.asarray(uv, float)
+    """Undistorted normalised image coordinates (x/z, y/z) of pixels ``uv`` (..., 2).
+
+    The inverse of :func:`pixels_of`: the skew is taken off first, then
+    ``cv2.undistortPoints`` (iterative, to 1e-14) inverts the distortion.
+    """
+    uv = np.array(uv, float)
     shape = uv.shape[:-1]
+    K = np.asarray(K, float)
+    uv[..., 0] -= K[0, 1] * (uv[..., 1] - K[1, 2]) / K[1, 1]
+    K0 = K.copy()
+    K0[0, 1] = 0.0
     pts = uv.reshape(-1, 1, 2)
-    xy = cv2.undistortPoints(pts, np.asarray(K, float), _dist(dist), criteria=_UNDISTORT_CRITERIA)
+    xy = cv2.undistortPoints(pts, K0, model_coefficients(dist), criteria=_UNDISTORT_CRITERIA)
     return xy.reshape(*shape, 2)
 
 
@@ -193,10 +250,3 @@ def vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
         np.add.at(n, triangles[:, k], face)
     norm = np.linalg.norm(n, axis=1, keepdims=True)
     return np.divide(n, norm, out=np.zeros_like(n), where=norm > 0)
-
-
-def _dist(dist) -> np.ndarray:
-    d = np.zeros(5) if dist is None else np.asarray(dist, float).ravel()
-    if d.size < 4:
-        d = np.concatenate([d, np.zeros(4 - d.size)])
-    return d

@@ -51,7 +51,13 @@ import cv2
 import numpy as np
 
 from colourhs.capture import Camera, CaptureFormatError, open_dataset, read_image, read_mask
-from colourhs.geometry import backproject, normalised_coordinates, pixel_grid, vertex_normals
+from colourhs.geometry import (
+    backproject,
+    normalised_coordinates,
+    pixel_grid,
+    pixels_of,
+    vertex_normals,
+)
 from colourhs.io import atomic_output, sha256_files
 
 __all__ = [
@@ -293,33 +299,6 @@ def _frustum_clearance(Xc: np.ndarray, inner: np.ndarray, outer: np.ndarray) -> 
     return np.maximum(inside, outside)
 
 
-def _distorted_pixels(x: np.ndarray, y: np.ndarray, cam: Camera) -> tuple[np.ndarray, np.ndarray]:
-    """Pixels (u, v) of normalised camera coordinates (x/z, y/z), the OpenCV camera model.
-
-    Implements OpenCV's radial (k1..k6), tangential (p1, p2) and thin-prism
-    (s1..s4) terms in numpy (a few times faster than ``cv2.projectPoints``
-    on millions of points, float32); tilted sensors (14 coefficients) go
-    through ``cv2.projectPoints``. Like it, ignores the skew ``K[0, 1]``.
-    """
-    K = np.asarray(cam.K, float)
-    d = np.zeros(12)
-    dist = np.asarray(cam.dist, float).ravel()
-    if len(dist) > 12 and np.any(dist[12:] != 0):
-        pts = np.stack([x, y, np.ones_like(x)], -1).astype(np.float64)
-        uv, _ = cv2.projectPoints(pts, np.zeros(3), np.zeros(3), K, dist)
-        uv = uv.reshape(-1, 2)
-        return uv[:, 0], uv[:, 1]
-    d[: min(len(dist), 12)] = dist[:12]
-    k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4 = (float(c) for c in d)
-    r2 = x * x + y * y
-    r4 = r2 * r2
-    radial = (1 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1 + r2 * (k4 + r2 * (k5 + r2 * k6)))
-    xy2 = 2 * x * y
-    xd = x * radial + p1 * xy2 + p2 * (r2 + 2 * x * x) + s1 * r2 + s2 * r4
-    yd = y * radial + p1 * (r2 + 2 * y * y) + p2 * xy2 + s3 * r2 + s4 * r4
-    return float(K[0, 0]) * xd + float(K[0, 2]), float(K[1, 1]) * yd + float(K[1, 2])
-
-
 def _camera_distance(Xc, cam, sdf, box):
     """Silhouette signed distance of points in one camera, metres at their depth.
 
@@ -338,7 +317,7 @@ def _camera_distance(Xc, cam, sdf, box):
     ok = (z > 1e-6) & (x >= box[0]) & (x <= box[1]) & (y >= box[2]) & (y <= box[3])
     dist = np.zeros(z.shape, np.float32)
     idx = np.flatnonzero(ok)
-    u, v = _distorted_pixels(x[idx], y[idx], cam)
+    u, v = pixels_of(x[idx], y[idx], cam.K, cam.dist)
     inside = (u >= -0.5) & (u <= W - 0.5) & (v >= -0.5) & (v <= H - 0.5)
     idx, u, v = idx[inside], u[inside], v[inside]
     ok[:] = False

@@ -39,7 +39,7 @@ from scipy.ndimage import map_coordinates
 from scipy.optimize import least_squares
 
 from colourhs.capture import Board, Camera, Rig, open_dataset, read_image
-from colourhs.geometry import normalised_coordinates, project, triangulate
+from colourhs.geometry import normalised_coordinates, pixels_of, project, triangulate
 from colourhs.io import atomic_output
 
 __all__ = [
@@ -196,11 +196,10 @@ class _Lens:
         if self.camera is None:
             return np.asarray(ideal, float)
         ideal = np.asarray(ideal, float)
-        shape = ideal.shape
-        h = np.concatenate([ideal.reshape(-1, 2), np.ones((ideal.size // 2, 1))], axis=1)
-        rays = h @ self.Kinv.T
-        uv, _ = cv2.projectPoints(rays, np.zeros(3), np.zeros(3), self.K, self.dist)
-        return uv.reshape(shape)
+        h = np.concatenate([ideal, np.ones(ideal.shape[:-1] + (1,))], axis=-1)
+        x = h @ self.Kinv.T
+        u, v = pixels_of(x[..., 0] / x[..., 2], x[..., 1] / x[..., 2], self.K, self.dist)
+        return np.stack([u, v], axis=-1)
 
 
 def _refine_marker(

@@ -250,7 +250,7 @@ def test_board(root: Path) -> None:
         ([0.1, 0.2, 0.3, 0.4], [0.1, 0.2, 0.3, 0.4, 0.0]),
         ([0.1, 0.2, 0.3, 0.4, 0.5], [0.1, 0.2, 0.3, 0.4, 0.5]),
         ([0.1] * 8, [0.1] * 8),
-        ([0.1] * 14, [0.1] * 14),
+        ([0.1] * 12 + [0.0, 0.0], [0.1] * 12 + [0.0, 0.0]),
     ],
 )
 def test_distortion_padding(root: Path, dist: list[float] | None, expected: list[float]) -> None:
@@ -535,6 +535,10 @@ RIG_CASES = {
     ),
     "dist-6": (assign("cameras", 0, "dist", value=[0.0] * 6), "dist has 6 coefficients"),
     "dist-not-list": (assign("cameras", 0, "dist", value=0.0), "cameras[0].dist must be a list"),
+    "dist-tilted": (
+        assign("cameras", 0, "dist", value=[0.0] * 12 + [0.01, 0.0]),
+        "cameras[0].dist: the tilted-sensor model (tau_x, tau_y = [0.01, 0.0]) is not supported",
+    ),
     "R-scaled": (assign("cameras", 2, "R", value=NOT_ROTATION), "cameras[2].R is not a rotation"),
     "R-reflection": (assign("cameras", 2, "R", value=REFLECTION), "det(R) = -1, expected +1"),
     "R-2x3": (

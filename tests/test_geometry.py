@@ -56,6 +56,53 @@ def test_distortion_matches_opencv_model():
     assert np.allclose(g.project(X, K, DIST, R, t), cv_uv.reshape(-1, 2), atol=1e-9)
 
 
+LONG = {  # OpenCV's longer models: rational (8) and thin prism (12)
+    8: np.array([-0.09, 0.07, 3e-4, -2e-4, 0.01, 0.05, -0.03, 0.02]),
+    12: np.array([-0.09, 0.07, 3e-4, -2e-4, 0.01, 0.05, -0.03, 0.02, 1e-3, -5e-4, 8e-4, 2e-4]),
+}
+SKEWED = K + np.array([[0.0, 9.5, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+
+
+@pytest.mark.parametrize("n", [8, 12])
+def test_long_distortion_models_match_opencv(n):
+    """Without skew, project() is cv2.projectPoints for 8 and 12 coefficients."""
+    _, _, R, t = _cameras()[2]
+    X = _points()
+    rvec, _ = cv2.Rodrigues(R)
+    cv_uv, _ = cv2.projectPoints(X, rvec, t, K, LONG[n])
+    assert np.abs(g.project(X, K, LONG[n], R, t) - cv_uv.reshape(-1, 2)).max() < 1e-9
+
+
+def test_skew_is_applied_and_inverted():
+    """K[0, 1] shifts u by skew * y_d (which OpenCV's own functions ignore), and
+    normalised_coordinates inverts project() on a skewed, distorted camera."""
+    _, _, R, t = _cameras()[0]
+    X = _points()
+    plain, skewed = g.project(X, K, LONG[12], R, t), g.project(X, SKEWED, LONG[12], R, t)
+    yd = (plain[:, 1] - K[1, 2]) / K[1, 1]
+    assert np.abs(skewed[:, 0] - plain[:, 0] - 9.5 * yd).max() < 1e-9
+    assert np.allclose(skewed[:, 1], plain[:, 1], atol=1e-12)
+    xc = g.world_to_camera(X, R, t)
+    xy = g.normalised_coordinates(skewed, SKEWED, LONG[12])
+    assert np.abs(xy - xc[:, :2] / xc[:, 2:]).max() < 1e-12
+
+
+def test_compiled_projection_is_geometry_project():
+    """The numba kernels' projection (dataterm.to_pixel, used by the data term
+    and by sample_sides) equals geometry.project to 1e-9 px on a skewed camera
+    with 12 coefficients, and the 14-coefficient tilted model is refused."""
+    from colourhs.reconstruct.dataterm import to_pixel
+
+    _, _, R, t = _cameras()[1]
+    X = _points()
+    xc = g.world_to_camera(X, R, t)
+    d = g.model_coefficients(LONG[12])
+    uv = np.array([to_pixel(a / c, b / c, SKEWED, d) for a, b, c in xc])
+    assert np.abs(uv - g.project(X, SKEWED, LONG[12], R, t)).max() < 1e-9
+    with pytest.raises(ValueError, match="tilted-sensor"):
+        g.model_coefficients(np.r_[LONG[12], 0.01, 0.0])
+
+
 def test_project_backproject_round_trip():
     _, _, R, t = _cameras()[1]
     X = _points()

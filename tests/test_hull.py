@@ -12,10 +12,9 @@ import pytest
 from scipy.ndimage import binary_erosion
 
 from colourhs.capture import Camera, CaptureFormatError, open_dataset, read_mask
-from colourhs.geometry import backproject, look_at, pixel_grid, project
+from colourhs.geometry import backproject, look_at, pixel_grid
 from colourhs.groundtruth import load_mesh, render_depth_normals
 from colourhs.hull import (
-    _distorted_pixels,
     axes_centre,
     carve,
     carve_field,
@@ -95,19 +94,6 @@ def _fibonacci_sphere(n):
 def ring():
     cams = _ring_cameras()
     return cams, [_sphere_silhouette(c) for c in cams]
-
-
-def test_fast_projection_matches_opencv():
-    """The numpy camera model used by the carving equals cv2.projectPoints (rational too)."""
-    rng = np.random.default_rng(1)
-    X = rng.uniform(-0.1, 0.1, (500, 3))
-    for dist in ([-0.05, 0.01, 1e-3, -2e-3, 0.002], [0.1, -0.02, 1e-3, 1e-3, 0.0, 0.05, 0.01, 0]):
-        cam = _ring_cameras(3)[1]
-        cam = Camera("x", cam.K, np.array(dist), cam.R, cam.t, "red", np.zeros(3))
-        Xc = X @ cam.R.T + cam.t
-        u, v = _distorted_pixels(Xc[:, 0] / Xc[:, 2], Xc[:, 1] / Xc[:, 2], cam)
-        ref = project(X, cam.K, cam.dist, cam.R, cam.t)
-        assert np.abs(np.stack([u, v], 1) - ref).max() < 1e-9
 
 
 def test_axes_centre_is_the_fixation_point(ring):

@@ -33,6 +33,8 @@ from numba import types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
+from colourhs.geometry import model_coefficients
+
 INVALID_COST = 1.0
 # sin(5 deg): a surface seen or lit within 5 degrees of grazing carries almost no
 # signal (its intensities scale with that cosine); any rig, any scale.
@@ -139,25 +141,23 @@ def _smallest_eig(a, b, c, d, e, f):
 
 @nb.njit(cache=True, inline="always")
 def to_pixel(x, y, K, dist):
-    """Pixel (u, v) of normalised camera coordinates (x, y): OpenCV's
-    distortion (k1, k2, p1, p2, k3 = ``dist[:5]``), then ``K`` (3, 3)."""
-    return _to_pixel(x, y, K[0, 0], K[0, 1], K[0, 2], K[1, 1], K[1, 2],
-                     dist[0], dist[1], dist[2], dist[3], dist[4])  # fmt: skip
-
-
-def dist5(dist) -> np.ndarray:
-    """The five OpenCV coefficients (k1, k2, p1, p2, k3) the compiled projection uses."""
-    return np.pad(np.asarray(dist, float), (0, 5))[:5]
+    """Pixel (u, v) of normalised camera coordinates (x, y): the package's
+    camera model (:func:`colourhs.geometry.pixels_of`) compiled; ``dist``
+    the 12 coefficients of :func:`colourhs.geometry.model_coefficients`."""
+    return _to_pixel(x, y, K[0, 0], K[0, 1], K[0, 2], K[1, 1], K[1, 2], dist)
 
 
 @nb.njit(cache=True, fastmath=True, inline="always")
-def _to_pixel(x, y, fx, sk, cx, fy, cy, k1, k2, p1, p2, k3):
+def _to_pixel(x, y, fx, sk, cx, fy, cy, d):
     """Pixel (u, v) of normalised camera coordinates (x, y): OpenCV's
-    distortion (k1, k2, p1, p2, k3), then K (with skew)."""
+    distortion with the 12 coefficients ``d`` (k1, k2, p1, p2, k3, k4, k5,
+    k6, s1, s2, s3, s4), then K with its skew ``sk`` (as
+    :func:`colourhs.geometry.pixels_of`)."""
     rr = x * x + y * y
-    radial = 1.0 + rr * (k1 + rr * (k2 + rr * k3))
-    xd = x * radial + 2.0 * p1 * x * y + p2 * (rr + 2.0 * x * x)
-    yd = y * radial + p1 * (rr + 2.0 * y * y) + 2.0 * p2 * x * y
+    radial = 1.0 + rr * (d[0] + rr * (d[1] + rr * d[4]))
+    radial /= 1.0 + rr * (d[5] + rr * (d[6] + rr * d[7]))
+    xd = x * radial + 2.0 * d[2] * x * y + d[3] * (rr + 2.0 * x * x) + rr * (d[8] + rr * d[9])
+    yd = y * radial + d[2] * (rr + 2.0 * y * y) + 2.0 * d[3] * x * y + rr * (d[10] + rr * d[11])
     return fx * xd + sk * yd + cx, fy * yd + cy
 
 
@@ -232,8 +232,7 @@ def _kernel(
                 y = Ps[ref, 1, 3] + Ps[ref, 1, 0] * X0 + Ps[ref, 1, 1] * X1 + Ps[ref, 1, 2] * X2
                 h = Ps[ref, 2, 3] + Ps[ref, 2, 0] * X0 + Ps[ref, 2, 1] * X1 + Ps[ref, 2, 2] * X2
                 u, v = _to_pixel(x / h, y / h, Ks[ref, 0, 0], Ks[ref, 0, 1], Ks[ref, 0, 2],
-                                 Ks[ref, 1, 1], Ks[ref, 1, 2], dists[ref, 0], dists[ref, 1],
-                                 dists[ref, 2], dists[ref, 3], dists[ref, 4])  # fmt: skip
+                                 Ks[ref, 1, 1], Ks[ref, 1, 2], dists[ref])  # fmt: skip
                 u = np.round(u) if abs(u - np.round(u)) < 1e-6 else u
                 v = np.round(v) if abs(v - np.round(v)) < 1e-6 else v
                 inside, u0, v0, w00, w01, w10, w11 = _footprint(u, v, Ww, Hh)
@@ -275,7 +274,7 @@ def _kernel(
                 B1 = Ps[c, 1, 0] * r0 + Ps[c, 1, 1] * r1 + Ps[c, 1, 2] * r2
                 B2 = Ps[c, 2, 0] * r0 + Ps[c, 2, 1] * r1 + Ps[c, 2, 2] * r2
                 fx, sk, cx, fy, cy = Ks[c, 0, 0], Ks[c, 0, 1], Ks[c, 0, 2], Ks[c, 1, 1], Ks[c, 1, 2]
-                k1, k2, p1, p2, k3 = dists[c, 0], dists[c, 1], dists[c, 2], dists[c, 3], dists[c, 4]
+                dc = dists[c]
                 l0, l1, l2 = lights[c, 0], lights[c, 1], lights[c, 2]
                 cbase = c * plane
                 for k in range(Kn):
@@ -284,7 +283,7 @@ def _kernel(
                     fall[c, k] = _falloff(l0 - z * r0, l1 - z * r1, l2 - z * r2)
                     ih = 1.0 / h
                     u, v = _to_pixel((A0 + z * B0) * ih, (A1 + z * B1) * ih, fx, sk, cx, fy, cy,
-                                     k1, k2, p1, p2, k3)  # fmt: skip
+                                     dc)  # fmt: skip
                     inside, u0, v0, w00, w01, w10, w11 = _footprint(u, v, Ww, Hh)
                     ok[k] &= inside & (A2 + z * B2 > 0.0)
                     wts[c, 0, k] = w00
@@ -486,7 +485,7 @@ def data_term(
     """
     pair_cams, _ = pairs
     Ks = np.stack([np.asarray(c.K, float) for c in cameras])
-    dists = np.stack([dist5(c.dist) for c in cameras])
+    dists = np.stack([model_coefficients(c.dist) for c in cameras])
     Ps = np.stack(
         [np.hstack([np.asarray(c.R, float), np.asarray(c.t, float)[:, None]]) for c in cameras]
     )

@@ -23,7 +23,8 @@ import numba as nb
 import numpy as np
 from scipy.ndimage import gaussian_filter
 
-from colourhs.reconstruct.dataterm import dist5, to_pixel
+from colourhs.geometry import model_coefficients
+from colourhs.reconstruct.dataterm import to_pixel
 
 BLUR_PX = 1.0  # Gaussian blur of the images before sampling, pixels (see side_maps)
 
@@ -46,7 +47,7 @@ class HelmholtzSides:
     def __post_init__(self):
         self.stack = np.ascontiguousarray(np.stack(self.maps), dtype=np.float64)
         self.K = np.stack([np.asarray(c.K, float) for c in self.cameras])
-        self.dist = np.stack([dist5(c.dist) for c in self.cameras])
+        self.dist = np.stack([model_coefficients(c.dist) for c in self.cameras])
         self.R = np.stack([np.asarray(c.R, float) for c in self.cameras])
         self.t = np.stack([np.asarray(c.t, float) for c in self.cameras])
         self.light = np.ascontiguousarray(self.light, dtype=np.float64)

@@ -29,7 +29,10 @@ principal point       (W-1)/2 + U(-0.04, 0.04) W, (H-1)/2 + U(-0.04,     same
 camera roll           U(-25, 25) deg about the camera's optical axis     same
 aim error             aim point N(0, 0.01 D) m per axis off the origin   same
 lens distortion       k1 U(-0.15, 0.05), k2 U(-0.05, 0.1), p1, p2 N(0,   same
-                      3e-4), k3 = 0 (per camera)
+                      3e-4), k3 = 0 (per camera); ``random-tiny-lens``
+                      adds rational k4-k6 U(-0.1, 0.1), thin prism
+                      s1-s4 N(0, 1e-3) and a skew K[0, 1] U(-0.01,
+                      0.01) f (the camera model's end-to-end test)
 camera names          one style of cam1..3, left/right/top (by           same
                       position), C0..C2, A/B/C, cam_a..c, north/east/
                       west-like; rig.json order shuffled; light colours
@@ -194,6 +197,9 @@ class RandomRanges:
     k1: tuple[float, float] = (-0.15, 0.05)
     k2: tuple[float, float] = (-0.05, 0.1)
     tangential_sd: float = 3e-4
+    rational: float = 0.0  # k4, k5, k6 U(-rational, rational); 0 = not drawn
+    thin_prism_sd: float = 0.0  # s1..s4 N(0, sd); 0 = not drawn
+    skew_rel: float = 0.0  # K[0, 1] U(-1, 1) skew_rel f; 0 = not drawn
     black_level_dn: dict = field(default_factory=lambda: {8: 16, 16: 4096})
     exposure: tuple[float, float] = (0.3, 0.6)
     board_width_m: tuple[float, float] = (0.20, 0.32)
@@ -254,7 +260,11 @@ TINY_RANGES = replace(
     pose_min_cell_px=3.0,
 )
 #: The ranges of each randomised preset, by :attr:`Preset.random_ranges`.
-RANGES_BY_NAME = {"random": RANGES, "random-tiny": TINY_RANGES}
+RANGES_BY_NAME = {
+    "random": RANGES,
+    "random-tiny": TINY_RANGES,
+    "random-tiny-lens": replace(TINY_RANGES, rational=0.1, thin_prism_sd=1e-3, skew_rel=0.01),
+}
 
 
 def _stream(seed: int, topic: str) -> np.random.Generator:
@@ -448,6 +458,11 @@ def _draw_cameras(rng, width, height, rg) -> dict:
         dist = np.array(
             [rng.uniform(*rg.k1), rng.uniform(*rg.k2), *rng.normal(0, rg.tangential_sd, 2), 0.0]
         )
+        # No draws without these terms: the other presets' seeds keep their rigs.
+        if rg.rational or rg.thin_prism_sd or rg.skew_rel:
+            k456 = rng.uniform(-rg.rational, rg.rational, 3)
+            dist = np.concatenate([dist, k456, rng.normal(0, rg.thin_prism_sd, 4)])
+            K[0, 1] = rng.uniform(-1, 1) * rg.skew_rel * f
         cams.append(Camera(f"_{i}", K, dist, R, t, "red", np.zeros(3)))
         rolls.append(float(roll))
     # Names, colours and the order of rig.json.
