@@ -142,10 +142,10 @@ def calibration_errors(data: Path, files: dict) -> dict:
 def evaluate_variant(data, scene, frames, variant, files, chromatic, work) -> dict:
     """Depth maps of one scene x variant over its frames, pooled against the ground truth."""
     from colourhs.capture import load_rig
+    from colourhs.depthfile import read_depth
     from colourhs.evaluate import depth_errors, depth_summary
     from colourhs.groundtruth import load_mesh
     from colourhs.hull import visual_hull
-    from colourhs.mesh import read_depth
     from colourhs.reconstruct.frame import reconstruct_frame
 
     rig = load_rig(data)

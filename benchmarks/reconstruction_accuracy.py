@@ -21,9 +21,9 @@ import numpy as np
 import pandas as pd
 
 from colourhs.capture import load_rig
+from colourhs.depthfile import read_depth
 from colourhs.evaluate import depth_errors, depth_summary
 from colourhs.groundtruth import load_mesh
-from colourhs.mesh import read_depth
 
 HERE = Path(__file__).parent
 

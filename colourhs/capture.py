@@ -230,6 +230,21 @@ class Board:
             raise KeyError(f"board has no marker {marker_id!r}; ids: {sorted(self.markers)}")
         return _square_corners(self.markers[marker_id], self.marker_length)
 
+    def white(self, xy: np.ndarray, margin_m) -> np.ndarray:
+        """True where board-frame points ``xy`` (N, 2) lie on the white surface.
+
+        Points within ``margin_m`` (metres; a scalar or one value per point)
+        of the board's edge or of a marker are left out (the rendered or
+        printed edge blurs over a pixel or two).
+        """
+        w, h = self.size
+        x, y = xy[:, 0], xy[:, 1]
+        ok = (x > margin_m) & (x < w - margin_m) & (y > margin_m) & (y < h - margin_m)
+        half = self.marker_length / 2 + margin_m
+        for centre in self.markers.values():
+            ok &= ~((np.abs(x - centre[0]) < half) & (np.abs(y - centre[1]) < half))
+        return ok
+
 
 @dataclass(frozen=True)
 class ReciprocalPair:

@@ -626,7 +626,6 @@ def _box_images(rig, shots, k: int, K: int, margin_m: float) -> list[dict]:
     import cv2
 
     from colourhs.geometry import backproject, pixel_grid, ray_plane_intersection
-    from colourhs.photometric import white_board_mask
 
     W, H = rig.image.width, rig.image.height
     grid = pixel_grid(W, H).reshape(-1, 2)
@@ -647,7 +646,7 @@ def _box_images(rig, shots, k: int, K: int, margin_m: float) -> list[dict]:
                 # at least 1.5 pixels clear of a marker or edge, wherever the pixel lies
                 pixel_m = t / (cam.K[0, 0] * np.abs(d @ shot.normal))
                 margin = np.maximum(margin_m, 1.5 * np.nan_to_num(pixel_m, nan=np.inf))
-                valid = (t > 0) & white_board_mask(xy, rig.board, margin)
+                valid = (t > 0) & rig.board.white(xy, margin)
             valid = valid.reshape(H, W) & ~shot.saturated[name]
             v = valid.astype(np.float32)
             img = np.ascontiguousarray(shot.images[name], np.float32) * v[..., None]

@@ -47,10 +47,11 @@ import pandas as pd
 import pymeshlab
 from scipy.ndimage import binary_dilation
 
+from colourhs.depthfile import DepthMap, read_depth
 from colourhs.geometry import backproject, camera_centre, pixel_grid, project, world_to_camera
 from colourhs.groundtruth import load_mesh, render_depth_normals
 from colourhs.io import atomic_output, write_json
-from colourhs.mesh import DepthMap, TriMesh, read_depth, write_ply
+from colourhs.mesh import TriMesh, write_ply
 
 __all__ = [
     "CONTRACT_COLUMNS",
@@ -234,7 +235,7 @@ def visible_vertices(
     triangles : ndarray, shape (T, 3), or None
         The occluding mesh (None: no occlusion test).
     camera : object with ``K``, ``dist``, ``R``, ``t``
-        A :class:`colourhs.capture.Camera` or :class:`colourhs.mesh.DepthMap`.
+        A :class:`colourhs.capture.Camera` or :class:`colourhs.depthfile.DepthMap`.
     width, height : int
         Image size, pixels.
     eps_m : float
@@ -272,7 +273,7 @@ def seen_surface(
     vertices, triangles : ndarray, shapes (V, 3), (T, 3)
         The mesh (world frame, metres).
     camera : object with ``K``, ``dist``, ``R``, ``t``
-        A :class:`colourhs.capture.Camera` or :class:`colourhs.mesh.DepthMap`.
+        A :class:`colourhs.capture.Camera` or :class:`colourhs.depthfile.DepthMap`.
     width, height : int
         Image size, pixels.
 
@@ -472,7 +473,7 @@ def evaluate_frame(
         module docstring for their meaning), sizes and inputs.
     out_ply : str or Path, optional
         The reconstruction mesh coloured by each vertex's accuracy distance
-        (:func:`colourhs.figures.value_colours`, viridis from 0 to ``vmax_mm``);
+        (:func:`colourhs.colours.value_colours`, viridis from 0 to ``vmax_mm``);
         grey outside the seen region or without ground truth.
     scene, frame, variant : str
         Identify the row in the metrics table.
@@ -490,7 +491,7 @@ def evaluate_frame(
     dict
         What was written to ``out_json``.
     """
-    from colourhs.figures import value_colours
+    from colourhs.colours import value_colours
 
     t0 = time.perf_counter()
     dm = read_depth(depth_h5)

@@ -24,15 +24,12 @@ __all__ = [
     "normal_map_figure",
     "render_grid_figure",
     "shaded_render",
-    "value_colours",
     "write_animation",
     "write_coloured_ply",
 ]
 
 #: Colour of pixels with no value (NaN) in the image figures and renders.
 BACKGROUND = (1.0, 1.0, 1.0)
-#: Colour of vertices with no value in :func:`value_colours`.
-NO_VALUE_GREY = 0.5
 
 
 def chromaticity_rgb(p: np.ndarray) -> np.ndarray:
@@ -151,36 +148,6 @@ def mu_maps_figure(
     finally:
         plt.close(fig)
     return out_png
-
-
-def value_colours(
-    values: np.ndarray, vmin: float, vmax: float, cmap: str = "viridis"
-) -> np.ndarray:
-    """Colours of scalar values under a matplotlib colormap (e.g. per-vertex error on a mesh).
-
-    Parameters
-    ----------
-    values : array_like, shape (N,)
-        Scalars; NaN (or inf) where unknown.
-    vmin, vmax : float
-        Values mapped to the colormap's two ends; values outside are clipped.
-    cmap : str
-        Matplotlib colormap name.
-
-    Returns
-    -------
-    ndarray of float64, shape (N, 3)
-        RGB in [0, 1]; non-finite values are grey (0.5, 0.5, 0.5).
-    """
-    values = np.asarray(values, dtype=np.float64).reshape(-1)
-    span = float(vmax) - float(vmin)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        s = (values - float(vmin)) / span if span > 0 else values * 0.0
-    finite = np.isfinite(s)
-    s = np.clip(np.where(finite, s, 0.0), 0.0, 1.0)
-    rgb = np.asarray(matplotlib.colormaps[cmap](s)[:, :3], dtype=np.float64)
-    rgb[~finite] = NO_VALUE_GREY
-    return rgb
 
 
 def _finite_or_raise(a: np.ndarray, what: str) -> np.ndarray:
@@ -589,9 +556,9 @@ def scene_figures(
     -------
     The PNG/GIF files written.
     """
+    from colourhs.depthfile import read_depth
     from colourhs.evaluate import depth_errors
     from colourhs.groundtruth import load_mesh
-    from colourhs.mesh import read_depth
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

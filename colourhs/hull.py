@@ -855,8 +855,8 @@ def hull_depth(
         the hull's interpolated normal facing the camera (world, unit);
         ``confidence`` 1 and ``mask`` True where the hull is hit.
     """
+    from colourhs.depthfile import DepthResult
     from colourhs.groundtruth import render_depth_normals
-    from colourhs.reconstruct.frame import DepthResult
 
     depth, nrm = render_depth_normals(vertices, triangles, normals, camera, width, height)
     mask = np.isfinite(depth)
@@ -935,7 +935,7 @@ def visual_hull(
         Reference camera of the depth map; default the rig's first camera.
     out_depth_h5 : str or Path, optional
         Where to write the hull's depth map in the reference camera (results
-        contract depth HDF5, via :func:`colourhs.reconstruct.frame.write_depth`).
+        contract depth HDF5, via :func:`colourhs.depthfile.write_depth`).
     bounds : pair of array_like (3,), optional
         Explicit working volume (lo, hi), metres; default found automatically.
     min_views : int
@@ -1002,7 +1002,7 @@ def visual_hull(
         depth.info.update(info)
     write_mesh_ply(out_ply, v, t, n)
     if depth is not None:
-        from colourhs.reconstruct.frame import write_depth
+        from colourhs.depthfile import write_depth
 
         attrs = {"method": "visual_hull", "params": depth.info, "silhouettes": source,
                  "inputs_sha256": sha256_files(files)}  # fmt: skip

@@ -22,23 +22,20 @@ normals). Lengths are metres throughout.
 
 from __future__ import annotations
 
-import json
 import time
-from dataclasses import dataclass
 from pathlib import Path
 from typing import NamedTuple
 
-import h5py
 import numpy as np
 import open3d as o3d
 from scipy.spatial import cKDTree
 
-from colourhs.geometry import backproject, camera_centre, pixel_grid
+from colourhs.depthfile import DepthMap, read_depth
+from colourhs.geometry import backproject, pixel_grid
 from colourhs.groundtruth import load_mesh
 from colourhs.io import atomic_output
 
 __all__ = [
-    "DepthMap",
     "TriMesh",
     "add_hull_points",
     "crop_to_data",
@@ -46,7 +43,6 @@ __all__ = [
     "oriented_points",
     "point_spacing",
     "poisson_mesh",
-    "read_depth",
     "write_ply",
 ]
 
@@ -62,149 +58,12 @@ HULL_MARGIN = 0.5
 POISSON_SCALE = 1.1
 
 
-@dataclass(frozen=True)
-class DepthMap:
-    """One results-contract depth file (``results/NAME/<scene>/<variant>/depth/<frame>.h5``).
-
-    Attributes
-    ----------
-    depth : ndarray of float32, shape (H, W)
-        z-depth along the reference camera's optical axis, metres; NaN = none.
-    normal : ndarray of float32, shape (H, W, 3)
-        World-frame unit normals; NaN = none.
-    confidence : ndarray of float32, shape (H, W)
-        Per-pixel confidence in [0, 1] (ones where the file has none).
-    mask : ndarray of bool, shape (H, W)
-        Pixels the method considered (finite depth where the file has none).
-    camera : str
-        Reference camera name.
-    K : ndarray, shape (3, 3)
-        Intrinsics, pixels.
-    dist : ndarray, shape (n,)
-        OpenCV distortion coefficients (zeros for files written without them).
-    R, t : ndarray, shapes (3, 3) and (3,)
-        World-to-camera pose, ``x_cam = R X + t`` (t in metres).
-    method : str
-        Reconstruction method (``"bayes"``, ``"ml"``, ``"vh"``, ...; ``""`` if absent).
-    params : dict
-        The method's parameters and diagnostics (``{}`` if absent).
-    path : str
-        File it was read from.
-    """
-
-    depth: np.ndarray
-    normal: np.ndarray
-    confidence: np.ndarray
-    mask: np.ndarray
-    camera: str
-    K: np.ndarray
-    dist: np.ndarray
-    R: np.ndarray
-    t: np.ndarray
-    method: str = ""
-    params: dict | None = None
-    path: str = ""
-
-    @property
-    def height(self) -> int:
-        return int(self.depth.shape[0])
-
-    @property
-    def width(self) -> int:
-        return int(self.depth.shape[1])
-
-    @property
-    def centre(self) -> np.ndarray:
-        """Reference camera centre in the world frame, metres, shape (3,)."""
-        return camera_centre(self.R, self.t)
-
-
 class TriMesh(NamedTuple):
     """A triangle mesh as arrays: vertices (V, 3) metres, triangles (T, 3), unit normals (V, 3)."""
 
     vertices: np.ndarray
     triangles: np.ndarray
     normals: np.ndarray
-
-
-def _attr_array(f, name, shape, path):
-    if name not in f.attrs:
-        raise ValueError(f"{path}: missing attribute {name!r}")
-    a = np.asarray(f.attrs[name], float)
-    if a.shape != shape:
-        raise ValueError(f"{path}: attribute {name!r} has shape {a.shape}, expected {shape}")
-    return a
-
-
-def read_depth(path: str | Path) -> DepthMap:
-    """Read and check a results-contract depth file.
-
-    Parameters
-    ----------
-    path : str or Path
-        HDF5 file with datasets ``depth`` (H, W), ``normal`` (H, W, 3) and optionally
-        ``confidence`` (H, W) and ``mask`` (H, W); attributes ``camera``, ``K``, ``R``,
-        ``t`` and optionally ``dist``, ``method``, ``params`` (JSON).
-
-    Returns
-    -------
-    DepthMap
-
-    Raises
-    ------
-    ValueError
-        Naming the file, when a required dataset or attribute is missing, a shape is
-        wrong, or no pixel has a finite depth ("no reconstructed pixels").
-    """
-    path = Path(path)
-    try:
-        f = h5py.File(path, "r")
-    except OSError as err:
-        raise ValueError(f"{path}: not a readable HDF5 depth file ({err})") from err
-    with f:
-        for name in ("depth", "normal"):
-            if name not in f:
-                raise ValueError(f"{path}: missing dataset {name!r}")
-        depth = np.asarray(f["depth"][()], np.float32)
-        if depth.ndim != 2:
-            raise ValueError(f"{path}: dataset 'depth' has shape {depth.shape}, expected (H, W)")
-        if depth.size == 0:
-            raise ValueError(f"{path}: no reconstructed pixels (empty depth map {depth.shape})")
-        h, w = depth.shape
-        normal = np.asarray(f["normal"][()], np.float32)
-        if normal.shape != (h, w, 3):
-            raise ValueError(
-                f"{path}: dataset 'normal' has shape {normal.shape}, expected {(h, w, 3)}"
-            )
-        finite = np.isfinite(depth)
-        confidence = (
-            np.asarray(f["confidence"][()], np.float32)
-            if "confidence" in f
-            else finite.astype(np.float32)
-        )
-        mask = np.asarray(f["mask"][()], bool) if "mask" in f else finite
-        for name, a in (("confidence", confidence), ("mask", mask)):
-            if a.shape != (h, w):
-                raise ValueError(f"{path}: dataset {name!r} has shape {a.shape}, expected {(h, w)}")
-        if "camera" not in f.attrs:
-            raise ValueError(f"{path}: missing attribute 'camera'")
-        camera = f.attrs["camera"]
-        camera = camera.decode() if isinstance(camera, bytes) else str(camera)
-        K = _attr_array(f, "K", (3, 3), path)
-        R = _attr_array(f, "R", (3, 3), path)
-        t = _attr_array(f, "t", (3,), path).reshape(3)
-        dist = np.asarray(f.attrs["dist"], float).ravel() if "dist" in f.attrs else np.zeros(5)
-        method = f.attrs.get("method", "")
-        method = method.decode() if isinstance(method, bytes) else str(method)
-        params = f.attrs.get("params", "{}")
-        try:
-            params = json.loads(params) if isinstance(params, str | bytes) else {}
-        except json.JSONDecodeError:
-            params = {}
-    if not np.any(finite & (depth > 0)):
-        raise ValueError(f"{path}: no reconstructed pixels (depth is empty or all NaN)")
-    return DepthMap(depth, normal, confidence, mask, camera, K, dist, R, t, method, params,
-                    str(path))  # fmt: skip
 
 
 def oriented_points(depth_map: DepthMap) -> tuple[np.ndarray, np.ndarray]:

@@ -187,22 +187,6 @@ class Grid:
         return self.interpolate(values, uv).reshape(self.height, self.width)
 
 
-def white_board_mask(xy_board: np.ndarray, board: Board, margin_m) -> np.ndarray:
-    """True where board-frame points (N, 2) lie on the white calibration surface.
-
-    Points within ``margin_m`` (metres; a scalar or one value per point) of
-    the board's edge or of a marker are left out (the rendered or printed
-    edge blurs over a pixel or two).
-    """
-    w, h = board.size
-    x, y = xy_board[:, 0], xy_board[:, 1]
-    ok = (x > margin_m) & (x < w - margin_m) & (y > margin_m) & (y < h - margin_m)
-    half = board.marker_length / 2 + margin_m
-    for centre in board.markers.values():
-        ok &= ~((np.abs(x - centre[0]) < half) & (np.abs(y - centre[1]) < half))
-    return ok
-
-
 @dataclass(frozen=True)
 class PoseView:
     """One board pose as the calibration needs it: plane, board pose, images."""
@@ -273,7 +257,7 @@ def _log_kappa_at(view: PoseView, board: Board, a: Camera, b: Camera, ch_a, ch_b
             foot = np.maximum(pixel_footprint_m(x, n, a), pixel_footprint_m(x, n, b))
         margin = opts["margin_px"] * np.nan_to_num(foot, nan=np.inf)
     with np.errstate(invalid="ignore"):
-        ok = (s > 0) & white_board_mask(xy, board, margin)
+        ok = (s > 0) & board.white(xy, margin)
     uv_a = project(x, a.K, a.dist, a.R, a.t)
     i_a = sample_bilinear(view.images[a.name][..., ch_a], uv_a)
     i_b = sample_bilinear(view.images[b.name][..., ch_b], uv_b)
@@ -730,7 +714,7 @@ def board_points(board: Board, poses, spacing_m: float = 0.002) -> np.ndarray:
     w, h = board.size
     gx, gy = np.meshgrid(np.arange(spacing_m, w, spacing_m), np.arange(spacing_m, h, spacing_m))
     xy = np.stack([gx.ravel(), gy.ravel()], axis=1)
-    xy = xy[white_board_mask(xy, board, spacing_m)]
+    xy = xy[board.white(xy, spacing_m)]
     pts = np.concatenate([xy, np.zeros((len(xy), 1))], axis=1)
     return np.concatenate([pts @ np.asarray(R, float).T + np.asarray(t, float) for R, t in poses])
 

@@ -11,6 +11,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 from colourhs.capture import Camera
+from colourhs.depthfile import DepthResult, read_depth, write_depth
 from colourhs.evaluate import (
     CONTRACT_COLUMNS,
     depth_errors,
@@ -23,8 +24,7 @@ from colourhs.evaluate import (
 )
 from colourhs.geometry import look_at
 from colourhs.groundtruth import load_mesh, render_depth_normals
-from colourhs.mesh import read_depth, write_ply
-from colourhs.reconstruct.frame import DepthResult, write_depth
+from colourhs.mesh import write_ply
 
 W, H = 128, 96
 

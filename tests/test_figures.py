@@ -9,13 +9,13 @@ import open3d as o3d
 import pytest
 from PIL import Image
 
+from colourhs.colours import value_colours
 from colourhs.figures import (
     depth_map_figure,
     error_map_figure,
     normal_map_figure,
     render_grid_figure,
     shaded_render,
-    value_colours,
     write_animation,
     write_coloured_ply,
 )

@@ -9,6 +9,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 from colourhs.capture import Camera
+from colourhs.depthfile import DepthResult, read_depth, write_depth
 from colourhs.geometry import backproject, look_at, pixel_grid, ray_plane_intersection
 from colourhs.groundtruth import load_mesh
 from colourhs.mesh import (
@@ -18,10 +19,8 @@ from colourhs.mesh import (
     oriented_points,
     poisson_mesh,
     poisson_voxel,
-    read_depth,
     write_ply,
 )
-from colourhs.reconstruct.frame import DepthResult, write_depth
 
 W, H = 128, 96
 

@@ -19,7 +19,6 @@ from colourhs.photometric import (
     mu_map_errors,
     photometric_maps,
     read_mu_maps,
-    white_board_mask,
 )
 from colourhs.synth.dataset import true_poses_csv
 
@@ -62,7 +61,7 @@ def test_white_board_mask_excludes_markers_and_edges(tiny_dataset):
     board = load_rig(tiny_dataset).board
     centre = next(iter(board.markers.values()))
     pts = np.array([centre, [board.size[0] / 2, board.size[1] / 2], [0.001, 0.1], centre + 0.045])
-    assert white_board_mask(pts, board, 0.004).tolist() == [False, True, False, True]
+    assert board.white(pts, 0.004).tolist() == [False, True, False, True]
 
 
 def test_crosstalk_matrix_matches_truth(tiny_dataset):

@@ -17,7 +17,6 @@
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -27,8 +26,9 @@ from tqdm import tqdm
 
 from colourhs.capture import COLOURS, Camera, Rig, open_dataset, read_image, read_mask
 from colourhs.crosstalk import load_crosstalk, unmix
+from colourhs.depthfile import DepthResult, write_depth
 from colourhs.geometry import normalised_coordinates, pixel_grid
-from colourhs.io import atomic_output, sha256_files
+from colourhs.io import sha256_files
 from colourhs.noise import NoiseModel, estimate_noise, load_noise
 from colourhs.reconstruct.dataterm import INVALID_COST, data_term, pair_arrays, prepare_images
 from colourhs.reconstruct.integrate import initial_surface
@@ -190,17 +190,6 @@ def foreground(frame: Frame, ref: int, threshold: float = 0.02) -> np.ndarray:
     dark = np.min(img[recip], axis=0) <= threshold
     # One pixel of dilation (4-neighbours; no wrap-around at the border).
     return fg & ~binary_dilation(dark)
-
-
-@dataclass
-class DepthResult:
-    """A reconstructed frame in the reference camera."""
-
-    depth: np.ndarray  # (H, W) float32 z-depth, metres, NaN = none
-    normal: np.ndarray  # (H, W, 3) float32 world unit normals, NaN = none
-    confidence: np.ndarray  # (H, W) float32 in [0, 1]
-    mask: np.ndarray  # (H, W) bool
-    info: dict
 
 
 def _parabola(c_m, c_0, c_p):
@@ -461,23 +450,6 @@ def _consistent_surface(frame, z, ok, rays, ref, pairs, iterations, spline_px):
         "filled": int(sinfo["filled"].sum()),
     }
     return z, nrm, ok, sinfo["weights"], info
-
-
-def write_depth(path, result: DepthResult, camera: Camera, attrs: dict) -> None:
-    """Write the results contract's depth HDF5 atomically."""
-    with atomic_output(path) as tmp, h5py.File(tmp, "w") as f:
-        f.create_dataset("depth", data=result.depth, compression="gzip")
-        f.create_dataset("normal", data=result.normal, compression="gzip")
-        f.create_dataset("confidence", data=result.confidence, compression="gzip")
-        f.create_dataset("mask", data=result.mask, compression="gzip")
-        f.attrs["camera"] = camera.name
-        f.attrs["K"] = np.asarray(camera.K, float)
-        f.attrs["R"] = np.asarray(camera.R, float)
-        f.attrs["t"] = np.asarray(camera.t, float)
-        f.attrs["dist"] = np.asarray(camera.dist, float)
-        f.attrs["units"] = "metres; depth is z along the reference camera"
-        for key, value in attrs.items():
-            f.attrs[key] = value if isinstance(value, str | int | float) else json.dumps(value)
 
 
 def reconstruct_frame(

@@ -130,9 +130,10 @@ import numpy as np
 from scipy.spatial import ConvexHull
 
 from colourhs.capture import Camera
-from colourhs.geometry import look_at, project
+from colourhs.geometry import look_at
 from colourhs.synth import scenes as sc
 from colourhs.synth.brdf import Material
+from colourhs.synth.poses import board_poses, in_view
 from colourhs.synth.rig import (
     COLOURS,
     CameraModel,
@@ -552,7 +553,6 @@ def _layout(rng, n, lo, hi, pitch) -> list | None:
 
 
 def _draw_poses(rng, view, board, rg, geo, n_poses):
-    from colourhs.synth.dataset import board_poses
 
     try:
         return board_poses(
@@ -595,18 +595,6 @@ def _object_shapes(statue_level: int) -> dict:
     return out
 
 
-def _in_view(view: _View, points: np.ndarray, margin: float) -> bool:
-    for cam in view.cameras:
-        uv = project(points, cam.K, cam.dist, cam.R, cam.t)
-        if not np.all(np.isfinite(uv)):
-            return False
-        if np.any(uv < margin) or np.any(uv[:, 0] > view.width - 1 - margin):
-            return False
-        if np.any(uv[:, 1] > view.height - 1 - margin):
-            return False
-    return True
-
-
 def _yaw(deg: float) -> np.ndarray:
     return sc.axis_angle([0.0, 1.0, 0.0], np.deg2rad(deg))
 
@@ -622,7 +610,7 @@ def _place(rng, view, rg, shape, tries=300) -> dict | None:
         )
         yaw = rng.uniform(-rg.object_yaw_deg, rg.object_yaw_deg)
         pts = s * (shape["hull"] - shape["centre"]) @ _yaw(yaw).T + pos
-        if _in_view(view, pts, rg.margin_px):
+        if in_view(view, pts, rg.margin_px):
             return {"scale": s, "position": pos, "yaw_deg": yaw, "origin": shape["centre"]}
     return None
 
@@ -664,7 +652,7 @@ def _draw_scenes(rng, view, rg, geo, shapes, sheet_frames) -> dict | None:
         frames = [
             _sheet(cand, f / max(sheet_frames - 1, 1), material=None) for f in range(sheet_frames)
         ]
-        if all(_in_view(view, _hull_points(g.vertices), rg.margin_px) for g in frames):
+        if all(in_view(view, _hull_points(g.vertices), rg.margin_px) for g in frames):
             sheet = cand
             break
     if sheet is None:

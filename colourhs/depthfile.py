@@ -1,0 +1,190 @@
+"""The results contract's depth file (``<scene>/<variant>/depth/<frame>.h5``).
+
+One module for both ends: :func:`write_depth` writes a reconstruction
+(:class:`DepthResult`, from :mod:`colourhs.reconstruct.frame` or the visual
+hull), :func:`read_depth` reads and checks any file in the contract's layout
+(:class:`DepthMap`). Datasets ``depth`` (H, W) z-depth in metres along the
+reference camera (NaN = none), ``normal`` (H, W, 3) world unit normals,
+``confidence`` and ``mask``; attributes ``camera``, ``K``, ``R``, ``t``,
+``dist``, ``method`` and ``params`` (JSON).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from colourhs.capture import Camera
+from colourhs.geometry import camera_centre
+from colourhs.io import atomic_output
+
+__all__ = ["DepthMap", "DepthResult", "read_depth", "write_depth"]
+
+
+@dataclass
+class DepthResult:
+    """A reconstructed frame in the reference camera."""
+
+    depth: np.ndarray  # (H, W) float32 z-depth, metres, NaN = none
+    normal: np.ndarray  # (H, W, 3) float32 world unit normals, NaN = none
+    confidence: np.ndarray  # (H, W) float32 in [0, 1]
+    mask: np.ndarray  # (H, W) bool
+    info: dict
+
+
+def write_depth(path, result: DepthResult, camera: Camera, attrs: dict) -> None:
+    """Write the results contract's depth HDF5 atomically."""
+    with atomic_output(path) as tmp, h5py.File(tmp, "w") as f:
+        f.create_dataset("depth", data=result.depth, compression="gzip")
+        f.create_dataset("normal", data=result.normal, compression="gzip")
+        f.create_dataset("confidence", data=result.confidence, compression="gzip")
+        f.create_dataset("mask", data=result.mask, compression="gzip")
+        f.attrs["camera"] = camera.name
+        f.attrs["K"] = np.asarray(camera.K, float)
+        f.attrs["R"] = np.asarray(camera.R, float)
+        f.attrs["t"] = np.asarray(camera.t, float)
+        f.attrs["dist"] = np.asarray(camera.dist, float)
+        f.attrs["units"] = "metres; depth is z along the reference camera"
+        for key, value in attrs.items():
+            f.attrs[key] = value if isinstance(value, str | int | float) else json.dumps(value)
+
+
+@dataclass(frozen=True)
+class DepthMap:
+    """One results-contract depth file (``results/NAME/<scene>/<variant>/depth/<frame>.h5``).
+
+    Attributes
+    ----------
+    depth : ndarray of float32, shape (H, W)
+        z-depth along the reference camera's optical axis, metres; NaN = none.
+    normal : ndarray of float32, shape (H, W, 3)
+        World-frame unit normals; NaN = none.
+    confidence : ndarray of float32, shape (H, W)
+        Per-pixel confidence in [0, 1] (ones where the file has none).
+    mask : ndarray of bool, shape (H, W)
+        Pixels the method considered (finite depth where the file has none).
+    camera : str
+        Reference camera name.
+    K : ndarray, shape (3, 3)
+        Intrinsics, pixels.
+    dist : ndarray, shape (n,)
+        OpenCV distortion coefficients (zeros for files written without them).
+    R, t : ndarray, shapes (3, 3) and (3,)
+        World-to-camera pose, ``x_cam = R X + t`` (t in metres).
+    method : str
+        Reconstruction method (``"bayes"``, ``"ml"``, ``"vh"``, ...; ``""`` if absent).
+    params : dict
+        The method's parameters and diagnostics (``{}`` if absent).
+    path : str
+        File it was read from.
+    """
+
+    depth: np.ndarray
+    normal: np.ndarray
+    confidence: np.ndarray
+    mask: np.ndarray
+    camera: str
+    K: np.ndarray
+    dist: np.ndarray
+    R: np.ndarray
+    t: np.ndarray
+    method: str = ""
+    params: dict | None = None
+    path: str = ""
+
+    @property
+    def height(self) -> int:
+        return int(self.depth.shape[0])
+
+    @property
+    def width(self) -> int:
+        return int(self.depth.shape[1])
+
+    @property
+    def centre(self) -> np.ndarray:
+        """Reference camera centre in the world frame, metres, shape (3,)."""
+        return camera_centre(self.R, self.t)
+
+
+def _attr_array(f, name, shape, path):
+    if name not in f.attrs:
+        raise ValueError(f"{path}: missing attribute {name!r}")
+    a = np.asarray(f.attrs[name], float)
+    if a.shape != shape:
+        raise ValueError(f"{path}: attribute {name!r} has shape {a.shape}, expected {shape}")
+    return a
+
+
+def read_depth(path: str | Path) -> DepthMap:
+    """Read and check a results-contract depth file.
+
+    Parameters
+    ----------
+    path : str or Path
+        HDF5 file with datasets ``depth`` (H, W), ``normal`` (H, W, 3) and optionally
+        ``confidence`` (H, W) and ``mask`` (H, W); attributes ``camera``, ``K``, ``R``,
+        ``t`` and optionally ``dist``, ``method``, ``params`` (JSON).
+
+    Returns
+    -------
+    DepthMap
+
+    Raises
+    ------
+    ValueError
+        Naming the file, when a required dataset or attribute is missing, a shape is
+        wrong, or no pixel has a finite depth ("no reconstructed pixels").
+    """
+    path = Path(path)
+    try:
+        f = h5py.File(path, "r")
+    except OSError as err:
+        raise ValueError(f"{path}: not a readable HDF5 depth file ({err})") from err
+    with f:
+        for name in ("depth", "normal"):
+            if name not in f:
+                raise ValueError(f"{path}: missing dataset {name!r}")
+        depth = np.asarray(f["depth"][()], np.float32)
+        if depth.ndim != 2:
+            raise ValueError(f"{path}: dataset 'depth' has shape {depth.shape}, expected (H, W)")
+        if depth.size == 0:
+            raise ValueError(f"{path}: no reconstructed pixels (empty depth map {depth.shape})")
+        h, w = depth.shape
+        normal = np.asarray(f["normal"][()], np.float32)
+        if normal.shape != (h, w, 3):
+            raise ValueError(
+                f"{path}: dataset 'normal' has shape {normal.shape}, expected {(h, w, 3)}"
+            )
+        finite = np.isfinite(depth)
+        confidence = (
+            np.asarray(f["confidence"][()], np.float32)
+            if "confidence" in f
+            else finite.astype(np.float32)
+        )
+        mask = np.asarray(f["mask"][()], bool) if "mask" in f else finite
+        for name, a in (("confidence", confidence), ("mask", mask)):
+            if a.shape != (h, w):
+                raise ValueError(f"{path}: dataset {name!r} has shape {a.shape}, expected {(h, w)}")
+        if "camera" not in f.attrs:
+            raise ValueError(f"{path}: missing attribute 'camera'")
+        camera = f.attrs["camera"]
+        camera = camera.decode() if isinstance(camera, bytes) else str(camera)
+        K = _attr_array(f, "K", (3, 3), path)
+        R = _attr_array(f, "R", (3, 3), path)
+        t = _attr_array(f, "t", (3,), path).reshape(3)
+        dist = np.asarray(f.attrs["dist"], float).ravel() if "dist" in f.attrs else np.zeros(5)
+        method = f.attrs.get("method", "")
+        method = method.decode() if isinstance(method, bytes) else str(method)
+        params = f.attrs.get("params", "{}")
+        try:
+            params = json.loads(params) if isinstance(params, str | bytes) else {}
+        except json.JSONDecodeError:
+            params = {}
+    if not np.any(finite & (depth > 0)):
+        raise ValueError(f"{path}: no reconstructed pixels (depth is empty or all NaN)")
+    return DepthMap(depth, normal, confidence, mask, camera, K, dist, R, t, method, params,
+                    str(path))  # fmt: skip
