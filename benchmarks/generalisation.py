@@ -144,8 +144,8 @@ def evaluate_variant(data, scene, frames, variant, files, chromatic, work) -> di
     from colourhs.capture import load_rig
     from colourhs.depthfile import read_depth
     from colourhs.evaluate import depth_errors, depth_summary
-    from colourhs.groundtruth import load_mesh
     from colourhs.hull import visual_hull
+    from colourhs.ply import load_mesh
     from colourhs.reconstruct.frame import reconstruct_frame
 
     rig = load_rig(data)

@@ -23,7 +23,7 @@ import pandas as pd
 from colourhs.capture import load_rig
 from colourhs.depthfile import read_depth
 from colourhs.evaluate import depth_errors, depth_summary
-from colourhs.groundtruth import load_mesh
+from colourhs.ply import load_mesh
 
 HERE = Path(__file__).parent
 

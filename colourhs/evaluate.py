@@ -49,9 +49,10 @@ from scipy.ndimage import binary_dilation
 
 from colourhs.depthfile import DepthMap, read_depth
 from colourhs.geometry import backproject, camera_centre, pixel_grid, project, world_to_camera
-from colourhs.groundtruth import load_mesh, render_depth_normals
 from colourhs.io import atomic_output, write_json
-from colourhs.mesh import TriMesh, write_ply
+from colourhs.mesh import TriMesh
+from colourhs.ply import load_mesh, write_ply
+from colourhs.raycast import render_depth_normals
 
 __all__ = [
     "CONTRACT_COLUMNS",
@@ -392,7 +393,7 @@ def depth_errors(
     """Per-pixel depth and normal errors of a depth map against a GT mesh.
 
     The GT is rendered into the depth map's reference camera
-    (:func:`colourhs.groundtruth.render_depth_normals`: z-depth and interpolated
+    (:func:`colourhs.raycast.render_depth_normals`: z-depth and interpolated
     vertex normals facing the camera at every pixel centre).
 
     Parameters

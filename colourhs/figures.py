@@ -25,7 +25,6 @@ __all__ = [
     "render_grid_figure",
     "shaded_render",
     "write_animation",
-    "write_coloured_ply",
 ]
 
 #: Colour of pixels with no value (NaN) in the image figures and renders.
@@ -301,7 +300,7 @@ def shaded_render(
     """Shaded image of a triangle mesh seen by a pinhole camera (ray cast, no OpenGL).
 
     One ray per pixel centre (open3d ``RaycastingScene``, via
-    :func:`colourhs.groundtruth._cast_pixels`); Lambertian shading from a
+    :func:`colourhs.raycast._cast_pixels`); Lambertian shading from a
     headlight at the camera centre, ``ambient + (1 - ambient) |n . ray|``
     with the interpolated (area-weighted) vertex normal ``n``.
 
@@ -329,7 +328,7 @@ def shaded_render(
         The render, white where no ray hits the mesh.
     """
     from colourhs.capture import Camera
-    from colourhs.groundtruth import _cast_pixels
+    from colourhs.raycast import _cast_pixels
 
     vertices = np.asarray(vertices, dtype=np.float64)
     triangles = np.asarray(triangles, dtype=np.int64)
@@ -482,45 +481,6 @@ def write_animation(images: list[np.ndarray], path: str | Path, fps: float = 8) 
     return path
 
 
-def write_coloured_ply(
-    vertices: np.ndarray, triangles: np.ndarray, vertex_rgb: np.ndarray, path: str | Path
-) -> Path:
-    """A binary PLY triangle mesh with per-vertex colours (open3d), written atomically.
-
-    Parameters
-    ----------
-    vertices : ndarray, shape (V, 3)
-        World points, metres.
-    triangles : ndarray of int, shape (T, 3)
-        Vertex indices.
-    vertex_rgb : ndarray, shape (V, 3)
-        Colours, floats in [0, 1] or uint8.
-    path : str or Path
-        PLY file to write.
-    """
-    import open3d as o3d
-
-    from colourhs.io import atomic_output
-
-    vertices = np.asarray(vertices, dtype=np.float64)
-    rgb = np.asarray(vertex_rgb)
-    rgb = rgb / 255.0 if np.issubdtype(rgb.dtype, np.integer) else rgb.astype(np.float64)
-    if rgb.shape != vertices.shape or vertices.ndim != 2 or vertices.shape[1] != 3:
-        raise ValueError(
-            f"vertices {vertices.shape} and vertex_rgb {rgb.shape} must both be (V, 3)"
-        )
-    mesh = o3d.geometry.TriangleMesh(
-        o3d.utility.Vector3dVector(vertices),
-        o3d.utility.Vector3iVector(np.asarray(triangles, dtype=np.int32).reshape(-1, 3)),
-    )
-    mesh.vertex_colors = o3d.utility.Vector3dVector(np.clip(rgb, 0.0, 1.0))
-    path = Path(path)
-    with atomic_output(path) as tmp:  # keeps the .ply suffix open3d chooses the format by
-        if not o3d.io.write_triangle_mesh(str(tmp), mesh, write_ascii=False):
-            raise OSError(f"{path}: open3d could not write the mesh")
-    return path
-
-
 def scene_figures(
     out_dir: str | Path,
     depths: Mapping[str, str | Path],
@@ -558,7 +518,7 @@ def scene_figures(
     """
     from colourhs.depthfile import read_depth
     from colourhs.evaluate import depth_errors
-    from colourhs.groundtruth import load_mesh
+    from colourhs.ply import load_mesh
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

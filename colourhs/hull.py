@@ -43,8 +43,6 @@ around the fixation point.
 
 from __future__ import annotations
 
-import os
-from pathlib import Path
 from time import perf_counter
 
 import cv2
@@ -58,7 +56,8 @@ from colourhs.geometry import (
     pixels_of,
     vertex_normals,
 )
-from colourhs.io import atomic_output, sha256_files
+from colourhs.io import sha256_files
+from colourhs.ply import write_ply
 
 __all__ = [
     "DEFAULT_THRESHOLD",
@@ -77,7 +76,6 @@ __all__ = [
     "threshold_silhouette",
     "visual_hull",
     "working_volume",
-    "write_mesh_ply",
 ]
 
 DEFAULT_THRESHOLD = 0.02
@@ -856,7 +854,7 @@ def hull_depth(
         ``confidence`` 1 and ``mask`` True where the hull is hit.
     """
     from colourhs.depthfile import DepthResult
-    from colourhs.groundtruth import render_depth_normals
+    from colourhs.raycast import render_depth_normals
 
     depth, nrm = render_depth_normals(vertices, triangles, normals, camera, width, height)
     mask = np.isfinite(depth)
@@ -875,28 +873,6 @@ def hull_depth(
 
 # --------------------------------------------------------------------------------------------
 # Files
-
-
-def write_mesh_ply(path, vertices: np.ndarray, triangles: np.ndarray, normals: np.ndarray) -> Path:
-    """Write a binary PLY mesh with vertex normals (open3d), atomically."""
-    import open3d as o3d
-
-    mesh = o3d.geometry.TriangleMesh(
-        o3d.utility.Vector3dVector(np.asarray(vertices, np.float64)),
-        o3d.utility.Vector3iVector(np.asarray(triangles, np.int32)),
-    )
-    mesh.vertex_normals = o3d.utility.Vector3dVector(np.asarray(normals, np.float64))
-    path = Path(path)
-    with atomic_output(path) as tmp:
-        # open3d picks the format from the file extension, so write a *.ply sibling first.
-        ply_tmp = tmp.with_name(tmp.name + ".ply")
-        try:
-            if not o3d.io.write_triangle_mesh(str(ply_tmp), mesh, write_ascii=False):
-                raise OSError(f"{path}: open3d could not write the mesh")
-            os.replace(ply_tmp, tmp)
-        finally:
-            ply_tmp.unlink(missing_ok=True)
-    return path
 
 
 def visual_hull(
@@ -1000,7 +976,7 @@ def visual_hull(
         spec = ds.rig.image
         depth = hull_depth(v, t, n, ref, spec.width, spec.height, sils[ref.name])
         depth.info.update(info)
-    write_mesh_ply(out_ply, v, t, n)
+    write_ply(out_ply, v, t, n)
     if depth is not None:
         from colourhs.depthfile import write_depth
 

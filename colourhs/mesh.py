@@ -32,8 +32,7 @@ from scipy.spatial import cKDTree
 
 from colourhs.depthfile import DepthMap, read_depth
 from colourhs.geometry import backproject, pixel_grid
-from colourhs.groundtruth import load_mesh
-from colourhs.io import atomic_output
+from colourhs.ply import load_mesh, write_ply
 
 __all__ = [
     "TriMesh",
@@ -43,7 +42,6 @@ __all__ = [
     "oriented_points",
     "point_spacing",
     "poisson_mesh",
-    "write_ply",
 ]
 
 #: Hull vertices closer than this many point spacings to the data are dropped (default radius).
@@ -271,36 +269,6 @@ def crop_to_data(mesh: TriMesh, data_points: np.ndarray, max_dist_m: float) -> T
     index = np.cumsum(used) - 1
     out = _to_o3d(np.asarray(mesh.vertices)[used], index[tri])
     return _with_normals(out)
-
-
-def write_ply(
-    path: str | Path,
-    vertices: np.ndarray,
-    triangles: np.ndarray,
-    normals: np.ndarray | None = None,
-    colours: np.ndarray | None = None,
-) -> Path:
-    """Write a binary PLY mesh atomically (world frame, metres).
-
-    Parameters
-    ----------
-    path : str or Path
-    vertices : ndarray, shape (V, 3), metres
-    triangles : ndarray, shape (T, 3)
-    normals : ndarray, shape (V, 3), optional
-        Unit vertex normals.
-    colours : ndarray, shape (V, 3), optional
-        RGB in [0, 1] (stored as 8-bit).
-    """
-    mesh = _to_o3d(vertices, triangles)
-    if normals is not None:
-        mesh.vertex_normals = o3d.utility.Vector3dVector(np.asarray(normals, float))
-    if colours is not None:
-        mesh.vertex_colors = o3d.utility.Vector3dVector(np.clip(np.asarray(colours, float), 0, 1))
-    with atomic_output(path) as tmp:  # tmp keeps the .ply suffix open3d picks the format by
-        if not o3d.io.write_triangle_mesh(str(tmp), mesh, write_ascii=False):
-            raise OSError(f"{path}: could not write PLY")
-    return Path(path)
 
 
 def frame_mesh(

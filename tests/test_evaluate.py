@@ -23,8 +23,8 @@ from colourhs.evaluate import (
     visible_vertices,
 )
 from colourhs.geometry import look_at
-from colourhs.groundtruth import load_mesh, render_depth_normals
-from colourhs.mesh import write_ply
+from colourhs.ply import load_mesh, write_ply
+from colourhs.raycast import render_depth_normals
 
 W, H = 128, 96
 

@@ -14,7 +14,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from colourhs.groundtruth import load_mesh, render_depth_normals
+from colourhs.ply import load_mesh
+from colourhs.raycast import render_depth_normals
 from colourhs.reconstruct.frame import load_frame, reconstruct
 from colourhs.synth.dataset import PRESETS, synthesise
 from colourhs.synth.rig import Nuisances

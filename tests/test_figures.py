@@ -17,7 +17,6 @@ from colourhs.figures import (
     render_grid_figure,
     shaded_render,
     write_animation,
-    write_coloured_ply,
 )
 
 W, H, F = 80, 60, 100.0
@@ -148,14 +147,3 @@ def test_render_grid_figure(tmp_path):
     assert full.shape[0] > row.shape[0] * 1.5  # two rows
     with pytest.raises(ValueError):
         render_grid_figure({}, tmp_path / "none.png")
-
-
-def test_write_coloured_ply(tmp_path):
-    v, f = _sphere(resolution=8)
-    rgb = np.tile([1.0, 0.5, 0.0], (len(v), 1))
-    path = write_coloured_ply(v, f, rgb, tmp_path / "m.ply")
-    mesh = o3d.io.read_triangle_mesh(str(path))
-    assert len(mesh.triangles) == len(f)
-    np.testing.assert_allclose(np.asarray(mesh.vertices), v, atol=1e-6)
-    np.testing.assert_allclose(np.asarray(mesh.vertex_colors), rgb, atol=1 / 255)
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["m.ply"]

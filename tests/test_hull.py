@@ -13,7 +13,6 @@ from scipy.ndimage import binary_erosion
 
 from colourhs.capture import Camera, CaptureFormatError, open_dataset, read_mask
 from colourhs.geometry import backproject, look_at, pixel_grid
-from colourhs.groundtruth import load_mesh, render_depth_normals
 from colourhs.hull import (
     axes_centre,
     carve,
@@ -27,6 +26,8 @@ from colourhs.hull import (
     visual_hull,
     working_volume,
 )
+from colourhs.ply import load_mesh
+from colourhs.raycast import render_depth_normals
 
 # ---------------------------------------------------------------------------------------------
 # A sphere of radius R at the origin, 12 cameras at distance D on two rings (+-25 deg

@@ -11,7 +11,6 @@ from scipy.spatial import cKDTree
 from colourhs.capture import Camera
 from colourhs.depthfile import DepthResult, read_depth, write_depth
 from colourhs.geometry import backproject, look_at, pixel_grid, ray_plane_intersection
-from colourhs.groundtruth import load_mesh
 from colourhs.mesh import (
     add_hull_points,
     crop_to_data,
@@ -19,8 +18,8 @@ from colourhs.mesh import (
     oriented_points,
     poisson_mesh,
     poisson_voxel,
-    write_ply,
 )
+from colourhs.ply import load_mesh, write_ply
 
 W, H = 128, 96
 

@@ -12,10 +12,11 @@ import numpy as np
 import pytest
 
 from colourhs.crosstalk import calibrate_crosstalk
-from colourhs.groundtruth import load_mesh, render_depth_normals
 from colourhs.helmholtz import pair_rows
 from colourhs.io import sha256_files
 from colourhs.photometric import read_mu_maps
+from colourhs.ply import load_mesh
+from colourhs.raycast import render_depth_normals
 from colourhs.reconstruct.dataterm import INVALID_COST, data_term, pair_arrays, prepare_images
 from colourhs.reconstruct.frame import (
     load_frame,

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from colourhs.crosstalk import calibrate_crosstalk
-from colourhs.groundtruth import load_mesh, render_depth_normals
+from colourhs.ply import load_mesh
+from colourhs.raycast import render_depth_normals
 from colourhs.reconstruct.dataterm import pair_arrays
 from colourhs.reconstruct.frame import foreground, load_frame, reference_rays
 from colourhs.reconstruct.ml import candidate_labels

@@ -12,8 +12,9 @@ import pytest
 
 from colourhs.capture import CaptureFormatError, load_rig, open_dataset, read_image
 from colourhs.geometry import project
-from colourhs.groundtruth import load_mesh, surface_points
 from colourhs.helmholtz import constraint_residual, pair_rows, sample_bilinear
+from colourhs.ply import load_mesh
+from colourhs.raycast import surface_points
 from colourhs.synth import dataset as synth_dataset
 from colourhs.synth.dataset import PRESETS, synthesise
 from colourhs.synth.rig import Nuisances, sensor

@@ -15,9 +15,10 @@ import pytest
 
 from colourhs.capture import load_rig, open_dataset, read_image, validate
 from colourhs.geometry import project
-from colourhs.groundtruth import load_mesh, surface_points
 from colourhs.helmholtz import constraint_residual, pair_rows, sample_bilinear
 from colourhs.markers import to_grey8
+from colourhs.ply import load_mesh
+from colourhs.raycast import surface_points
 from colourhs.synth import randomrig as rr
 from colourhs.synth.brdf import Material
 from colourhs.synth.dataset import PRESETS, SCENE_META, _mask, synthesise

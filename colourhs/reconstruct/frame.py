@@ -465,8 +465,8 @@ def reconstruct_frame(
     fr = load_frame(dataset_dir, scene, frame, crosstalk_json, photometric_h5, chromaticity_h5,
                     noise_json=noise_json)  # fmt: skip
     if hull_ply is not None:
-        from colourhs.groundtruth import load_mesh
         from colourhs.hull import hull_depth_range
+        from colourhs.ply import load_mesh
 
         vertices, triangles, _ = load_mesh(hull_ply)
         ref = fr.rig.camera(params.get("reference") or fr.rig.camera_names[0])

@@ -26,9 +26,9 @@ from pathlib import Path
 import cv2
 import h5py
 import numpy as np
-import open3d as o3d
 from tqdm import tqdm
 
+from colourhs.ply import write_ply
 from colourhs.synth import scenes as sc
 from colourhs.synth.poses import board_poses
 from colourhs.synth.render import (
@@ -205,17 +205,6 @@ def write_png(path: Path, rgb: np.ndarray) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     if not cv2.imwrite(str(path), np.ascontiguousarray(rgb[..., ::-1])):
         raise OSError(f"{path}: could not write PNG")
-
-
-def write_mesh(path: Path, geom: sc.SceneGeometry) -> None:
-    """Write the geometry's triangle mesh as PLY (world frame, metres)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    mesh = o3d.geometry.TriangleMesh(
-        o3d.utility.Vector3dVector(geom.vertices), o3d.utility.Vector3iVector(geom.triangles)
-    )
-    mesh.vertex_normals = o3d.utility.Vector3dVector(geom.vertex_normals)
-    if not o3d.io.write_triangle_mesh(str(path), mesh, write_ascii=False):
-        raise OSError(f"{path}: could not write PLY")
 
 
 @dataclass(frozen=True)
@@ -487,7 +476,7 @@ def _render_job(root, rig, rays, p, job, seed, nuis, mask_mode="exact"):
     geom = job.geometry()
     scene = raycasting_scene(geom)
     if job.gt_mesh:
-        write_mesh(root / job.gt_mesh, geom)
+        write_ply(root / job.gt_mesh, geom.vertices, geom.triangles, geom.vertex_normals)
     chroma_maps = {}
     for cam, cam_rays in zip(rig.cameras, rays, strict=True):
         hits = trace_camera(geom, scene, cam_rays)

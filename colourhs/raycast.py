@@ -1,26 +1,18 @@
-"""Ground-truth surface samples from a dataset's meshes (``scenes/<s>/gt/<f>.ply``)."""
+"""Ray casting a triangle mesh into a camera (open3d): depth and normals per pixel
+(ground truth for evaluation and tests), and the surface points a rig sees and lights.
+
+Meshes are read by :func:`colourhs.ply.load_mesh`.
+"""
 
 from __future__ import annotations
-
-from pathlib import Path
 
 import numpy as np
 import open3d as o3d
 
-from colourhs.capture import Camera, CaptureFormatError
+from colourhs.capture import Camera
 from colourhs.geometry import backproject, pixel_grid
 
 SHADOW_EPS_M = 2e-5
-
-
-def load_mesh(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Vertices (V, 3), triangles (T, 3) and unit vertex normals (V, 3) of a PLY mesh."""
-    mesh = o3d.io.read_triangle_mesh(str(path))
-    if len(mesh.triangles) == 0:
-        raise CaptureFormatError(path, "not a triangle mesh (no faces read)")
-    if not mesh.has_vertex_normals():
-        mesh.compute_vertex_normals()
-    return np.asarray(mesh.vertices), np.asarray(mesh.triangles), np.asarray(mesh.vertex_normals)
 
 
 def _cast_pixels(vertices, triangles, normals, camera, width, height):
