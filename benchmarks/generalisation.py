@@ -42,8 +42,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from colourhs.variants import VARIANTS
+
 HERE = Path(__file__).parent
-VARIANTS = ("vh", "ml_full", "bayes_nocalib", "bayes_ph", "bayes_full")
 TARGETS = {  # issue 11: median over seeds (worst seed within 2x)
     ("plane", "bayes_ph", "depth_median_mm"): 0.3,
     ("plane", "bayes_ph", "depth_rms_mm"): 1.0,

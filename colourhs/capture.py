@@ -102,6 +102,17 @@ class CaptureFormatError(ValueError):
         return (type(self), (self.path, self.problem))
 
 
+class UnknownNameError(KeyError):
+    """A scene, frame, camera, object, pose or marker the dataset does not have.
+
+    A KeyError (lookups by name), whose message names what exists; ``str()``
+    is the message itself, not KeyError's quoted repr.
+    """
+
+    def __str__(self) -> str:
+        return str(self.args[0]) if self.args else ""
+
+
 # --------------------------------------------------------------------------------------------
 # Rig types
 
@@ -227,7 +238,9 @@ class Board:
             If the board has no such marker.
         """
         if marker_id not in self.markers:
-            raise KeyError(f"board has no marker {marker_id!r}; ids: {sorted(self.markers)}")
+            raise UnknownNameError(
+                f"board has no marker {marker_id!r}; ids: {sorted(self.markers)}"
+            )
         return _square_corners(self.markers[marker_id], self.marker_length)
 
     def white(self, xy: np.ndarray, margin_m) -> np.ndarray:
@@ -306,7 +319,9 @@ class Rig:
         for cam in self.cameras:
             if cam.name == name:
                 return cam
-        raise KeyError(f"rig {self.path} has no camera {name!r}; cameras: {self.camera_names}")
+        raise UnknownNameError(
+            f"rig {self.path} has no camera {name!r}; cameras: {self.camera_names}"
+        )
 
     def reciprocal_pairs(self) -> tuple[ReciprocalPair, ...]:
         """Every unordered camera pair ``i < j`` in rig order, with its channels.
@@ -382,6 +397,11 @@ class Dataset:
     chromatic_objects: tuple[str, ...]
     scenes: dict[str, Scene]
 
+    def scene(self, name: str) -> Scene:
+        """The scene ``name``; :class:`UnknownNameError` naming the dataset's scenes."""
+        _known(name, tuple(self.scenes), "scene")
+        return self.scenes[name]
+
     def photometric_image(self, pose: str, camera: str) -> Path:
         """Path of ``photometric/<pose>/<camera>.png``."""
         _known(pose, self.poses, "photometric pose")
@@ -410,8 +430,8 @@ class Dataset:
             If the scene has no masks (or the scene, frame or camera is unknown).
         """
         frame = self._frame(scene, frame)
-        if not self.scenes[scene].has_masks:
-            raise KeyError(f"scene {scene!r} has no masks")
+        if not self.scene(scene).has_masks:
+            raise UnknownNameError(f"scene {scene!r} has no masks")
         self.rig.camera(camera)
         return self.root / "scenes" / scene / "masks" / frame / f"{camera}.png"
 
@@ -424,8 +444,8 @@ class Dataset:
             If the scene has no ground truth (or the scene or frame is unknown).
         """
         frame = self._frame(scene, frame)
-        if not self.scenes[scene].has_gt:
-            raise KeyError(f"scene {scene!r} has no ground-truth meshes")
+        if not self.scene(scene).has_gt:
+            raise UnknownNameError(f"scene {scene!r} has no ground-truth meshes")
         return self.root / "scenes" / scene / "gt" / f"{frame}.ply"
 
     @property
@@ -443,7 +463,7 @@ class Dataset:
 
 def _known(name: str, names: tuple[str, ...], what: str) -> None:
     if name not in names:
-        raise KeyError(f"unknown {what} {name!r}; known: {', '.join(names) or 'none'}")
+        raise UnknownNameError(f"unknown {what} {name!r}; known: {', '.join(names) or 'none'}")
 
 
 # --------------------------------------------------------------------------------------------

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import yaml
 
-from colourhs.capture import validate
+from colourhs.capture import UnknownNameError, validate
 
 PROJECT_ROOT = Path(__file__).resolve().parents[1]
 SNAKEFILE = PROJECT_ROOT / "Snakefile"
@@ -26,8 +26,7 @@ def _synth(args) -> int:
     from colourhs.synth.rig import Nuisances
 
     if args.preset not in PRESETS:
-        print(f"colourhs synth: unknown preset {args.preset!r}; choose from {sorted(PRESETS)}")
-        return 2
+        raise ValueError(f"unknown preset {args.preset!r}; presets: {', '.join(PRESETS)}")
     nuisances = Nuisances().without(*args.off)
     synthesise(
         args.out,
@@ -48,16 +47,30 @@ def _validate(args) -> int:
 
 
 def _run(args) -> int:
+    from colourhs.capture import open_dataset
+    from colourhs.variants import parse_variants
+
     dataset = Path(args.dataset).resolve()
     if not (dataset / "rig.json").exists():
-        print(f"colourhs run: {dataset / 'rig.json'}: missing (not a capture-format dataset)")
-        return 2
+        raise FileNotFoundError(f"{dataset / 'rig.json'}: missing (not a capture-format dataset)")
+    # Everything the command line names is checked before anything is written.
+    reconstruction = {}
+    if args.variants:
+        reconstruction["variants"] = parse_variants(args.variants)
+    if args.scenes:
+        known = tuple(open_dataset(dataset, check_images=False).scenes)
+        scenes = [v.strip() for v in args.scenes.split(",") if v.strip()]
+        unknown = [v for v in scenes if v not in known]
+        if unknown or not scenes:
+            raise ValueError(f"unknown scene(s) {', '.join(map(repr, unknown)) or '(none given)'}"
+                             f" in {dataset}; scenes: {', '.join(known)}")  # fmt: skip
+        reconstruction["scenes"] = scenes
     name = args.name or dataset.name
     config_path = Path(args.directory) / "results" / name / "run-config.yaml"
-    config_path.parent.mkdir(parents=True, exist_ok=True)
     config = {"datasets": {name: {"path": str(dataset)}}, "only": [name]}
-    if args.variants:
-        config["reconstruction"] = {"variants": [v.strip() for v in args.variants.split(",")]}
+    if reconstruction:
+        config["reconstruction"] = reconstruction
+    config_path.parent.mkdir(parents=True, exist_ok=True)
     config_path.write_text(yaml.safe_dump(config))
     # Snakemake's own arguments (targets included) go before --configfile,
     # whose list of files would otherwise swallow them.
@@ -217,19 +230,69 @@ def _config(args) -> int:
     return 0
 
 
-RECONSTRUCT_PARAMS = {"reference": str, "n_labels": int, "alpha": float, "tau": float,
-                      "working_radius": float, "working_radius_m": float,
-                      "data_weight": float, "max_cost": float, "cost_scale": float,
-                      "erode_px": int, "edge_m": float,
-                      "refine_passes": int, "min_component": int, "link_m": float,
-                      "surface_iterations": int, "spline_px": float}  # fmt: skip
+#: ``colourhs reconstruct`` tuning options: name -> (type, help); the default is
+#: the package's (:func:`colourhs.reconstruct.frame.reconstruct`), shown by --help.
+RECONSTRUCT_PARAMS = {
+    "reference": (str, "reference camera (default: the first camera of rig.json)"),
+    "n_labels": (int, "depth hypotheses of the labelling"),
+    "alpha": (float, "weight of the data term in the Bayesian energy"),
+    "tau": (float, "truncation of the depth-normal prior, labels"),
+    "working_radius": (float, "depth hypotheses: working depth +- this fraction of it"),
+    "working_radius_m": (float, "the same in metres, instead of --working-radius"),
+    "data_weight": (float, "weight of the labelling in the initial surface"),
+    "max_cost": (float, "pixels whose best hypothesis costs more are left out (sigma3/sigma2)"),
+    "cost_scale": (float, "typical noise level of sigma3/sigma2 (the data term's unit)"),
+    "erode_px": (int, "erosion of the Bayesian mask, pixels (default: 1 per 320 px of width)"),
+    "edge_m": (float, "depth step that separates surfaces in the initial surface, metres"),
+    "refine_passes": (int, "passes of the initial surface"),
+    "min_component": (int, "smallest kept surface, pixels (default: 0.2 %% of the image)"),
+    "link_m": (float, "tangent-plane distance that links neighbours into one surface, metres"),
+    "surface_iterations": (int, "Levenberg-Marquardt steps before and after the depth search"),
+    "spline_px": (float, "spline control spacing, pixels (default: 1/80 of the width)"),
+}
 
-PHOTOMETRIC_PARAMS = ("grid_spacing_px", "step_px", "smoothness", "coupling", "margin_m",
-                      "min_cos", "min_signal")  # fmt: skip
+#: ``colourhs photometric`` options: name -> (type, help); defaults in
+#: :data:`colourhs.photometric.DEFAULTS`, shown by --help.
+PHOTOMETRIC_PARAMS = {
+    "grid_spacing_px": (float, "mu control-grid spacing, pixels (default: 1 deg of field)"),
+    "step_px": (int, "sample spacing, pixels (default: the grid spacing / 7)"),
+    "smoothness": (float, "curvature regulariser, relative to one eq. (6) row"),
+    "coupling": (float, "gradient penalty on the difference of a camera's two maps"),
+    "margin_m": (float, "margin around markers and board edges, metres (default 2 px)"),
+    "min_cos": (float, "grazing limit: smallest cosine of incidence and view"),
+    "min_signal": (float, "darkest usable intensity, fraction of full scale"),
+}
 
 
-def build_parser() -> argparse.ArgumentParser:
+def _defaults(command: str) -> dict:
+    """The package's defaults of a stage's tuning options (imported only for --help)."""
+    import inspect
+
+    if command == "reconstruct":
+        from colourhs.reconstruct.frame import reconstruct
+
+        sig = inspect.signature(reconstruct).parameters
+        return {k: sig[k].default for k in RECONSTRUCT_PARAMS if k in sig}
+    from colourhs.photometric import DEFAULTS
+
+    return dict(DEFAULTS)
+
+
+def _tuning_options(parser, params: dict, defaults: dict | None) -> None:
+    """One --option per tuning parameter, its help with its unit and default."""
+    for name, (kind, text) in params.items():
+        default = (defaults or {}).get(name)
+        if defaults is not None and default is not None and "default" not in text:
+            text = f"{text} (default {default:g})" if kind is not str else text
+        parser.add_argument("--" + name.replace("_", "-"), dest=name, type=kind, default=None,
+                            metavar=kind.__name__.upper(), help=text)  # fmt: skip
+
+
+def build_parser(show_defaults: bool = False) -> argparse.ArgumentParser:
+    """The command line; ``show_defaults`` imports the stages to show their
+    tuning options' defaults (for --help only: it costs a second)."""
     p = argparse.ArgumentParser(prog="colourhs", description=__doc__)
+    p.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     sub = p.add_subparsers(dest="command", required=True)
 
     s = sub.add_parser("synth", help="render a synthetic dataset in the capture format")
@@ -237,10 +300,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument(
         "--preset",
         default="demo",
-        help="tiny, demo, paper, random or random-tiny (default demo); the random presets "
-        "draw a different rig, board, encoding and scene set for every --seed",
+        help="tiny, demo, paper, random, random-tiny or random-tiny-lens (default demo); the "
+        "random presets draw a different rig, board, encoding and scene set for every --seed",
     )
-    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     s.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
     s.add_argument("--overwrite", action="store_true", help="replace an existing dataset")
     s.add_argument(
@@ -249,7 +312,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=_synth)
 
     v = sub.add_parser("validate", help="check a dataset against the capture format")
-    v.add_argument("dataset", type=Path)
+    v.add_argument("dataset", type=Path, help="dataset folder (capture format)")
     v.add_argument("--summary", type=Path, default=None, help="write a JSON summary here")
     v.set_defaults(func=_validate)
 
@@ -262,12 +325,12 @@ def build_parser() -> argparse.ArgumentParser:
     m.set_defaults(func=_markers)
 
     nz = sub.add_parser("noise", help="sensor noise model of every camera channel (JSON)")
-    nz.add_argument("dataset", type=Path)
+    nz.add_argument("dataset", type=Path, help="dataset folder (capture format)")
     nz.add_argument("out", type=Path, help="noise model JSON to write")
     nz.set_defaults(func=_noise)
 
     x = sub.add_parser("crosstalk", help="calibrate each camera's channel mixing matrix")
-    x.add_argument("dataset", type=Path)
+    x.add_argument("dataset", type=Path, help="dataset folder (capture format)")
     x.add_argument("out", type=Path, help="JSON file to write")
     x.add_argument(
         "--poses",
@@ -279,14 +342,12 @@ def build_parser() -> argparse.ArgumentParser:
     x.set_defaults(func=_crosstalk)
 
     ph = sub.add_parser("photometric", help="mu maps of the Helmholtz cameras (eqs. 6-8)")
-    ph.add_argument("dataset", type=Path)
+    ph.add_argument("dataset", type=Path, help="dataset folder (capture format)")
     ph.add_argument("poses", type=Path, help="marker poses table (colourhs markers)")
     ph.add_argument("out", type=Path, help="photometric.h5 to write")
     ph.add_argument("--crosstalk", type=Path, default=None, help="unmix with this calibration")
     ph.add_argument("--figure", type=Path, default=None, help="also write the heat maps PNG")
-    for name in PHOTOMETRIC_PARAMS:
-        kind = int if name == "step_px" else float
-        ph.add_argument("--" + name.replace("_", "-"), dest=name, type=kind, default=None)
+    _tuning_options(ph, PHOTOMETRIC_PARAMS, _defaults("photometric") if show_defaults else None)
     ph.set_defaults(func=_photometric)
 
     c = sub.add_parser("chromaticity", help="surface chromaticity maps of a chromatic object")
@@ -303,11 +364,12 @@ def build_parser() -> argparse.ArgumentParser:
     c.set_defaults(func=_chromaticity)
 
     rc = sub.add_parser("reconstruct", help="depth and normals of one frame (ML or Bayesian HS)")
-    rc.add_argument("dataset", type=Path)
-    rc.add_argument("scene")
-    rc.add_argument("frame", help="6-digit frame index")
+    rc.add_argument("dataset", type=Path, help="dataset folder (capture format)")
+    rc.add_argument("scene", help="scene name (a folder under scenes/)")
+    rc.add_argument("frame", help="frame: its folder name under frames/ (e.g. 000000)")
     rc.add_argument("out", type=Path, help="depth HDF5 to write")
-    rc.add_argument("--method", choices=("ml", "bayes"), default="bayes")
+    rc.add_argument("--method", choices=("ml", "bayes"), default="bayes",
+                    help="ML HS or Bayesian HS (default bayes)")  # fmt: skip
     rc.add_argument("--crosstalk", type=Path, default=None, help="unmix with this calibration")
     rc.add_argument("--photometric", type=Path, default=None, help="mu maps (photometric.h5)")
     rc.add_argument("--chromaticity", type=Path, default=None, help="chromaticity maps (.h5)")
@@ -319,93 +381,156 @@ def build_parser() -> argparse.ArgumentParser:
     )
     rc.add_argument("--hull", type=Path, default=None,
                     help="visual hull PLY: depth hypotheses over its depth range")  # fmt: skip
-    for name, kind in RECONSTRUCT_PARAMS.items():
-        rc.add_argument("--" + name.replace("_", "-"), dest=name, type=kind, default=None)
+    _tuning_options(rc, RECONSTRUCT_PARAMS, _defaults("reconstruct") if show_defaults else None)
     rc.set_defaults(func=_reconstruct)
 
     h = sub.add_parser("hull", help="visual hull of one frame from its silhouettes (PLY)")
-    h.add_argument("dataset", type=Path)
-    h.add_argument("scene")
-    h.add_argument("frame")
+    h.add_argument("dataset", type=Path, help="dataset folder (capture format)")
+    h.add_argument("scene", help="scene name (a folder under scenes/)")
+    h.add_argument("frame", help="frame: its folder name under frames/ (e.g. 000000)")
     h.add_argument("out", type=Path, help="hull mesh PLY to write")
     h.add_argument("--depth", type=Path, default=None, help="also write the vh depth HDF5")
-    h.add_argument("--voxel-m", type=float, default=None, help="voxel size, metres")
-    h.add_argument("--threshold", type=float, default=0.02, help="silhouette threshold")
+    h.add_argument(
+        "--voxel-m",
+        type=float,
+        default=None,
+        help="voxel size, metres (default: about two pixel footprints)",
+    )
+    h.add_argument("--threshold", type=float, default=0.02,
+                   help="silhouettes of scenes without masks: lit pixels above this fraction "
+                        "of full scale (default 0.02)")  # fmt: skip
     h.set_defaults(func=_hull)
 
     me = sub.add_parser("mesh", help="oriented points of a depth file -> Poisson mesh (PLY)")
     me.add_argument("depth", type=Path, help="results-contract depth HDF5")
     me.add_argument("out", type=Path, help="mesh PLY to write")
     me.add_argument("--hull", type=Path, default=None, help="visual hull PLY to close the cloud")
-    me.add_argument("--poisson-depth", type=int, default=8)
-    me.add_argument("--density-quantile", type=float, default=0.02)
+    me.add_argument("--poisson-depth", type=int, default=8, help="octree depth (default 8)")
+    me.add_argument("--density-quantile", type=float, default=0.02,
+                    help="fraction of lowest-density vertices trimmed (default 0.02)")  # fmt: skip
     me.set_defaults(func=_mesh)
 
     ev = sub.add_parser("evaluate", help="Hausdorff and depth/normal errors of one frame")
-    ev.add_argument("depth", type=Path)
-    ev.add_argument("mesh", type=Path)
+    ev.add_argument("depth", type=Path, help="results-contract depth HDF5")
+    ev.add_argument("mesh", type=Path, help="the frame's mesh PLY (colourhs mesh)")
     ev.add_argument("out", type=Path, help="metrics JSON to write")
     ev.add_argument("--gt", type=Path, default=None, help="ground-truth mesh (none: empty metrics)")
     ev.add_argument("--coloured", type=Path, default=None, help="mesh coloured by its error")
-    ev.add_argument("--scene", default="")
-    ev.add_argument("--frame", default="")
-    ev.add_argument("--variant", default="")
-    ev.add_argument("--vmax-mm", type=float, default=None)
+    ev.add_argument("--scene", default="", help="scene name written into the metrics")
+    ev.add_argument("--frame", default="", help="frame written into the metrics")
+    ev.add_argument("--variant", default="", help="variant id written into the metrics")
+    ev.add_argument(
+        "--vmax-mm",
+        type=float,
+        default=None,
+        help="top of the coloured mesh's error scale, mm (default: its p95)",
+    )
     ev.set_defaults(func=_evaluate)
 
     mt = sub.add_parser("metrics", help="gather per-frame metrics JSON into metrics.csv")
-    mt.add_argument("out", type=Path)
-    mt.add_argument("json", nargs="+", type=Path)
+    mt.add_argument("json", nargs="+", type=Path, help="per-frame metrics JSON (colourhs evaluate)")
+    mt.add_argument("out", type=Path, help="metrics.csv to write")
     mt.set_defaults(func=_metrics)
 
     fg = sub.add_parser("figures", help="a scene's figures (Figure 7 grid, maps, animation)")
     fg.add_argument("out", type=Path, help="folder to write")
     fg.add_argument("--depth", nargs="+", default=[], help="VARIANT=depth.h5 ...")
     fg.add_argument("--mesh", nargs="+", default=[], help="VARIANT=mesh.ply ...")
-    fg.add_argument("--gt", type=Path, default=None)
+    fg.add_argument("--gt", type=Path, default=None, help="ground-truth mesh PLY")
     fg.add_argument("--coloured", nargs="*", default=[], help="VARIANT=error-coloured mesh ...")
     fg.add_argument("--animate", nargs="*", default=[], help="FRAME=mesh.ply ... (dynamic scene)")
     fg.set_defaults(func=_figures)
 
     rp = sub.add_parser("report", help="the evaluation report (index.html)")
-    rp.add_argument("out", type=Path)
-    rp.add_argument("--name", required=True)
-    rp.add_argument("--metrics", type=Path, required=True)
+    rp.add_argument("out", type=Path, help="index.html to write")
+    rp.add_argument("--name", required=True, help="the dataset's results name")
+    rp.add_argument("--metrics", type=Path, required=True, help="metrics.csv (colourhs metrics)")
     rp.add_argument("--calibration", nargs="*", default=[], help="calibration figures (PNG)")
     rp.add_argument("--figures", nargs="*", default=[], help="SCENE=figure folder ...")
-    rp.add_argument("--benchmarks", type=Path, default=Path("benchmarks/snakemake"))
+    rp.add_argument(
+        "--benchmarks",
+        type=Path,
+        default=Path("benchmarks/snakemake"),
+        help="Snakemake benchmark files (default benchmarks/snakemake)",
+    )
     rp.add_argument("--config", type=Path, default=None, help="the run's configuration (YAML)")
     rp.set_defaults(func=_report)
 
     cf = sub.add_parser("config", help="write a run's configuration (JSON text) as YAML")
-    cf.add_argument("out", type=Path)
-    cf.add_argument("json")
+    cf.add_argument("json", help="the configuration as JSON text")
+    cf.add_argument("out", type=Path, help="YAML file to write")
     cf.set_defaults(func=_config)
 
     r = sub.add_parser("run", help="run the whole workflow on a dataset")
-    r.add_argument("dataset", type=Path)
+    r.add_argument("dataset", type=Path, help="dataset folder (capture format)")
     r.add_argument("--name", default=None, help="results name (default: the folder's name)")
-    r.add_argument("--cores", type=int, default=2)
-    r.add_argument("--directory", default=".", help="where results/ and reports/ go")
+    r.add_argument("--cores", type=int, default=2, help="cores Snakemake may use (default 2)")
+    r.add_argument(
+        "--directory", default=".", help="where results/ and reports/ go (default: here)"
+    )
     r.add_argument("--variants", default=None,
                    help="comma-separated variant ids (default: vh,ml_full,bayes_nocalib,"
                         "bayes_ph,bayes_full)")  # fmt: skip
+    r.add_argument("--scenes", default=None,
+                   help="comma-separated scenes to reconstruct (default: all)")  # fmt: skip
     r.set_defaults(func=_run)
     r.epilog = "Arguments after `--` are passed on to snakemake."
     return p
 
 
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("colourhs")
+    except PackageNotFoundError:
+        return "unknown (not installed)"
+
+
+#: Input paths of each subcommand (argument names): they must exist before it runs.
+INPUTS = {
+    "validate": ("dataset",),
+    "markers": ("dataset",),
+    "noise": ("dataset",),
+    "crosstalk": ("dataset", "poses"),
+    "photometric": ("dataset", "poses", "crosstalk"),
+    "chromaticity": ("dataset",),
+    "reconstruct": ("dataset", "crosstalk", "photometric", "chromaticity", "noise", "hull"),
+    "hull": ("dataset",),
+    "mesh": ("depth", "hull"),
+    "evaluate": ("depth", "mesh", "gt"),
+    "metrics": ("json",),
+    "report": ("metrics", "calibration", "config"),
+}
+
+#: Errors of the user's input (a file, a name, a value), not of the program:
+#: one line on stderr, exit status 1. Anything else is a bug and keeps its traceback.
+USER_ERRORS = (ValueError, FileExistsError, FileNotFoundError, UnknownNameError)
+
+
+def _check_inputs(args) -> None:
+    for name in INPUTS.get(args.command, ()):
+        value = getattr(args, name, None)
+        for path in value if isinstance(value, list) else [value]:
+            if path is not None and not Path(path).exists():
+                option = name if name in ("dataset", "depth", "mesh", "json") else f"--{name}"
+                raise FileNotFoundError(f"{option} {path}: no such file or folder")
+
+
 def main(argv: list[str] | None = None) -> int:
+    """Run a subcommand. Exit status: 0 done; 1 an error in the input (one line on
+    stderr naming the file or name and what exists); 2 a usage error (argparse)."""
     argv = list(sys.argv[1:] if argv is None else argv)
     extra = []
     if "--" in argv:
         k = argv.index("--")
         argv, extra = argv[:k], argv[k + 1 :]
-    args = build_parser().parse_args(argv)
+    args = build_parser(show_defaults=bool({"-h", "--help"} & set(argv))).parse_args(argv)
     args.snakemake_args = extra
     try:
+        _check_inputs(args)
         return args.func(args)
-    except (ValueError, FileExistsError) as e:  # CaptureFormatError is a ValueError
+    except USER_ERRORS as e:  # CaptureFormatError is a ValueError
         print(f"colourhs {args.command}: {e}", file=sys.stderr)
         return 1
 

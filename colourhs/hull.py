@@ -185,7 +185,7 @@ def _silhouettes(ds, scene, frame, threshold):
     """Silhouettes, the files they came from and how ("masks" or "threshold")."""
     spec = ds.rig.image
     out, files = {}, []
-    source = "masks" if ds.scenes[scene].has_masks else "threshold"
+    source = "masks" if ds.scene(scene).has_masks else "threshold"
     for cam in ds.rig.cameras:
         if source == "masks":
             path = ds.mask_image(scene, frame, cam.name)

@@ -31,6 +31,7 @@ import pandas as pd
 import yaml
 
 from colourhs.io import atomic_output
+from colourhs.variants import VARIANT_LABELS, VARIANT_ORDER
 
 __all__ = [
     "AGGREGATION",
@@ -71,17 +72,6 @@ AGGREGATION = {
     "depth_median_mm": "median",
     "depth_rms_mm": "rms",
     "normal_median_deg": "median",
-}
-
-#: The variants of the paper's ablation (Figure 7), in its order.
-VARIANT_ORDER = ("vh", "ml_full", "bayes_nocalib", "bayes_ph", "bayes_full")
-#: The paper's names of the variants (Section IV-A, Figure 7).
-VARIANT_LABELS = {
-    "vh": "VH",
-    "ml_full": "ML_HS_wPh&ChromCalib",
-    "bayes_nocalib": "BayesianHS_w/oCalib",
-    "bayes_ph": "BayesianHS_wPhCalib",
-    "bayes_full": "BayesianHS_wPh&ChromCalib",
 }
 
 #: Numbers the paper states, as ``{scene: {variant: {column: value}}}``. The paper

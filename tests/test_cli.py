@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 import pandas as pd
+import pytest
 import yaml
 
 from colourhs.cli import PROJECT_ROOT, main
@@ -129,8 +130,62 @@ def test_invalid_config_names_the_key(tmp_path):
 
 
 def test_missing_dataset_is_a_clear_error(tmp_path, capsys):
-    assert main(["run", str(tmp_path / "nowhere")]) == 2
-    assert "rig.json" in capsys.readouterr().out
+    assert main(["run", str(tmp_path / "nowhere")]) == 1
+    assert "rig.json" in _one_line(capsys)
+
+
+def _one_line(capsys) -> str:
+    """The error: exactly one line on stderr, no traceback, nothing on stdout."""
+    out, err = capsys.readouterr()
+    assert err.count("\n") == 1 and "Traceback" not in err and out == "", (out, err)
+    return err
+
+
+USER_ERRORS = {  # argv after DATASET -> what the one line must say
+    "scene": (["reconstruct", "{d}", "nosuch", "000000", "{o}/x.h5"],
+              ["unknown scene 'nosuch'", "statue", "plane"]),
+    "frame": (["reconstruct", "{d}", "statue", "7", "{o}/x.h5"],
+              ["unknown frame of scene 'statue' '7'", "000000"]),
+    "camera": (["reconstruct", "{d}", "statue", "000000", "{o}/x.h5", "--reference", "cam9"],
+               ["no camera 'cam9'", "cam1"]),
+    "file": (["reconstruct", "{d}", "statue", "000000", "{o}/x.h5", "--photometric", "{o}/no.h5"],
+             ["--photometric", "no.h5: no such file"]),
+    "hull scene": (["hull", "{d}", "nosuch", "000000", "{o}/h.ply"], ["unknown scene 'nosuch'"]),
+    "object": (["chromaticity", "{d}", "nosuch", "{o}/c.h5"], ["nosuch", "toy"]),
+    "dataset": (["markers", "{o}/nowhere", "{o}/p.csv"], ["dataset", "nowhere: no such file"]),
+    "preset": (["synth", "{o}/s", "--preset", "huge"], ["unknown preset 'huge'", "demo"]),
+    "variant": (["run", "{d}", "--directory", "{o}", "--variants", "vh,foo"],
+                ["unknown variant(s) 'foo'", "bayes_full"]),
+    "run scene": (["run", "{d}", "--directory", "{o}", "--scenes", "statue,nosuch"],
+                  ["unknown scene(s) 'nosuch'", "plane"]),
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("case", USER_ERRORS, ids=list(USER_ERRORS))
+def test_user_errors_are_one_line_and_write_nothing(case, tiny_dataset, tmp_path, capsys):
+    """Issue 14: every user error is one line on stderr naming what is wrong and
+    what exists, exit status 1, and leaves no output behind (run validates its
+    options before it writes run-config.yaml)."""
+    argv, phrases = USER_ERRORS[case]
+    argv = [a.format(d=tiny_dataset, o=tmp_path) for a in argv]
+    assert main(argv) == 1
+    err = _one_line(capsys)
+    for phrase in phrases:
+        assert phrase in err, (phrase, err)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_version_and_option_help(capsys):
+    with pytest.raises(SystemExit) as done:
+        main(["--version"])
+    assert done.value.code == 0 and capsys.readouterr().out.startswith("colourhs ")
+    with pytest.raises(SystemExit):
+        main(["reconstruct", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "(default 192)" in text and "(default 0.25)" in text and "(default bayes)" in text
+    with pytest.raises(SystemExit):
+        main(["photometric", "--help"])
+    assert "(default 0.0001)" in " ".join(capsys.readouterr().out.split())  # smoothness
 
 
 def test_readme_commands_exist():

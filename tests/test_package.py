@@ -63,3 +63,17 @@ def test_no_import_cycles():
     graph = import_graph()
     assert len(graph) > 30 and "colourhs.depthfile" in graph["colourhs.hull"]
     assert cycles(graph) == []
+
+
+def test_one_variant_table():
+    """The workflow, report, CLI and benchmarks read colourhs.variants; the config
+    schema's enum (static YAML) must list the same ids in the same order."""
+    import yaml
+
+    from colourhs.variants import VARIANTS
+
+    schema = yaml.safe_load((PACKAGE.parent / "workflow/schemas/config.schema.yaml").read_text())
+    enum = schema["properties"]["reconstruction"]["properties"]["variants"]["items"]["enum"]
+    assert enum == list(VARIANTS)
+    common = (PACKAGE.parent / "workflow/rules/common.smk").read_text()
+    assert "from colourhs.variants import VARIANTS" in common and "VARIANTS = {" not in common

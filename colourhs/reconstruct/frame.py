@@ -85,7 +85,7 @@ def load_frame(
     rig = ds.rig
     mixing = load_crosstalk(crosstalk_json) if crosstalk_json else {}
     imgs, sats, sils, inputs = [], [], [], []
-    sc = ds.scenes[scene]
+    sc = ds.scene(scene)
     for cam in rig.camera_names:
         path = ds.frame_image(scene, frame, cam)
         img, sat = read_image(path, rig.image)
@@ -288,7 +288,7 @@ def reconstruct(
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     rig = frame.rig
     names = list(rig.camera_names)
-    ref_i = names.index(reference) if reference else 0
+    ref_i = names.index(rig.camera(reference).name) if reference else 0
     ref = rig.cameras[ref_i]
     H, W = rig.image.height, rig.image.width
     if depth_range is None:

@@ -8,6 +8,8 @@ from pathlib import Path
 # (workflow/envs/colourhs.yaml), which Snakemake activates before the command.
 from snakemake_interface_executor_plugins.settings import DeploymentMethod
 
+from colourhs.variants import VARIANTS  # the paper's ablation, one table
+
 _settings = getattr(workflow, "deployment_settings", None)
 if _settings is not None and DeploymentMethod.CONDA in _settings.deployment_method:
     shell.prefix("export COLOURHS_PYTHON=python; ")
@@ -204,16 +206,6 @@ def calibration_targets(name):
         f"results/{name}/calib/chromaticity/{obj}.h5" for obj in chromatic_objects(name)
     ]
     return out
-
-
-# The paper's ablation (Figure 7) with the results contract's ids.
-VARIANTS = {
-    "vh": {"method": "vh", "photometric": False, "chromaticity": False},
-    "ml_full": {"method": "ml", "photometric": True, "chromaticity": True},
-    "bayes_nocalib": {"method": "bayes", "photometric": False, "chromaticity": False},
-    "bayes_ph": {"method": "bayes", "photometric": True, "chromaticity": False},
-    "bayes_full": {"method": "bayes", "photometric": True, "chromaticity": True},
-}
 
 
 def scene_info(name):

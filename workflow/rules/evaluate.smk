@@ -50,4 +50,4 @@ rule metrics_table:
         mem_mb=1000,
         runtime=5,
     shell:
-        '"$COLOURHS_PYTHON" -m colourhs metrics {output:q} {input:q} > {log:q} 2>&1'
+        '"$COLOURHS_PYTHON" -m colourhs metrics {input:q} {output:q} > {log:q} 2>&1'

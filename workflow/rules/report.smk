@@ -15,7 +15,7 @@ rule effective_config:
     params:
         config=lambda w: json.dumps(config, sort_keys=True),
     shell:
-        '"$COLOURHS_PYTHON" -m colourhs config {output:q} {params.config:q} > {log:q} 2>&1'
+        '"$COLOURHS_PYTHON" -m colourhs config {params.config:q} {output:q} > {log:q} 2>&1'
 
 
 rule scene_figures:
