@@ -8,7 +8,9 @@ and median of ``--repeat`` runs), the
 wall time of a whole Bayesian frame at 640x480 with 192 labels, and the
 peak resident memory of the process. Targets (issue 4): at least 60 million
 pixel-hypotheses per second and a whole frame in at most 10 s and 2 GB on
-2 cores.
+2 cores. Issue 13: the same data term written plainly in NumPy
+(:mod:`colourhs.reconstruct.reference`) runs on the same 2,000 foreground
+pixels and hypotheses, and the ratio of the two rates is reported.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ import numpy as np
 
 from colourhs.reconstruct.dataterm import data_term, pair_arrays, prepare_images
 from colourhs.reconstruct.frame import load_frame, reconstruct, reference_rays, working_depth
+from colourhs.reconstruct.reference import reference_data_term
 
 HERE = Path(__file__).parent
 
@@ -69,6 +72,11 @@ def main() -> None:
     sel = rays[sil][: 16384 * 4]
     fg_rate = rates(lambda: data_term(sel, ref.centre, depths, rig.cameras, fg, pairs),
                     len(sel) * len(depths), args.repeat)  # fmt: skip
+    few = sel[:2000]
+    plain = rates(lambda: reference_data_term(few, ref.centre, depths, rig.cameras, fg, pairs),
+                  len(few) * len(depths), 1)  # fmt: skip
+    compiled = rates(lambda: data_term(few, ref.centre, depths, rig.cameras, fg, pairs),
+                     len(few) * len(depths), args.repeat)  # fmt: skip
     reconstruct(frame, "bayes", n_labels=args.labels)  # warm-up of every kernel
     t = time.perf_counter()
     res = reconstruct(frame, "bayes", n_labels=args.labels)
@@ -83,6 +91,9 @@ def main() -> None:
         "repeats": args.repeat,
         "dataterm_mhyp_per_s_rows_of_frame": whole,
         "dataterm_mhyp_per_s_foreground": fg_rate,
+        "numpy_reference_mhyp_per_s": plain["best"],
+        "compiled_on_the_same_2000_pixels_mhyp_per_s": compiled,
+        "speedup_over_numpy_reference": round(compiled["best"] / plain["best"], 1),
         "bayes_frame_s": round(frame_s, 2),
         "bayes_frame_pixels": res.info["pixels"],
         "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
