@@ -77,6 +77,18 @@ _MISSING = object()
 # Errors
 
 
+#: The rig has no ambient light (the format's rule): without masks, an object is
+#: the pixels brighter than this fraction of full scale (above black level) in
+#: some channel. The silhouettes, the object masks and the reconstruction's
+#: foreground all use it.
+LIT_THRESHOLD = 0.02
+#: Darkest intensity (fraction of full scale) whose ratio to another is still
+#: measured: the data term's and the chromaticity's samples at or below it are
+#: unusable (1 % of full scale: 2.5 8-bit levels, where quantisation alone is a
+#: 12 % error of the ratio).
+MIN_SIGNAL = 0.01
+
+
 class CaptureFormatError(ValueError):
     """A dataset, or one of its files, breaks the capture format.
 

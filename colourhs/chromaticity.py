@@ -58,6 +58,8 @@ import numpy as np
 
 from colourhs.capture import (
     COLOURS,
+    LIT_THRESHOLD,
+    MIN_SIGNAL,
     CaptureFormatError,
     Dataset,
     open_dataset,
@@ -81,10 +83,7 @@ __all__ = [
     "solve_chromaticity",
 ]
 
-MIN_SIGNAL = 0.01
-"""Default smallest usable matching-channel intensity, fraction of full scale."""
-
-OBJECT_THRESHOLD = 0.02
+OBJECT_THRESHOLD = LIT_THRESHOLD
 """Default object threshold on the mean of the three matching channels (no silhouette)."""
 
 NORMALISATION = "sum: p_R + p_G + p_B = 3 (white = (1, 1, 1)); only the direction is measured"

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import yaml
 
-from colourhs.capture import UnknownNameError, validate
+from colourhs.capture import LIT_THRESHOLD, MIN_SIGNAL, UnknownNameError, validate
 
 PROJECT_ROOT = Path(__file__).resolve().parents[1]
 SNAKEFILE = PROJECT_ROOT / "Snakefile"
@@ -358,8 +358,8 @@ def build_parser(show_defaults: bool = False) -> argparse.ArgumentParser:
     c.add_argument(
         "--min-signal",
         type=float,
-        default=0.01,
-        help="smallest usable intensity, fraction of full scale (default 0.01)",
+        default=MIN_SIGNAL,
+        help=f"smallest usable intensity, fraction of full scale (default {MIN_SIGNAL})",
     )
     c.set_defaults(func=_chromaticity)
 
@@ -396,7 +396,7 @@ def build_parser(show_defaults: bool = False) -> argparse.ArgumentParser:
         default=None,
         help="voxel size, metres (default: about two pixel footprints)",
     )
-    h.add_argument("--threshold", type=float, default=0.02,
+    h.add_argument("--threshold", type=float, default=LIT_THRESHOLD,
                    help="silhouettes of scenes without masks: lit pixels above this fraction "
                         "of full scale (default 0.02)")  # fmt: skip
     h.set_defaults(func=_hull)

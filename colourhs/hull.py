@@ -48,7 +48,14 @@ from time import perf_counter
 import cv2
 import numpy as np
 
-from colourhs.capture import Camera, CaptureFormatError, open_dataset, read_image, read_mask
+from colourhs.capture import (
+    LIT_THRESHOLD,
+    Camera,
+    CaptureFormatError,
+    open_dataset,
+    read_image,
+    read_mask,
+)
 from colourhs.geometry import (
     backproject,
     normalised_coordinates,
@@ -78,8 +85,8 @@ __all__ = [
     "working_volume",
 ]
 
-DEFAULT_THRESHOLD = 0.02
-"""Silhouette threshold on the largest channel, in full-scale units above black level."""
+DEFAULT_THRESHOLD = LIT_THRESHOLD
+"""Silhouette threshold on the largest channel (:data:`colourhs.capture.LIT_THRESHOLD`)."""
 
 VOXEL_PIXELS = 2.0
 """Default voxel edge, in pixel footprints at the working distance."""

@@ -33,6 +33,7 @@ from numba import types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
+from colourhs.capture import MIN_SIGNAL
 from colourhs.geometry import model_coefficients
 
 INVALID_COST = 1.0
@@ -395,7 +396,7 @@ def prepare_images(
     mu: np.ndarray | None = None,
     chroma: np.ndarray | None = None,
     silhouettes: np.ndarray | None = None,
-    min_signal: float = 0.01,
+    min_signal: float = MIN_SIGNAL,
 ) -> Prepared:
     """Per-frame preparation of the data term's inputs.
 

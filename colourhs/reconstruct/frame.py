@@ -24,7 +24,15 @@ import h5py
 import numpy as np
 from tqdm import tqdm
 
-from colourhs.capture import COLOURS, Camera, Rig, open_dataset, read_image, read_mask
+from colourhs.capture import (
+    COLOURS,
+    LIT_THRESHOLD,
+    Camera,
+    Rig,
+    open_dataset,
+    read_image,
+    read_mask,
+)
 from colourhs.crosstalk import load_crosstalk, unmix
 from colourhs.depthfile import DepthResult, write_depth
 from colourhs.geometry import normalised_coordinates, pixel_grid
@@ -152,7 +160,7 @@ def working_depth(rig: Rig, ref: Camera) -> float:
     return float((np.asarray(ref.R, float) @ x + np.asarray(ref.t, float))[2])
 
 
-def object_mask(frame: Frame, ref: int, threshold: float = 0.02) -> np.ndarray:
+def object_mask(frame: Frame, ref: int, threshold: float = LIT_THRESHOLD) -> np.ndarray:
     """The object in the reference camera (H, W): its silhouette, or the lit pixels.
 
     Without masks, pixels brighter than ``threshold`` (fraction of full
@@ -163,7 +171,7 @@ def object_mask(frame: Frame, ref: int, threshold: float = 0.02) -> np.ndarray:
     return frame.images[ref].max(axis=0) > threshold
 
 
-def foreground(frame: Frame, ref: int, threshold: float = 0.02) -> np.ndarray:
+def foreground(frame: Frame, ref: int, threshold: float = LIT_THRESHOLD) -> np.ndarray:
     """Pixels (H, W) of the reference camera to reconstruct.
 
     The silhouette when the dataset has masks, otherwise pixels brighter than

@@ -23,6 +23,7 @@ import numba as nb
 import numpy as np
 from scipy.ndimage import gaussian_filter
 
+from colourhs.capture import MIN_SIGNAL
 from colourhs.geometry import model_coefficients
 from colourhs.reconstruct.dataterm import to_pixel
 
@@ -89,7 +90,7 @@ def helmholtz_sides(
     frame,
     variance: np.ndarray,
     pairs,
-    min_signal: float = 0.01,
+    min_signal: float = MIN_SIGNAL,
     blur_px: float = BLUR_PX,
 ) -> HelmholtzSides:
     """The sides of every reciprocal pair of a frame (see :class:`HelmholtzSides`).

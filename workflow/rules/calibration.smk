@@ -106,7 +106,7 @@ rule chromaticity_map:
         runtime=10,
     params:
         dataset=lambda w: dataset_path(w.name),
-        min_signal=lambda w: calibration(w.name)["chromaticity"]["min_signal"],
+        options=lambda w: cli_options(calibration(w.name)["chromaticity"]),
     shell:
         '"$COLOURHS_PYTHON" -m colourhs chromaticity {params.dataset:q} {wildcards.object} {output.h5:q} '
-        "--figure {output.png:q} --min-signal {params.min_signal} > {log:q} 2>&1"
+        "--figure {output.png:q} {params.options} > {log:q} 2>&1"

@@ -139,11 +139,8 @@ for _name in DATASETS:
         _check_layout(_name)
 
 
-CALIBRATION_DEFAULTS = {
-    "unmix_crosstalk": True,
-    "photometric": {},
-    "chromaticity": {"min_signal": 0.01},
-}
+# Settings the config may leave out (the package's own defaults apply to the rest).
+CALIBRATION_DEFAULTS = {"unmix_crosstalk": True, "photometric": {}, "chromaticity": {}}
 
 
 def calibration(name):
