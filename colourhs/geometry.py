@@ -233,6 +233,24 @@ def triangulate(uvs: np.ndarray, Ks, dists, Rs, ts) -> np.ndarray:
     return X
 
 
+def fixation_point(axes: np.ndarray, centres: np.ndarray) -> np.ndarray:
+    """The point nearest (least squares) to every camera's optical axis, metres (3,).
+
+    ``axes`` (N, 3) unit optical axes (the third row of each R) and
+    ``centres`` (N, 3) camera centres, world frame. ValueError with fewer
+    than two cameras or (nearly) parallel axes.
+    """
+    A, b = np.zeros((3, 3)), np.zeros(3)
+    for a, c in zip(np.asarray(axes, float), np.asarray(centres, float), strict=True):
+        P = np.eye(3) - np.outer(a, a)
+        A += P
+        b += P @ c
+    w = np.linalg.eigvalsh(A)
+    if len(axes) < 2 or w[0] < 1e-4 * w[-1]:
+        raise ValueError("the optical axes do not converge")
+    return np.linalg.solve(A, b)
+
+
 def fit_plane(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Least-squares plane through ``points`` (N, 3): (centroid, unit normal)."""
     p = np.asarray(points, float)

@@ -58,6 +58,7 @@ from colourhs.capture import (
 )
 from colourhs.geometry import (
     backproject,
+    fixation_point,
     normalised_coordinates,
     pixel_grid,
     pixels_of,
@@ -561,16 +562,11 @@ def axes_centre(cameras: list[Camera]) -> np.ndarray:
     ValueError
         With fewer than two cameras, or optical axes (nearly) parallel.
     """
-    A, b = np.zeros((3, 3)), np.zeros(3)
-    for cam in cameras:
-        a = np.asarray(cam.R, float)[2]  # optical axis in the world frame
-        P = np.eye(3) - np.outer(a, a)
-        A += P
-        b += P @ cam.centre
-    w = np.linalg.eigvalsh(A)
-    if len(cameras) < 2 or w[0] < 1e-4 * w[-1]:
-        raise ValueError("the optical axes do not converge: pass explicit hull bounds")
-    return np.linalg.solve(A, b)
+    axes = [np.asarray(cam.R, float)[2] for cam in cameras]  # optical axes, world frame
+    try:
+        return fixation_point(axes, [cam.centre for cam in cameras])
+    except ValueError as err:
+        raise ValueError(f"{err}: pass explicit hull bounds") from None
 
 
 def _working_distance(cameras: list[Camera]) -> tuple[np.ndarray, float]:

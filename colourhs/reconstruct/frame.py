@@ -35,7 +35,7 @@ from colourhs.capture import (
 )
 from colourhs.crosstalk import load_crosstalk, unmix
 from colourhs.depthfile import DepthResult, write_depth
-from colourhs.geometry import normalised_coordinates, pixel_grid
+from colourhs.geometry import fixation_point, normalised_coordinates, pixel_grid
 from colourhs.io import sha256_files
 from colourhs.noise import NoiseModel, estimate_noise, load_noise
 from colourhs.reconstruct.dataterm import INVALID_COST, data_term, pair_arrays, prepare_images
@@ -149,14 +149,9 @@ def reference_rays(camera: Camera, width: int, height: int) -> np.ndarray:
 
 
 def working_depth(rig: Rig, ref: Camera) -> float:
-    """z-depth (in ``ref``) of the point closest to every camera's optical axis."""
-    A, b = np.zeros((3, 3)), np.zeros(3)
-    for cam in rig.cameras:
-        d = np.asarray(cam.R, float)[2]
-        P = np.eye(3) - np.outer(d, d)
-        A += P
-        b += P @ cam.centre
-    x = np.linalg.solve(A, b)
+    """z-depth in ``ref`` of the fixation point (:func:`colourhs.geometry.fixation_point`)."""
+    x = fixation_point([np.asarray(c.R, float)[2] for c in rig.cameras],
+                       [c.centre for c in rig.cameras])  # fmt: skip
     return float((np.asarray(ref.R, float) @ x + np.asarray(ref.t, float))[2])
 
 
