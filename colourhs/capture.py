@@ -26,6 +26,8 @@ from typing import Any, NamedTuple
 import cv2
 import numpy as np
 
+from colourhs.geometry import camera_centre, light_centre
+
 __all__ = [
     "COLOURS",
     "FORMAT",
@@ -193,12 +195,12 @@ class Camera:
     @property
     def centre(self) -> np.ndarray:
         """Camera centre in world coordinates, metres: ``-R^T t``."""
-        return -self.R.T @ self.t
+        return camera_centre(self.R, self.t)
 
     @property
     def light_centre(self) -> np.ndarray:
         """Light centre in world coordinates, metres: ``R^T (offset - t)``."""
-        return self.R.T @ (self.light_offset - self.t)
+        return light_centre(self.R, self.t, self.light_offset)
 
     @property
     def light_channel(self) -> int:
