@@ -156,11 +156,6 @@ class ImageSpec:
         """NumPy type of raw pixel values (``uint8`` or ``uint16``)."""
         return np.uint8 if self.bit_depth == 8 else np.uint16
 
-    @property
-    def max_value(self) -> int:
-        """Largest raw value the bit depth can hold."""
-        return 2**self.bit_depth - 1
-
 
 @dataclass(frozen=True, eq=False)
 class Camera:

@@ -58,7 +58,6 @@ __all__ = [
     "CONTRACT_COLUMNS",
     "depth_errors",
     "depth_summary",
-    "distance_summary",
     "evaluate_frame",
     "evaluated_vertices",
     "hausdorff",
@@ -83,25 +82,6 @@ VISIBILITY_EPS_M = 1e-4
 
 
 # --------------------------------------------------------------------------- distances
-
-
-def distance_summary(distances_m: np.ndarray) -> dict:
-    """RMS, mean, median and max (metres) and the count of point-to-surface distances.
-
-    RMS is ``sqrt(mean(d**2))``, as in MeshLab's Hausdorff filter. All NaN for no distances.
-    """
-    d = np.asarray(distances_m, float).ravel()
-    d = d[np.isfinite(d)]
-    if d.size == 0:
-        nan = float("nan")
-        return {"rms_m": nan, "mean_m": nan, "median_m": nan, "max_m": nan, "n_samples": 0}
-    return {
-        "rms_m": float(np.sqrt(np.mean(d**2))),
-        "mean_m": float(np.mean(d)),
-        "median_m": float(np.median(d)),
-        "max_m": float(np.max(d)),
-        "n_samples": int(d.size),
-    }
 
 
 def _ml_mesh(vertices, triangles) -> pymeshlab.Mesh:
