@@ -75,7 +75,7 @@ CONTRACT_COLUMNS = (
 #: Extra metric columns, after the contract's.
 EXTRA_COLUMNS = (
     "hausdorff_median_mm", "completeness_rms_mm", "completeness_mean_mm", "completeness_max_mm",
-    "depth_p95_mm", "coverage", "hausdorff_samples", "completeness_samples",
+    "depth_p95_mm", "coverage", "hausdorff_samples", "completeness_samples", "outside_share",
 )  # fmt: skip
 #: Offset (metres) of a visibility ray's start from the vertex it tests (avoids self-hits).
 VISIBILITY_EPS_M = 1e-4
@@ -290,8 +290,8 @@ def evaluated_vertices(
     camera,
     pixel_mask: np.ndarray,
     dilate_px: int = 2,
-) -> np.ndarray:
-    """Reconstruction vertices inside the seen region.
+) -> tuple[np.ndarray, np.ndarray]:
+    """Reconstruction vertices inside the seen region, and those the camera sees.
 
     A vertex counts when the camera sees it (:func:`visible_vertices`) on a
     pixel of ``pixel_mask`` (where the GT is visible) dilated by ``dilate_px``
@@ -310,13 +310,16 @@ def evaluated_vertices(
 
     Returns
     -------
-    ndarray of bool, shape (V,)
+    evaluated, visible : ndarrays of bool, shape (V,). Visible vertices that
+    are not evaluated lie outside where the ground truth is seen: surface the
+    reconstruction invented (``outside_share`` in the metrics).
     """
     h, w = pixel_mask.shape
     mask = binary_dilation(pixel_mask, iterations=dilate_px) if dilate_px > 0 else pixel_mask
-    ok, pixel = visible_vertices(vertices, triangles, camera, w, h)
+    visible, pixel = visible_vertices(vertices, triangles, camera, w, h)
+    ok = visible.copy()
     ok[ok] = mask[pixel[ok, 0], pixel[ok, 1]]
-    return ok
+    return ok, visible
 
 
 # --------------------------------------------------------------------------- depth maps
@@ -490,9 +493,11 @@ def evaluate_frame(
             seen, pixel_mask, gt_points = seen_surface(gv, gt_tri, dm, dm.width, dm.height)
             if seen.any():
                 target = gt_tri[seen]
-                evaluated = evaluated_vertices(v, tri, dm, pixel_mask, dilate_px)
+                evaluated, visible = evaluated_vertices(v, tri, dm, pixel_mask, dilate_px)
                 dist_v = np.full(len(v), np.nan)
                 info["hausdorff_samples"] = int(evaluated.sum())
+                # Seen by the reference camera but off the seen ground truth: invented surface.
+                info["outside_share"] = float(1.0 - evaluated.sum() / max(int(visible.sum()), 1))
                 if evaluated.any():  # the evaluated vertices as a point set, in vertex order
                     acc = hausdorff(v[evaluated], None, gv, target)
                     dist_v[evaluated] = acc["distances"]
@@ -524,7 +529,8 @@ def evaluate_frame(
          "dilate_px": int(dilate_px),
         "completeness_max_samples": int(completeness_samples),
         "units": "mm; hausdorff_* = reconstruction -> seen GT (accuracy), "
-                 "completeness_* = seen GT -> reconstruction",
+                 "completeness_* = seen GT -> reconstruction; outside_share = share of the "
+                 "mesh vertices the reference camera sees that lie off the seen GT",
         "seconds": time.perf_counter() - t0,
     })  # fmt: skip
     write_json(out_json, info)

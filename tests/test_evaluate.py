@@ -183,6 +183,17 @@ def test_evaluate_frame_and_metrics_table(tmp_path):
     empty = evaluate_frame(h5, mesh_ply, None, tmp_path / "m" / "sphere_b.json",
                            scene="sphere", frame="000001", variant="bayes_nocalib")  # fmt: skip
     assert empty["hausdorff_rms_mm"] is None and empty["depth_median_mm"] is None
+    # Invented surface: the same sphere plus a small one beside it (radius 2 cm, 7
+    # pixels off the true silhouette), in view but off the ground truth: outside_share
+    # counts it, the accuracy does not change.
+    assert info["outside_share"] < 0.01
+    bv, bt, bn = sphere(0.02, 60)
+    both = write_ply(tmp_path / "both.ply", np.vstack([mv, bv + [0.14, 0.0, 0.0]]),
+                     np.vstack([mt, bt + len(mv)]), np.vstack([mn, bn]))  # fmt: skip
+    extra = evaluate_frame(h5, both, gt_ply, tmp_path / "extra.json",
+                           scene="sphere", frame="000001", variant="ml_full")  # fmt: skip
+    assert 0.45 < extra["outside_share"] < 0.6  # measured 0.518
+    assert extra["hausdorff_rms_mm"] == pytest.approx(info["hausdorff_rms_mm"], abs=0.01)
     evaluate_frame(h5, mesh_ply, gt_ply, tmp_path / "m" / "aaa.json",
                    scene="another", frame="000000", variant="ml_full")  # fmt: skip
     csv = tmp_path / "reports" / "metrics.csv"
