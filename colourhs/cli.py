@@ -139,6 +139,8 @@ def _chromaticity(args) -> int:
 
 
 def _reconstruct(args) -> int:
+    if args.same_as:
+        return _same_as(args.same_as, args.out)
     from colourhs.reconstruct.frame import reconstruct_frame
 
     params = {k: v for k, v in vars(args).items() if k in RECONSTRUCT_PARAMS and v is not None}
@@ -150,6 +152,16 @@ def _reconstruct(args) -> int:
     info = result.info
     print(f"{args.scene}/{args.frame} {args.method}: {info['valid_pixels']} of {info['pixels']} "
           f"pixels, energy {info.get('energy', '-')}; wrote {args.out}")  # fmt: skip
+    return 0
+
+
+def _same_as(src, out, also=()) -> int:
+    """A result equal to one another job computed (colourhs.variants.same_as): a copy."""
+    from colourhs.io import copy_output
+
+    for a, b in ((src, out), *also):
+        copy_output(a, b)
+    print(f"wrote {out}: the same as {src}")
     return 0
 
 
@@ -174,6 +186,8 @@ def _hull(args) -> int:
 
 
 def _mesh(args) -> int:
+    if args.same_as:
+        return _same_as(args.same_as, args.out)
     from colourhs.mesh import frame_mesh
 
     info = frame_mesh(args.depth, args.out, hull_ply=args.hull, poisson_depth=args.poisson_depth,
@@ -183,6 +197,16 @@ def _mesh(args) -> int:
 
 
 def _evaluate(args) -> int:
+    if args.same_as:
+        from colourhs.io import write_json
+
+        info = json.loads(Path(args.same_as).read_text())
+        info.update(variant=args.variant, same_as=info.get("variant", ""))
+        if args.coloured:
+            _same_as(Path(args.same_as).with_suffix(".ply"), args.coloured)
+        write_json(args.out, info)
+        print(f"wrote {args.out}: the same as {args.same_as}")
+        return 0
     from colourhs.evaluate import evaluate_frame
 
     info = evaluate_frame(args.depth, args.mesh, args.gt, args.out, out_ply=args.coloured,
@@ -229,6 +253,11 @@ def _config(args) -> int:
     print(f"wrote {args.out}")
     return 0
 
+
+SAME_AS_HELP = (
+    "an equal result another job computed: copy it (the workflow's bayes_full "
+    "on a scene without a chromatic object)"
+)
 
 #: ``colourhs reconstruct`` tuning options: name -> (type, help); the default is
 #: the package's (:func:`colourhs.reconstruct.frame.reconstruct`), shown by --help.
@@ -381,6 +410,7 @@ def build_parser(show_defaults: bool = False) -> argparse.ArgumentParser:
     )
     rc.add_argument("--hull", type=Path, default=None,
                     help="visual hull PLY: depth hypotheses over its depth range")  # fmt: skip
+    rc.add_argument("--same-as", type=Path, default=None, help=SAME_AS_HELP)
     _tuning_options(rc, RECONSTRUCT_PARAMS, _defaults("reconstruct") if show_defaults else None)
     rc.set_defaults(func=_reconstruct)
 
@@ -405,6 +435,7 @@ def build_parser(show_defaults: bool = False) -> argparse.ArgumentParser:
     me.add_argument("depth", type=Path, help="results-contract depth HDF5")
     me.add_argument("out", type=Path, help="mesh PLY to write")
     me.add_argument("--hull", type=Path, default=None, help="visual hull PLY to close the cloud")
+    me.add_argument("--same-as", type=Path, default=None, help=SAME_AS_HELP)
     me.add_argument("--poisson-depth", type=int, default=8, help="octree depth (default 8)")
     me.add_argument("--density-quantile", type=float, default=0.02,
                     help="fraction of lowest-density vertices trimmed (default 0.02)")  # fmt: skip
@@ -416,6 +447,12 @@ def build_parser(show_defaults: bool = False) -> argparse.ArgumentParser:
     ev.add_argument("out", type=Path, help="metrics JSON to write")
     ev.add_argument("--gt", type=Path, default=None, help="ground-truth mesh (none: empty metrics)")
     ev.add_argument("--coloured", type=Path, default=None, help="mesh coloured by its error")
+    ev.add_argument(
+        "--same-as",
+        type=Path,
+        default=None,
+        help="metrics JSON of an equal result: copy it (and its coloured mesh)",
+    )
     ev.add_argument("--scene", default="", help="scene name written into the metrics")
     ev.add_argument("--frame", default="", help="frame written into the metrics")
     ev.add_argument("--variant", default="", help="variant id written into the metrics")
@@ -495,10 +532,18 @@ INPUTS = {
     "crosstalk": ("dataset", "poses"),
     "photometric": ("dataset", "poses", "crosstalk"),
     "chromaticity": ("dataset",),
-    "reconstruct": ("dataset", "crosstalk", "photometric", "chromaticity", "noise", "hull"),
+    "reconstruct": (
+        "dataset",
+        "crosstalk",
+        "photometric",
+        "chromaticity",
+        "noise",
+        "hull",
+        "same_as",
+    ),
     "hull": ("dataset",),
-    "mesh": ("depth", "hull"),
-    "evaluate": ("depth", "mesh", "gt"),
+    "mesh": ("depth", "hull", "same_as"),
+    "evaluate": ("depth", "mesh", "gt", "same_as"),
     "metrics": ("json",),
     "report": ("metrics", "calibration", "config"),
 }

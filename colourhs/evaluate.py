@@ -541,7 +541,8 @@ def metrics_table(json_paths, out_csv: str | Path) -> pd.DataFrame:
     """Gather per-frame metrics JSON files into the tidy ``reports/NAME/metrics.csv``.
 
     One row per (scene, frame, variant), sorted by them; columns
-    :data:`CONTRACT_COLUMNS`, then :data:`EXTRA_COLUMNS`, then ``method``;
+    :data:`CONTRACT_COLUMNS`, then :data:`EXTRA_COLUMNS`, then ``method`` and
+    ``same_as`` (the variant whose result a row copies: :func:`colourhs.variants.same_as`);
     empty cells where a metric is unknown (no ground truth). Written atomically.
 
     Raises
@@ -556,7 +557,7 @@ def metrics_table(json_paths, out_csv: str | Path) -> pd.DataFrame:
         if missing:
             raise ValueError(f"{p}: metrics lack {missing}")
         rows.append(rec)
-    columns = list(CONTRACT_COLUMNS) + list(EXTRA_COLUMNS) + ["method"]
+    columns = list(CONTRACT_COLUMNS) + list(EXTRA_COLUMNS) + ["method", "same_as"]
     table = pd.DataFrame(rows, columns=columns)
     for key in ("scene", "frame", "variant"):
         table[key] = table[key].astype(str)

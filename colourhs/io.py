@@ -42,3 +42,12 @@ def sha256_files(paths) -> str:
     for p in paths:
         h.update(Path(p).read_bytes())
     return h.hexdigest()[:16]
+
+
+def copy_output(src: str | Path, out: str | Path) -> Path:
+    """Copy ``src`` to ``out`` atomically (a result another job computed)."""
+    import shutil
+
+    with atomic_output(out) as tmp:
+        shutil.copyfile(src, tmp)
+    return Path(out)

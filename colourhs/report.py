@@ -271,7 +271,7 @@ def summarise_metrics(df: pd.DataFrame) -> pd.DataFrame:
     df["variant"] = df["variant"].astype(str)
     metric_cols = []
     for c in df.columns:
-        if c in KEY_COLUMNS:
+        if c in KEY_COLUMNS or c in ("method", "same_as"):  # labels, not metrics
             continue
         if c in METRIC_COLUMNS or pd.api.types.is_numeric_dtype(df[c]):
             df[c] = pd.to_numeric(df[c], errors="coerce")
@@ -564,6 +564,24 @@ def _aggregation_legend(summary: pd.DataFrame) -> str:
 # --------------------------------------------------------------------------- the report
 
 
+def _same_as_note(metrics: pd.DataFrame, scene: str) -> str:
+    """A note naming the variants whose rows copy another's on ``scene`` (or "")."""
+    if "same_as" not in metrics.columns:
+        return ""
+    rows = metrics[(metrics["scene"] == scene) & metrics["same_as"].notna()]
+    rows = rows[rows["same_as"].astype(str) != ""]
+    pairs = sorted(
+        {(str(v), str(o)) for v, o in zip(rows["variant"], rows["same_as"], strict=True)}
+    )
+    if not pairs:
+        return ""
+    text = "; ".join(f"<code>{_e(v)}</code> is <code>{_e(o)}</code>" for v, o in pairs)
+    return (
+        f'<p class="note">{text} on this scene: it has no chromatic object, so the '
+        "chromaticity calibration has nothing to change; computed once and copied.</p>"
+    )
+
+
 def build_report(
     out_html: str | Path,
     dataset_name: str,
@@ -666,6 +684,7 @@ def build_report(
         if (summary["scene"] == scene).any():
             table, has_ref = _scene_table(summary, scene)
             parts.append(table)
+            parts.append(_same_as_note(metrics, scene))
             parts.append(_aggregation_legend(summary))
             if has_ref:
                 parts.append(

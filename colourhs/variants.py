@@ -38,3 +38,22 @@ def parse_variants(text: str) -> list[str]:
             f"variants: {', '.join(VARIANTS)}"
         )
     return ids
+
+
+def same_as(variant: str, chromatic_object: bool) -> str | None:
+    """The variant whose results ``variant``'s equal on a scene, or None.
+
+    On a scene without a chromatic object the chromaticity calibration has
+    nothing to apply (p = 1 everywhere, eq. 9 with white albedo), so a
+    variant that uses it equals the one with the same method and photometric
+    calibration without it (``bayes_full`` is ``bayes_ph``): the workflow
+    computes it once and copies the results (beyond the paper: a saving).
+    """
+    v = VARIANTS[variant]
+    if chromatic_object or not v["chromaticity"]:
+        return None
+    for other, w in VARIANTS.items():
+        if w["method"] == v["method"] and w["photometric"] == v["photometric"]:
+            if not w["chromaticity"]:
+                return other
+    return None

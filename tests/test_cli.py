@@ -70,8 +70,20 @@ def test_run_does_the_whole_job_through_snakemake(tiny_dataset, tmp_path):
     print(sheet.to_dict())
     assert sheet["bayes_ph"] < 0.7
     assert 5 * sheet["bayes_ph"] < sheet["bayes_nocalib"] < sheet["vh"]
+    # Issue 14: bayes_full on the scenes without a chromatic object (plane, sheet)
+    # is bayes_ph, computed once and copied; the chromatic ones are computed.
+    full = metrics[metrics["variant"] == "bayes_full"].set_index(["scene", "frame"])
+    copied = full["same_as"].fillna("")
+    assert set(copied[copied == "bayes_ph"].index.get_level_values(0)) == {"plane", "sheet"}
+    assert set(copied[copied == ""].index.get_level_values(0)) == {"statue", "toy"}
+    res = tmp_path / "results" / "t"
+    for scene, frame in copied[copied == "bayes_ph"].index:
+        for kind in (f"depth/{frame}.h5", f"mesh/{frame}.ply"):
+            a, b = res / scene / "bayes_full" / kind, res / scene / "bayes_ph" / kind
+            assert a.read_bytes() == b.read_bytes()
     html = (tmp_path / "reports" / "t" / "index.html").read_text()
     assert "bayes_full" in html and "data:image/png;base64," in html
+    assert "<code>bayes_full</code> is <code>bayes_ph</code> on this scene" in html
     assert (tmp_path / "reports" / "t" / "figures" / "sheet" / "animation.gif").exists()
     # A second run does nothing.
     again = subprocess.run(cmd, capture_output=True, text=True)

@@ -8,7 +8,7 @@ from pathlib import Path
 # (workflow/envs/colourhs.yaml), which Snakemake activates before the command.
 from snakemake_interface_executor_plugins.settings import DeploymentMethod
 
-from colourhs.variants import VARIANTS  # the paper's ablation, one table
+from colourhs.variants import VARIANTS, same_as  # the paper's ablation, one table
 
 _settings = getattr(workflow, "deployment_settings", None)
 if _settings is not None and DeploymentMethod.CONDA in _settings.deployment_method:
@@ -253,6 +253,24 @@ def reconstruct_options(name, scene, variant):
         if value is not None:
             opts.append(f"--{key.replace('_', '-')} {value}")
     return " ".join(opts)
+
+
+def same_result(name, scene, variant, frame, kind):
+    """[the equal result of another variant] (colourhs.variants.same_as), or [].
+
+    ``kind``: depth, mesh or eval (its JSON). On a scene without a chromatic
+    object bayes_full equals bayes_ph: computed once, copied.
+    """
+    other = same_as(variant, bool(scene_info(name)[scene][1]))
+    if other is None:
+        return []
+    ext = {"depth": "h5", "mesh": "ply", "eval": "json"}[kind]
+    return [f"results/{name}/{scene}/{other}/{kind}/{frame}.{ext}"]
+
+
+def same_option(input):
+    """`--same-as PATH` when the rule's `same` input names an equal result."""
+    return f"--same-as {shlex.quote(str(input.same))}" if input.same else ""
 
 
 def hull_ply(name, scene, frame):

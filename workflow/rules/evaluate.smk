@@ -8,6 +8,7 @@ rule evaluate_frame:
         depth="results/{name}/{scene}/{variant}/depth/{frame}.h5",
         mesh="results/{name}/{scene}/{variant}/mesh/{frame}.ply",
         gt=lambda w: gt_mesh(w.name, w.scene, w.frame),
+        same=lambda w: same_result(w.name, w.scene, w.variant, w.frame, "eval"),
     output:
         json="results/{name}/{scene}/{variant}/eval/{frame}.json",
         ply="results/{name}/{scene}/{variant}/eval/{frame}.ply",
@@ -26,10 +27,11 @@ rule evaluate_frame:
     params:
         gt=lambda w, input: f"--gt {shlex.quote(str(input.gt))}" if input.gt else "",
         options=lambda w: cli_options(section("evaluation")),
+        same=lambda w, input: same_option(input),
     shell:
         '"$COLOURHS_PYTHON" -m colourhs evaluate {input.depth:q} {input.mesh:q} {output.json:q} {params.gt} '
         "--coloured {output.ply:q} --scene {wildcards.scene} --frame {wildcards.frame} "
-        "--variant {wildcards.variant} {params.options} > {log:q} 2>&1"
+        "--variant {wildcards.variant} {params.options} {params.same} > {log:q} 2>&1"
 
 
 rule metrics_table:

@@ -6,6 +6,7 @@ rule reconstruct_frame:
         images=lambda w: frame_inputs(w.name, w.scene, w.frame),
         calib=lambda w: variant_calibration(w.name, w.scene, w.variant).values(),
         hull=lambda w: reconstruction_hull(w.name, w.scene, w.frame),
+        same=lambda w: same_result(w.name, w.scene, w.variant, w.frame, "depth"),
     output:
         "results/{name}/{scene}/{variant}/depth/{frame}.h5",
     log:
@@ -29,6 +30,7 @@ rule reconstruct_frame:
         hull=lambda w, input: (
             f"--hull {shlex.quote(str(input.hull))}" if input.hull else ""
         ),
+        same=lambda w, input: same_option(input),
     shell:
         'NUMBA_NUM_THREADS={threads} "$COLOURHS_PYTHON" -m colourhs reconstruct {params.dataset:q} {wildcards.scene} {wildcards.frame} '
-        "{output:q} {params.options} {params.hull} > {log:q} 2>&1"
+        "{output:q} {params.options} {params.hull} {params.same} > {log:q} 2>&1"

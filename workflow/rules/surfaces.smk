@@ -35,6 +35,7 @@ rule frame_mesh:
         hull=lambda w: (
             hull_ply(w.name, w.scene, w.frame) if mesh_uses_hull(w.variant) else []
         ),
+        same=lambda w: same_result(w.name, w.scene, w.variant, w.frame, "mesh"),
     output:
         "results/{name}/{scene}/{variant}/mesh/{frame}.ply",
     log:
@@ -54,6 +55,7 @@ rule frame_mesh:
             f"--hull {shlex.quote(str(input.hull))}" if input.hull else ""
         ),
         options=lambda w: cli_options(section("surfaces").get("mesh", {})),
+        same=lambda w, input: same_option(input),
     shell:
         '"$COLOURHS_PYTHON" -m colourhs mesh {input.depth:q} {output:q} {params.hull} {params.options} '
-        "> {log:q} 2>&1"
+        "{params.same} > {log:q} 2>&1"
