@@ -21,13 +21,12 @@ from colourhs.hull import (
     hull_depth_range,
     hull_surface,
     mesh_volume,
-    silhouettes,
-    threshold_silhouette,
     visual_hull,
     working_volume,
 )
 from colourhs.ply import load_mesh
 from colourhs.raycast import render_depth_normals
+from colourhs.silhouettes import silhouettes, threshold_silhouette
 
 # ---------------------------------------------------------------------------------------------
 # A sphere of radius R at the origin, 12 cameras at distance D on two rings (+-25 deg
