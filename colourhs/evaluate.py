@@ -52,7 +52,7 @@ from colourhs.geometry import backproject, camera_centre, pixel_grid, project, w
 from colourhs.io import atomic_output, write_json
 from colourhs.mesh import TriMesh
 from colourhs.ply import load_mesh, write_ply
-from colourhs.raycast import render_depth_normals
+from colourhs.raycast import raycasting_scene, render_depth_normals
 
 __all__ = [
     "CONTRACT_COLUMNS",
@@ -185,15 +185,6 @@ def hausdorff_symmetric(vertices_a, triangles_a, vertices_b, triangles_b, **kwar
 # --------------------------------------------------------------------------- seen region
 
 
-def _scene(vertices, triangles) -> o3d.t.geometry.RaycastingScene:
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(
-        o3d.core.Tensor(np.asarray(vertices, np.float32).reshape(-1, 3)),
-        o3d.core.Tensor(np.asarray(triangles, np.uint32).reshape(-1, 3)),
-    )
-    return scene
-
-
 def visible_vertices(
     vertices: np.ndarray,
     triangles: np.ndarray | None,
@@ -238,7 +229,7 @@ def visible_vertices(
         d = camera_centre(camera.R, camera.t) - v[ok]
         d /= np.linalg.norm(d, axis=1, keepdims=True)
         rays = np.concatenate([v[ok] + eps_m * d, d], axis=1).astype(np.float32)
-        hidden = _scene(v, triangles).test_occlusions(o3d.core.Tensor(rays)).numpy()
+        hidden = raycasting_scene(v, triangles).test_occlusions(o3d.core.Tensor(rays)).numpy()
         ok[ok] = ~hidden
     pixel[~ok] = -1
     return ok, pixel
@@ -273,7 +264,7 @@ def seen_surface(
     grid = pixel_grid(width, height).reshape(-1, 2)
     origin, dirs = backproject(grid, camera.K, camera.dist, camera.R, camera.t)
     rays = np.concatenate([np.broadcast_to(origin, dirs.shape), dirs], axis=1)
-    ans = _scene(vertices, tri).cast_rays(o3d.core.Tensor(rays.astype(np.float32)))
+    ans = raycasting_scene(vertices, tri).cast_rays(o3d.core.Tensor(rays.astype(np.float32)))
     t_hit = ans["t_hit"].numpy().astype(float)
     hit = np.isfinite(t_hit)
     seen = np.zeros(len(tri), bool)

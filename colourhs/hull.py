@@ -578,17 +578,6 @@ def mesh_volume(vertices: np.ndarray, triangles: np.ndarray) -> float:
 # The hull seen from a camera
 
 
-def _raycasting_scene(vertices, triangles):
-    import open3d as o3d
-
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(
-        o3d.core.Tensor(np.asarray(vertices, np.float32)),
-        o3d.core.Tensor(np.asarray(triangles, np.uint32)),
-    )
-    return scene
-
-
 def depth_bounds(
     vertices: np.ndarray, triangles: np.ndarray, camera: Camera, width: int, height: int
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -623,7 +612,9 @@ def depth_bounds(
     """
     import open3d as o3d
 
-    scene = _raycasting_scene(vertices, triangles)
+    from colourhs.raycast import raycasting_scene
+
+    scene = raycasting_scene(vertices, triangles)
     grid = pixel_grid(width, height).reshape(-1, 2)
     origin, d = backproject(grid, camera.K, camera.dist, camera.R, camera.t)
     o = np.broadcast_to(origin, d.shape)

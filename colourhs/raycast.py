@@ -15,16 +15,23 @@ from colourhs.geometry import backproject, pixel_grid
 SHADOW_EPS_M = 2e-5
 
 
+def raycasting_scene(vertices: np.ndarray, triangles: np.ndarray) -> o3d.t.geometry.RaycastingScene:
+    """An open3d ray-casting scene of a triangle mesh (vertices (V, 3) metres, triangles (T, 3))."""
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(
+        o3d.core.Tensor(np.asarray(vertices, np.float32).reshape(-1, 3)),
+        o3d.core.Tensor(np.asarray(triangles, np.uint32).reshape(-1, 3)),
+    )
+    return scene
+
+
 def _cast_pixels(vertices, triangles, normals, camera, width, height):
     """Ray cast a mesh from every pixel centre of a camera.
 
     Returns the open3d scene, the hit mask (H*W,), the hit points (M, 3) on
     the mesh and their interpolated unit normals facing the camera.
     """
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(
-        o3d.core.Tensor(vertices.astype(np.float32)), o3d.core.Tensor(triangles.astype(np.uint32))
-    )
+    scene = raycasting_scene(vertices, triangles)
     grid = pixel_grid(width, height).reshape(-1, 2)
     origin, dirs = backproject(grid, camera.K, camera.dist, camera.R, camera.t)
     rays = np.concatenate([np.broadcast_to(origin, dirs.shape), dirs], axis=1)

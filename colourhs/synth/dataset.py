@@ -29,13 +29,13 @@ import numpy as np
 from tqdm import tqdm
 
 from colourhs.ply import write_ply
+from colourhs.raycast import raycasting_scene
 from colourhs.synth import scenes as sc
 from colourhs.synth.poses import board_poses
 from colourhs.synth.render import (
     camera_rays,
     channel_signal,
     light_transport,
-    raycasting_scene,
     trace_camera,
 )
 from colourhs.synth.rig import COLOURS, Nuisances, RigModel, make_rig, sensor
@@ -474,7 +474,7 @@ def _render_indexed(k: int) -> None:
 
 def _render_job(root, rig, rays, p, job, seed, nuis, mask_mode="exact"):
     geom = job.geometry()
-    scene = raycasting_scene(geom)
+    scene = raycasting_scene(geom.vertices, geom.triangles)
     if job.gt_mesh:
         write_ply(root / job.gt_mesh, geom.vertices, geom.triangles, geom.vertex_normals)
     chroma_maps = {}

@@ -35,16 +35,6 @@ from colourhs.synth.scenes import SceneGeometry
 SHADOW_EPS_M = 2e-5  # shadow-ray start offset along the geometric normal, metres
 
 
-def raycasting_scene(geom: SceneGeometry) -> o3d.t.geometry.RaycastingScene:
-    """An open3d ray-casting scene holding the geometry's triangles."""
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(
-        o3d.core.Tensor(geom.vertices.astype(np.float32)),
-        o3d.core.Tensor(geom.triangles.astype(np.uint32)),
-    )
-    return scene
-
-
 @dataclass(frozen=True)
 class Hits:
     """First intersections of a camera's sub-pixel rays with a scene.
