@@ -168,10 +168,7 @@ def unmix_crosstalk(name):
 def photometric_options(name, crosstalk):
     """Command-line options of `colourhs photometric` (plain values, no arrays)."""
     opts = [f"--crosstalk {shlex.quote(crosstalk)}"] if crosstalk else []
-    for key, value in sorted(calibration(name)["photometric"].items()):
-        if value is not None:
-            opts.append(f"--{key.replace('_', '-')} {value}")
-    return " ".join(opts)
+    return " ".join(opts + [cli_options(calibration(name)["photometric"])])
 
 
 def chromatic_objects(name):
@@ -247,12 +244,9 @@ def reconstruct_options(name, scene, variant):
     opts = [f"--method {VARIANTS[variant]['method']}"]
     for key, path in variant_calibration(name, scene, variant).items():
         opts.append(f"--{key} {shlex.quote(path)}")
-    for key, value in sorted(
-        config.get("reconstruction", {}).get("params", {}).items()
-    ):
-        if value is not None:
-            opts.append(f"--{key.replace('_', '-')} {value}")
-    return " ".join(opts)
+    return " ".join(
+        opts + [cli_options(config.get("reconstruction", {}).get("params", {}))]
+    )
 
 
 def same_result(name, scene, variant, frame, kind):
@@ -299,9 +293,10 @@ def mesh_uses_hull(variant):
 
 
 def cli_options(values):
-    """`--key value` options of the non-null entries of a dict (plain values)."""
+    """`--key value` options of the non-null entries of a dict (plain values, quoted):
+    the one formatter of the config's options."""
     return " ".join(
-        f"--{k.replace('_', '-')} {v}"
+        f"--{k.replace('_', '-')} {shlex.quote(str(v))}"
         for k, v in sorted(values.items())
         if v is not None
     )
