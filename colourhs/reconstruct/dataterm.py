@@ -195,8 +195,8 @@ def _kernel(
     into every camera (OpenCV model), with the bilinear weights and the
     light fall-offs; sample all packed slots of each footprint (SIMD over the
     slots: no gathers); accumulate the Gram matrix of W row by row (eq. 5);
-    then sigma_3 / sigma_2 and the null vector. Passes 1, 3 and 4 vectorise
-    over the hypotheses. ``lights``: light centres minus ``c_ref``. ``ns``:
+    then sigma_3 / sigma_2 and the null vector; the facing test. Passes 1, 3,
+    4 and 5 vectorise over the hypotheses. ``lights``: light centres minus ``c_ref``. ``ns``:
     offset of the p slots in S. ``ref``: the
     camera the rays leave from, or -1; every point of a ray through a camera's
     centre projects to the same pixel, so its footprint is computed and sampled
@@ -220,6 +220,7 @@ def _kernel(
         smp = np.empty((ncam, nv, Kn), np.float32)
         M = np.empty((6, Kn))
         R = np.empty((3, Kn), np.float32)  # normal, copied out after the vectorised pass
+        score = np.empty(Kn, np.float32)
         ok = np.empty(Kn, np.uint8)
         for n in range(t * chunk, min(N, (t + 1) * chunk)):
             r0, r1, r2 = rays[n, 0], rays[n, 1], rays[n, 2]
@@ -368,25 +369,32 @@ def _kernel(
                 inv = np.sqrt(q2 * rq)
                 # Orient towards the reference camera: n . (c - X) = -z n . r > 0.
                 inv = -inv if nx * r0 + ny * r1 + nz * r2 > 0.0 else inv
-                # A point every camera sees and every light lights faces them all
-                # (by more than MIN_FACING_COS): a normal that does not is a false
-                # root of det W = 0.
-                z = depths[k]
-                for c in range(ncam):
-                    dx, dy, dz = lights[c, 0] - z * r0, lights[c, 1] - z * r1, lights[c, 2] - z * r2
-                    facing = (nx * dx + ny * dy + nz * dz) * inv
-                    valid &= facing > MIN_FACING_COS * np.sqrt(dx * dx + dy * dy + dz * dz)
                 # (sigma_3 / sigma_2)^2 <= 1: its square root in float32, like the output.
-                score = np.sqrt(np.float32(min(max(lam3, 0.0) * den * nnc * rq, 4.0)))
-                # Selects, not products: an invalid hypothesis may carry inf or nan.
-                cost[n, k] = score if valid else np.float32(INVALID_COST)
-                R[0, k] = nx * inv if valid else 0.0
-                R[1, k] = ny * inv if valid else 0.0
-                R[2, k] = nz * inv if valid else 0.0
+                score[k] = np.sqrt(np.float32(min(max(lam3, 0.0) * den * nnc * rq, 4.0)))
+                ok[k] = valid
+                R[0, k] = nx * inv
+                R[1, k] = ny * inv
+                R[2, k] = nz * inv
+            # 5. A point every camera sees and every light lights faces them all
+            # (by more than MIN_FACING_COS): a normal that does not is a false
+            # root of det W = 0. One pass per camera, so each vectorises over k
+            # (a camera loop inside the k loop stopped pass 4 vectorising: 3x
+            # slower, measured 46 -> 15 M hypotheses/s).
+            for c in range(ncam):
+                l0, l1, l2 = lights[c, 0], lights[c, 1], lights[c, 2]
+                for k in range(Kn):
+                    z = depths[k]
+                    dx, dy, dz = l0 - z * r0, l1 - z * r1, l2 - z * r2
+                    facing = R[0, k] * dx + R[1, k] * dy + R[2, k] * dz
+                    lim = MIN_FACING_COS * np.sqrt(dx * dx + dy * dy + dz * dz)
+                    ok[k] &= facing > lim
+            # Selects, not products: an invalid hypothesis may carry inf or nan.
             for k in range(Kn):
-                normals[n, k, 0] = R[0, k]
-                normals[n, k, 1] = R[1, k]
-                normals[n, k, 2] = R[2, k]
+                valid = ok[k] != 0
+                cost[n, k] = score[k] if valid else np.float32(INVALID_COST)
+                normals[n, k, 0] = R[0, k] if valid else np.float32(0.0)
+                normals[n, k, 1] = R[1, k] if valid else np.float32(0.0)
+                normals[n, k, 2] = R[2, k] if valid else np.float32(0.0)
 
 
 def prepare_images(
