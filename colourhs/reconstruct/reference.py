@@ -7,10 +7,10 @@ the same inputs (:class:`~colourhs.reconstruct.dataterm.Prepared` images),
 written the obvious way: vectorised over pixels and hypotheses, the
 projection of :func:`colourhs.geometry.project`, bilinear sampling by
 indexing, ``numpy.linalg.eigh`` of W^T W in float64. No numba, no float32
-arithmetic, no fused loops. It is slow on purpose-free grounds: it exists so
-that ``benchmarks/bench_reconstruct.py`` reports the compiled kernel's speed
-as a ratio to a plain implementation run on the same pixels, and so that a
-test checks the kernel against an independent implementation.
+arithmetic, no fused loops, no attempt at speed: it exists so that
+``benchmarks/bench_reconstruct.py`` reports the compiled kernel's speed as a
+ratio to a plain implementation run on the same pixels, and so that a test
+(``tests/test_exact.py``) checks the kernel against an independent one.
 """
 
 from __future__ import annotations
