@@ -1,4 +1,4 @@
-"""Caching and incremental reruns of the Snakemake workflow, through Snakemake's Python API.
+"""Caching and incremental reruns of the Snakemake workflow (its public API and CLI).
 
 One real run of the whole workflow on a copy of the tiny dataset (variants vh and
 bayes_ph, scenes plane and sheet), then, in file order: what a second run would do,
@@ -9,6 +9,8 @@ resumed run (real runs).
 
 from __future__ import annotations
 
+import contextlib
+import io
 import os
 import re
 import shutil
@@ -46,40 +48,26 @@ RUN_CONFIG = {
 # --------------------------------------------------------------------------- Snakemake API
 
 
-def _snakemake(workdir: Path, configfiles, *, dryrun: bool, keep_going: bool = False):
-    """Run (or dry-run) the default target; returns (succeeded, jobs, updated files).
-
-    ``jobs``: (rule, outputs) of every job Snakemake planned, read from its DAG;
-    ``updated files``: the outputs of those jobs as Snakemake reports them.
-    """
+def _snakemake(workdir: Path, configfiles, *, keep_going: bool = False):
+    """Run the default target: (succeeded, None, the files Snakemake reports updated)."""
     updated: list[str] = []
-    quiet = {Quietness.RULES, Quietness.PROGRESS} if dryrun else None
-    jobs: list[tuple[str, tuple[str, ...]]] = []
     try:
-        with SnakemakeApi(OutputSettings(quiet=quiet, dryrun=dryrun)) as api:
+        with SnakemakeApi(OutputSettings()) as api:
             workflow_api = api.workflow(
                 resource_settings=ResourceSettings(cores=2),
                 config_settings=ConfigSettings(configfiles=[Path(p) for p in configfiles]),
                 snakefile=SNAKEFILE,
                 workdir=workdir,
             )
-            dag_api = workflow_api.dag(DAGSettings())
-            try:
-                dag_api.execute_workflow(
-                    executor="dryrun" if dryrun else "local",
-                    execution_settings=ExecutionSettings(keep_going=keep_going),
-                    updated_files=updated,
-                )
-            finally:
-                dag = workflow_api._workflow.dag  # the DAG the call built (no public getter)
-                if dag is not None and dryrun:
-                    jobs = [(j.rule.name, tuple(map(str, j.output))) for j in dag.needrun_jobs()]
+            workflow_api.dag(DAGSettings()).execute_workflow(
+                executor="local",
+                execution_settings=ExecutionSettings(keep_going=keep_going),
+                updated_files=updated,
+            )
     except Exception as e:  # a failed job: WorkflowError
-        if dryrun:
-            raise
         print(f"snakemake failed: {e}")
-        return False, jobs, updated
-    return True, jobs, updated
+        return False, None, updated
+    return True, None, updated
 
 
 @dataclass(frozen=True)
@@ -97,12 +85,27 @@ class Plan:
 
 
 def planned_jobs(workdir: Path, configfiles) -> Plan:
-    """Dry run: the jobs Snakemake would run now (the `all` target rule left out)."""
-    _, jobs, updated = _snakemake(workdir, configfiles, dryrun=True)
-    jobs = [(rule, out) for rule, out in jobs if rule != "all"]
-    outputs = frozenset((rule, path) for rule, out in jobs for path in out)
-    # The DAG's jobs and Snakemake's own list of files it would update agree.
-    assert {path for _, path in outputs} == set(updated)
+    """The jobs Snakemake would run now (the `all` target left out), from its public
+    summary (``DAGApi.summary``, the `--summary` table): every output file with its
+    rule, log file and plan ("update pending" or "no update"); one log file per job
+    tells the jobs apart."""
+    text = io.StringIO()
+    with (
+        contextlib.redirect_stdout(text),
+        SnakemakeApi(OutputSettings(quiet={Quietness.ALL})) as api,
+    ):
+        api.workflow(
+            resource_settings=ResourceSettings(cores=2),
+            config_settings=ConfigSettings(configfiles=[Path(p) for p in configfiles]),
+            snakefile=SNAKEFILE,
+            workdir=workdir,
+        ).dag(DAGSettings()).summary()
+    lines = text.getvalue().splitlines()
+    header = lines.index(next(x for x in lines if x.startswith("output_file\t")))
+    rows = [x.split("\t") for x in lines[header + 1 :] if x.count("\t") >= 5]
+    pending = [(r[2], r[0], r[3]) for r in rows if r[-1] == "update pending" and r[2] != "all"]
+    outputs = frozenset((rule, path) for rule, path, _ in pending)
+    jobs = {(rule, log) for rule, _, log in pending}
     return Plan(outputs, Counter(rule for rule, _ in jobs))
 
 
@@ -240,7 +243,7 @@ def run(tiny_dataset, tmp_path_factory) -> Run:
     (workdir / "run-config.yaml").write_text(yaml.safe_dump(config))
     # As `colourhs run`: the project's config.yaml, then the run's.
     configfiles = [PROJECT_ROOT / "config.yaml", workdir / "run-config.yaml"]
-    ok, _, updated = _snakemake(workdir, configfiles, dryrun=False)
+    ok, _, updated = _snakemake(workdir, configfiles)
     assert ok, "the first run of the workflow failed"
     assert f"reports/{NAME}/index.html" in updated
     return Run(workdir, data, configfiles, snapshot(workdir))
@@ -269,7 +272,7 @@ def test_first_run_made_every_output(run):
 
 def test_second_run_does_nothing(run):
     assert not planned_jobs(run.workdir, run.configfiles)
-    ok, _, updated = _snakemake(run.workdir, run.configfiles, dryrun=False)
+    ok, _, updated = _snakemake(run.workdir, run.configfiles)
     assert ok and updated == []
     assert snapshot(run.workdir) == run.first
 
@@ -338,7 +341,7 @@ def test_malformed_capture_stops_the_run_before_any_stage(run, capsys):
     before = snapshot(run.workdir)
     with replaced(image, lambda p: p.write_bytes(p.read_bytes()[:200]), run.workdir):
         capsys.readouterr()
-        ok, _, updated = _snakemake(run.workdir, run.configfiles, dryrun=False, keep_going=True)
+        ok, _, updated = _snakemake(run.workdir, run.configfiles, keep_going=True)
         message = capsys.readouterr().out
         after = snapshot(run.workdir)
     assert not ok, "the run with a truncated frame image succeeded"
@@ -359,7 +362,7 @@ def test_failed_stage_leaves_no_partial_output_and_rerun_resumes(run):
     before = snapshot(run.workdir)
     original = depth.read_bytes()
     with replaced(depth, lambda p: p.write_bytes(p.read_bytes()[:200]), run.workdir):
-        ok, _, _ = _snakemake(run.workdir, run.configfiles, dryrun=False, keep_going=True)
+        ok, _, _ = _snakemake(run.workdir, run.configfiles, keep_going=True)
         failed = snapshot(run.workdir)
     # The good depth file back, newer than what reads it (as when its stage reruns).
     depth.write_bytes(original)
@@ -375,7 +378,7 @@ def test_failed_stage_leaves_no_partial_output_and_rerun_resumes(run):
     # The rerun does the failed job and what follows, nothing else.
     plan = planned_jobs(run.workdir, run.configfiles)
     assert_plan(plan, failed_jobs | report_jobs("sheet"))
-    ok, _, updated = _snakemake(run.workdir, run.configfiles, dryrun=False)
+    ok, _, updated = _snakemake(run.workdir, run.configfiles)
     assert ok
     assert set(updated) == {path for _, path in plan.outputs}
     after = snapshot(run.workdir)
