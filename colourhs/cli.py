@@ -155,12 +155,11 @@ def _reconstruct(args) -> int:
     return 0
 
 
-def _same_as(src, out, also=()) -> int:
+def _same_as(src, out) -> int:
     """A result equal to one another job computed (colourhs.variants.same_as): a copy."""
     from colourhs.io import copy_output
 
-    for a, b in ((src, out), *also):
-        copy_output(a, b)
+    copy_output(src, out)
     print(f"wrote {out}: the same as {src}")
     return 0
 
