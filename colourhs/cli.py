@@ -316,6 +316,13 @@ def _tuning_options(parser, params: dict, defaults: dict | None) -> None:
                             metavar=kind.__name__.upper(), help=text)  # fmt: skip
 
 
+def _frame_arguments(parser) -> None:
+    """The positional DATASET SCENE FRAME of the per-frame stages."""
+    parser.add_argument("dataset", type=Path, help="dataset folder (capture format)")
+    parser.add_argument("scene", help="scene name (a folder under scenes/)")
+    parser.add_argument("frame", help="frame: its folder name under frames/ (e.g. 000000)")
+
+
 def build_parser(show_defaults: bool = False) -> argparse.ArgumentParser:
     """The command line; ``show_defaults`` imports the stages to show their
     tuning options' defaults (for --help only: it costs a second)."""
@@ -392,9 +399,7 @@ def build_parser(show_defaults: bool = False) -> argparse.ArgumentParser:
     c.set_defaults(func=_chromaticity)
 
     rc = sub.add_parser("reconstruct", help="depth and normals of one frame (ML or Bayesian HS)")
-    rc.add_argument("dataset", type=Path, help="dataset folder (capture format)")
-    rc.add_argument("scene", help="scene name (a folder under scenes/)")
-    rc.add_argument("frame", help="frame: its folder name under frames/ (e.g. 000000)")
+    _frame_arguments(rc)
     rc.add_argument("out", type=Path, help="depth HDF5 to write")
     rc.add_argument("--method", choices=("ml", "bayes"), default="bayes",
                     help="ML HS or Bayesian HS (default bayes)")  # fmt: skip
@@ -414,9 +419,7 @@ def build_parser(show_defaults: bool = False) -> argparse.ArgumentParser:
     rc.set_defaults(func=_reconstruct)
 
     h = sub.add_parser("hull", help="visual hull of one frame from its silhouettes (PLY)")
-    h.add_argument("dataset", type=Path, help="dataset folder (capture format)")
-    h.add_argument("scene", help="scene name (a folder under scenes/)")
-    h.add_argument("frame", help="frame: its folder name under frames/ (e.g. 000000)")
+    _frame_arguments(h)
     h.add_argument("out", type=Path, help="hull mesh PLY to write")
     h.add_argument("--depth", type=Path, default=None, help="also write the vh depth HDF5")
     h.add_argument(
@@ -427,7 +430,7 @@ def build_parser(show_defaults: bool = False) -> argparse.ArgumentParser:
     )
     h.add_argument("--threshold", type=float, default=LIT_THRESHOLD,
                    help="silhouettes of scenes without masks: lit pixels above this fraction "
-                        "of full scale (default 0.02)")  # fmt: skip
+                        f"of full scale (default {LIT_THRESHOLD})")  # fmt: skip
     h.set_defaults(func=_hull)
 
     me = sub.add_parser("mesh", help="oriented points of a depth file -> Poisson mesh (PLY)")

@@ -62,6 +62,7 @@ from colourhs.geometry import (
 )
 from colourhs.io import sha256_files
 from colourhs.ply import write_ply
+from colourhs.raycast import raycasting_scene
 from colourhs.silhouettes import DEFAULT_THRESHOLD, silhouette_distance, silhouettes_and_sources
 
 __all__ = [
@@ -611,8 +612,6 @@ def depth_bounds(
     pixel in 10^4 to 10^5 on the synthetic board).
     """
     import open3d as o3d
-
-    from colourhs.raycast import raycasting_scene
 
     scene = raycasting_scene(vertices, triangles)
     grid = pixel_grid(width, height).reshape(-1, 2)
