@@ -1,0 +1,166 @@
+"""The eq. (6) samples of the photometric calibration, paper section III-C.
+
+Step 1 of :mod:`colourhs.photometric` (whose docstring describes every step):
+for a reciprocal pair (a, b) and a point x of the white board on plane Pi_j,
+``kappa = p_ba mu_a(v_a) / (p_ab mu_b(v_b))`` is measured from the two
+reciprocal intensities. This module holds
+
+- :func:`kappa`: eq. (6) itself;
+- :class:`PoseView`: one board pose with its (unmixed) images;
+- :class:`KappaSamples` and :func:`kappa_samples`: the log kappa of a pair
+  at the usable board points seen by a regular pixel grid of one camera, on
+  every pose (markers, board edges -- :func:`pixel_footprint_m` --,
+  saturation, grazing and dark readings left out).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from colourhs.capture import Board, Camera, Rig
+from colourhs.geometry import backproject, project, ray_plane_intersection
+from colourhs.helmholtz import sample_bilinear
+
+
+def kappa(
+    x: np.ndarray,
+    n: np.ndarray,
+    c_a: np.ndarray,
+    c_b: np.ndarray,
+    i_a: np.ndarray,
+    i_b: np.ndarray,
+) -> np.ndarray:
+    """kappa(v_a, v_b | Pi) of equation (6).
+
+    ``kappa = (n . v_b) |c_a - x|^2 i_b / ((n . v_a) |c_b - x|^2 i_a)``,
+    which equals ``p_ba mu_a(v_a) / (p_ab mu_b(v_b))``.
+
+    Parameters
+    ----------
+    x : (..., 3) board points, metres.
+    n : (3,) or (..., 3) unit plane normal.
+    c_a, c_b : (3,) Helmholtz camera centres (collocated light), metres.
+    i_a : (...,) intensity of camera a lit by b's light.
+    i_b : (...,) intensity of camera b lit by a's light.
+
+    Returns
+    -------
+    (...,) dimensionless ratio.
+    """
+    da = np.asarray(c_a, float) - x
+    db = np.asarray(c_b, float) - x
+    ra2 = np.sum(da**2, axis=-1)
+    rb2 = np.sum(db**2, axis=-1)
+    cos_a = np.sum(da * n, axis=-1) / np.sqrt(ra2)
+    cos_b = np.sum(db * n, axis=-1) / np.sqrt(rb2)
+    return cos_b * ra2 * i_b / (cos_a * rb2 * i_a)
+
+
+@dataclass(frozen=True)
+class PoseView:
+    """One board pose as the calibration needs it: plane, board pose, images."""
+
+    name: str
+    R: np.ndarray  # board to world rotation
+    t: np.ndarray  # board to world translation, metres
+    images: dict  # camera name -> (H, W, 3) unmixed linear image
+    saturated: dict  # camera name -> (H, W) bool
+
+    @property
+    def normal(self) -> np.ndarray:
+        """Unit normal of the white face (towards the cameras), world frame."""
+        return self.R @ np.array([0.0, 0.0, -1.0])
+
+
+@dataclass(frozen=True)
+class KappaSamples:
+    """eq. (6) samples of a reciprocal pair (a, b): ``log kappa = log mu_a(uv_a) - log mu_b(uv_b)``
+
+    (up to the pair's constant log(p_ba / p_ab)), one per usable board point.
+    """
+
+    uv_a: np.ndarray  # (N, 2) pixel of camera a
+    uv_b: np.ndarray  # (N, 2) pixel of camera b
+    log_kappa: np.ndarray  # (N,)
+    pose: np.ndarray  # (N,) index of the board pose
+
+    def transferred(self) -> np.ndarray:
+        """(N,) bool: samples whose pixel ``uv_b`` is seen on another pose too (an eq. 7 row)."""
+        _, g = np.unique(self.uv_b, axis=0, return_inverse=True)
+        return np.bincount(g.ravel())[g.ravel()] > 1
+
+    def swapped(self) -> KappaSamples:
+        """The same samples as seen from b: ``log kappa_ba = -log kappa_ab``."""
+        return KappaSamples(self.uv_b, self.uv_a, -self.log_kappa, self.pose)
+
+    @staticmethod
+    def concatenate(parts: list[KappaSamples]) -> KappaSamples:
+        return KappaSamples(
+            *(np.concatenate([getattr(p, f) for p in parts]) for f in KappaSamples.__annotations__)
+        )
+
+
+def pixel_footprint_m(x: np.ndarray, n: np.ndarray, cam: Camera) -> np.ndarray:
+    """Size (metres) of one pixel of ``cam`` on the plane with normal ``n`` at points ``x``.
+
+    Distance over focal length, stretched by the slant (the long axis of the
+    pixel's footprint on the plane).
+    """
+    d = x - cam.centre
+    r = np.linalg.norm(d, axis=-1)
+    cos = np.abs(d @ n) / r
+    f = 0.5 * (cam.K[0, 0] + cam.K[1, 1])
+    return r / (f * np.maximum(cos, 1e-6))
+
+
+def _log_kappa_at(view: PoseView, board: Board, a: Camera, b: Camera, ch_a, ch_b, uv_b, opts):
+    """log kappa (eq. 6) at the board points seen by pixels ``uv_b`` of b; NaN if unusable."""
+    origin, d = backproject(uv_b, b.K, b.dist, b.R, b.t)
+    n = view.normal
+    x, s = ray_plane_intersection(origin, d, view.t, n)
+    xy = ((x - view.t) @ view.R)[:, :2]
+    if opts.get("margin_m") is not None:
+        margin = float(opts["margin_m"])
+    else:
+        with np.errstate(invalid="ignore"):
+            foot = np.maximum(pixel_footprint_m(x, n, a), pixel_footprint_m(x, n, b))
+        margin = opts["margin_px"] * np.nan_to_num(foot, nan=np.inf)
+    with np.errstate(invalid="ignore"):
+        ok = (s > 0) & board.white(xy, margin)
+    uv_a = project(x, a.K, a.dist, a.R, a.t)
+    i_a = sample_bilinear(view.images[a.name][..., ch_a], uv_a)
+    i_b = sample_bilinear(view.images[b.name][..., ch_b], uv_b)
+    sat = sample_bilinear(view.saturated[a.name].astype(float), uv_a) > 0
+    sat |= sample_bilinear(view.saturated[b.name].astype(float), uv_b) > 0
+    for c in (a, b):
+        v = c.light_centre - x
+        with np.errstate(invalid="ignore"):
+            ok &= (v @ n) / np.linalg.norm(v, axis=1) > opts["min_cos"]
+    with np.errstate(invalid="ignore"):
+        ok &= ~sat & (i_a > opts["min_signal"]) & (i_b > opts["min_signal"])
+    lk = np.full(len(uv_b), np.nan)
+    lk[ok] = np.log(kappa(x[ok], n, a.light_centre, b.light_centre, i_a[ok], i_b[ok]))
+    return lk, uv_a
+
+
+def kappa_samples(views: list[PoseView], rig: Rig, a: str, b: str, opts: dict) -> KappaSamples:
+    """eq. (6) samples of the pair (a, b) at pixels of b on a grid of step ``opts["step_px"]``.
+
+    ``opts`` needs ``step_px``, ``min_cos``, ``min_signal`` and ``margin_px``
+    (or ``margin_m``), see :data:`colourhs.photometric.DEFAULTS`. Camera a's
+    channel is the one of b's light and vice versa.
+    """
+    A, B = rig.camera(a), rig.camera(b)
+    ch_a, ch_b = B.light_channel, A.light_channel
+    W, H = rig.image.width, rig.image.height
+    step = opts["step_px"]
+    u, v = np.meshgrid(np.arange(0, W, step, dtype=float), np.arange(0, H, step, dtype=float))
+    uv_b = np.stack([u.ravel(), v.ravel()], axis=1)
+    parts = []
+    for j, view in enumerate(views):
+        lk, uv_a = _log_kappa_at(view, rig.board, A, B, ch_a, ch_b, uv_b, opts)
+        ok = np.isfinite(lk)
+        parts.append(KappaSamples(uv_a[ok], uv_b[ok], lk[ok], np.full(ok.sum(), j)))
+    return KappaSamples.concatenate(parts)
