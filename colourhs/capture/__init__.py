@@ -1,0 +1,66 @@
+"""Read and validate datasets in the Colour HS capture format, version 1.
+
+The format is specified in ``capture-format.md`` (the contract between a
+capture rig or the synthetic renderer and the pipeline). This package is the
+pipeline's only reader of that layout: :func:`open_dataset` validates a whole
+dataset and :func:`load_rig`, :func:`read_image` and :func:`read_mask` read its
+parts. Anything malformed is refused with a :class:`CaptureFormatError` whose
+message starts with the offending file's path, then ``": "`` and the problem.
+
+Conventions (all from the format): lengths are in metres, geometry follows
+OpenCV (a world point X maps to camera coordinates ``R X + t``), images are
+R, G, B in that order, and channel indices follow :data:`COLOURS`.
+
+Modules (everything public is re-exported here; import from ``colourhs.capture``):
+
+- :mod:`~colourhs.capture.base`: the format's constants, the intensity thresholds
+  and the errors;
+- :mod:`~colourhs.capture.rig`: the rig's types (:class:`ImageSpec`,
+  :class:`Camera`, :class:`Board`, :class:`ReciprocalPair`, :class:`Rig`);
+- :mod:`~colourhs.capture.dataset`: :class:`Scene` and :class:`Dataset`;
+- :mod:`~colourhs.capture.rigjson`: reading and validating rig.json;
+- :mod:`~colourhs.capture.jsonvalues`: JSON reading and value checks;
+- :mod:`~colourhs.capture.png`: PNG header checks, :func:`read_image`, :func:`read_mask`;
+- :mod:`~colourhs.capture.layout`: the dataset folder, :func:`open_dataset`, :func:`validate`.
+"""
+
+from __future__ import annotations
+
+from colourhs.capture.base import (
+    COLOURS,
+    FORMAT,
+    LIT_THRESHOLD,
+    MIN_SIGNAL,
+    CaptureFormatError,
+    UnknownNameError,
+)
+from colourhs.capture.dataset import Dataset, Scene
+from colourhs.capture.layout import all_images, open_dataset, validate
+from colourhs.capture.png import read_image, read_mask
+from colourhs.capture.rig import Board, Camera, ImageSpec, ReciprocalPair, Rig
+from colourhs.capture.rigjson import DIST_LENGTHS, ROTATION_TOLERANCE, load_rig, rig_from_dict
+
+__all__ = [
+    "COLOURS",
+    "DIST_LENGTHS",
+    "FORMAT",
+    "LIT_THRESHOLD",
+    "MIN_SIGNAL",
+    "ROTATION_TOLERANCE",
+    "Board",
+    "Camera",
+    "CaptureFormatError",
+    "Dataset",
+    "ImageSpec",
+    "ReciprocalPair",
+    "Rig",
+    "Scene",
+    "UnknownNameError",
+    "all_images",
+    "load_rig",
+    "open_dataset",
+    "read_image",
+    "read_mask",
+    "rig_from_dict",
+    "validate",
+]

@@ -1,0 +1,241 @@
+"""The rig's types: image encoding, cameras with their lights, the board, reciprocal pairs.
+
+:class:`Rig` is the contents of a validated rig.json (read by
+:func:`colourhs.capture.rigjson.load_rig`): its :class:`Camera` objects (each a
+calibrated pinhole camera with its collocated light), the :class:`ImageSpec`
+shared by all images, the calibration :class:`Board` and the Helmholtz
+:class:`ReciprocalPair` of every two cameras (camera i records camera j's light
+in the channel of j's light colour). Geometry follows OpenCV (``x_cam = R X + t``),
+lengths in metres. Re-exported by :mod:`colourhs.capture`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from colourhs.capture.base import COLOURS, UnknownNameError
+from colourhs.geometry import camera_centre, light_centre
+
+
+@dataclass(frozen=True)
+class ImageSpec:
+    """Size and encoding shared by all images of a dataset.
+
+    Attributes
+    ----------
+    width, height : int
+        Image size in pixels.
+    bit_depth : int
+        8 or 16 bits per channel.
+    black_level, white_level : float
+        Raw values of zero and of full scale; a value at ``white_level`` is saturated.
+    """
+
+    width: int
+    height: int
+    bit_depth: int
+    black_level: float
+    white_level: float
+
+    @property
+    def dtype(self) -> type[np.unsignedinteger]:
+        """NumPy type of raw pixel values (``uint8`` or ``uint16``)."""
+        return np.uint8 if self.bit_depth == 8 else np.uint16
+
+
+@dataclass(frozen=True, eq=False)
+class Camera:
+    """One calibrated camera with its collocated light.
+
+    Attributes
+    ----------
+    name : str
+        Camera name; also the image file stem ``<name>.png``.
+    K : ndarray, shape (3, 3)
+        Intrinsic matrix, pixels.
+    dist : ndarray, shape (n,), n >= 5
+        OpenCV distortion coefficients (k1, k2, p1, p2, k3, ...), zero-padded to at least 5.
+    R : ndarray, shape (3, 3)
+        World-to-camera rotation.
+    t : ndarray, shape (3,)
+        World-to-camera translation, metres (``x_cam = R X + t``).
+    light_colour : str
+        Colour filter of the camera's light, one of :data:`COLOURS`.
+    light_offset : ndarray, shape (3,)
+        Light centre in camera coordinates, metres.
+    """
+
+    name: str
+    K: np.ndarray
+    dist: np.ndarray
+    R: np.ndarray
+    t: np.ndarray
+    light_colour: str
+    light_offset: np.ndarray
+
+    @property
+    def centre(self) -> np.ndarray:
+        """Camera centre in world coordinates, metres: ``-R^T t``."""
+        return camera_centre(self.R, self.t)
+
+    @property
+    def light_centre(self) -> np.ndarray:
+        """Light centre in world coordinates, metres: ``R^T (offset - t)``."""
+        return light_centre(self.R, self.t, self.light_offset)
+
+    @property
+    def light_channel(self) -> int:
+        """Image channel (index into :data:`COLOURS`) of the light's colour."""
+        return COLOURS.index(self.light_colour)
+
+
+@dataclass(frozen=True, eq=False)
+class Board:
+    """The flat calibration board with its ArUco markers.
+
+    Board frame: origin at the top-left corner, x to the right, y down, board
+    plane z = 0, metres.
+
+    Attributes
+    ----------
+    dictionary : str
+        Name of the OpenCV predefined ArUco dictionary, e.g. ``"DICT_4X4_50"``.
+    marker_length : float
+        Side of each square marker, metres.
+    size : tuple of float
+        Board (width, height), metres.
+    markers : dict of int to ndarray, shape (2,)
+        Marker id to marker centre (x, y) in the board frame, metres; ids ascending.
+    """
+
+    dictionary: str
+    marker_length: float
+    size: tuple[float, float]
+    markers: dict[int, np.ndarray]
+
+    def marker_corners(self, marker_id: int) -> np.ndarray:
+        """Corners of one marker in the board frame.
+
+        Parameters
+        ----------
+        marker_id : int
+            A marker id of the board.
+
+        Returns
+        -------
+        ndarray, shape (4, 3)
+            Corners in metres, OpenCV order: top-left, top-right, bottom-right,
+            bottom-left (x right, y down, z = 0).
+
+        Raises
+        ------
+        KeyError
+            If the board has no such marker.
+        """
+        if marker_id not in self.markers:
+            raise UnknownNameError(
+                f"board has no marker {marker_id!r}; ids: {sorted(self.markers)}"
+            )
+        return _square_corners(self.markers[marker_id], self.marker_length)
+
+    def white(self, xy: np.ndarray, margin_m) -> np.ndarray:
+        """True where board-frame points ``xy`` (N, 2) lie on the white surface.
+
+        Points within ``margin_m`` (metres; a scalar or one value per point)
+        of the board's edge or of a marker are left out (the rendered or
+        printed edge blurs over a pixel or two).
+        """
+        w, h = self.size
+        x, y = xy[:, 0], xy[:, 1]
+        ok = (x > margin_m) & (x < w - margin_m) & (y > margin_m) & (y < h - margin_m)
+        half = self.marker_length / 2 + margin_m
+        for centre in self.markers.values():
+            ok &= ~((np.abs(x - centre[0]) < half) & (np.abs(y - centre[1]) < half))
+        return ok
+
+
+@dataclass(frozen=True)
+class ReciprocalPair:
+    """Two cameras whose lights and channels form a Helmholtz reciprocal pair.
+
+    Attributes
+    ----------
+    cam_a, cam_b : str
+        Camera names, in rig order.
+    channel_a : int
+        Channel of ``cam_a`` recording ``cam_b``'s light (index into :data:`COLOURS`).
+    channel_b : int
+        Channel of ``cam_b`` recording ``cam_a``'s light.
+    """
+
+    cam_a: str
+    cam_b: str
+    channel_a: int
+    channel_b: int
+
+
+@dataclass(frozen=True, eq=False)
+class Rig:
+    """Contents of a validated rig.json.
+
+    Attributes
+    ----------
+    cameras : tuple of Camera
+        The cameras in rig.json order.
+    image : ImageSpec
+        Size and encoding of all images.
+    board : Board
+        The calibration board.
+    chromatic_light : ndarray, shape (3,)
+        World position of the chromatic-capture light, metres.
+    path : Path
+        The rig.json file this was read from.
+    """
+
+    cameras: tuple[Camera, ...]
+    image: ImageSpec
+    board: Board
+    chromatic_light: np.ndarray
+    path: Path
+
+    @property
+    def camera_names(self) -> tuple[str, ...]:
+        """Camera names in rig order."""
+        return tuple(cam.name for cam in self.cameras)
+
+    def camera(self, name: str) -> Camera:
+        """Look a camera up by name.
+
+        Raises
+        ------
+        KeyError
+            If the rig has no camera of that name.
+        """
+        for cam in self.cameras:
+            if cam.name == name:
+                return cam
+        raise UnknownNameError(
+            f"rig {self.path} has no camera {name!r}; cameras: {self.camera_names}"
+        )
+
+    def reciprocal_pairs(self) -> tuple[ReciprocalPair, ...]:
+        """Every unordered camera pair ``i < j`` in rig order, with its channels.
+
+        Camera i records camera j's light in the channel of j's light colour and
+        vice versa.
+        """
+        return tuple(
+            ReciprocalPair(a.name, b.name, channel_a=b.light_channel, channel_b=a.light_channel)
+            for i, a in enumerate(self.cameras)
+            for b in self.cameras[i + 1 :]
+        )
+
+
+def _square_corners(centre: np.ndarray, side: float) -> np.ndarray:
+    """Corners (TL, TR, BR, BL) of an axis-aligned square in the board plane, shape (4, 3)."""
+    h = side / 2.0
+    offsets = np.array([[-h, -h], [h, -h], [h, h], [-h, h]])
+    return np.column_stack([centre + offsets, np.zeros(4)])
