@@ -294,93 +294,40 @@ def reconstruct(
     ref_i = names.index(rig.camera(reference).name) if reference else 0
     ref = rig.cameras[ref_i]
     H, W = rig.image.height, rig.image.width
-    if depth_range is None:
-        zc = working_depth(rig, ref)
-        radius = working_radius * zc if working_radius_m is None else working_radius_m
-        depth_range = (zc - radius, zc + radius)
-    depths = np.linspace(depth_range[0], depth_range[1], n_labels)
+    depths = depth_hypotheses(rig, ref, n_labels, depth_range, working_radius, working_radius_m)
     rays = reference_rays(ref, W, H)
-    fg = foreground(frame, ref_i).ravel()
-    pix = np.flatnonzero(fg)
+    pix = np.flatnonzero(foreground(frame, ref_i).ravel())
     if len(pix) == 0:
         raise ValueError("no foreground pixels in the reference camera: nothing to reconstruct")
     pairs = pair_arrays(rig)
-    prepared = prepare_images(
-        frame.images, frame.saturated, pairs, frame.mu, frame.chroma, frame.silhouettes
-    )
-
-    def evaluate(pixel_rays, hypotheses, normal_dtype=np.float32, bar=False):
-        """The data term in chunks of pixels (bounds its float32 normals buffer)."""
-        cost = np.empty((len(pixel_rays), len(hypotheses)), np.float32)
-        normals = np.empty((len(pixel_rays), len(hypotheses), 3), normal_dtype)
-        chunks = range(0, len(pixel_rays), CHUNK)
-        for s in tqdm(chunks, desc="data term", unit="chunk", disable=not bar, leave=False):
-            c, n = data_term(pixel_rays[s : s + CHUNK], ref.centre, hypotheses, rig.cameras,
-                             prepared, pairs)  # fmt: skip
-            cost[s : s + len(c)] = c
-            normals[s : s + len(c)] = n
-        return cost, normals
-
+    evaluate = data_term_evaluator(frame, ref, pairs)
     # float16 normals: half the memory of the volume.
     cost, normals = evaluate(rays[pix], depths, np.float16, progress)
     info = {"method": method, "reference": ref.name, "n_labels": n_labels,
             "depth_range_m": [float(depths[0]), float(depths[-1])], "alpha": alpha, "tau": tau,
             "pixels": int(len(pix))}  # fmt: skip
+    shape = (H, W)
     if method == "ml":
-        labels = np.argmin(cost, axis=1)
-        frac = _subpixel(cost, labels)
+        z, nrm, ok, conf = _ml_solution(frame, cost, depths, pix, rays, ref, pairs, shape, max_cost)
     else:
-        labels, frac, normals = _bayes_labelling(
-            cost / cost_scale,
-            normals,
-            pix,
-            rays,
-            depths,
-            (H, W),
-            alpha,
-            tau,
-            info,
-            INVALID_COST / cost_scale,
-        )
-    chosen = cost[np.arange(len(pix)), labels]
-    valid = chosen < max_cost
-    n_sel = normals[np.arange(len(pix)), labels].astype(float)
-    n_sel /= np.maximum(np.linalg.norm(n_sel, axis=1, keepdims=True), 1e-12)
-    del normals
-    z = np.full(H * W, np.nan)
-    z[pix] = _depth_at(depths, frac)
-    nrm = np.zeros((H * W, 3))
-    nrm[pix] = n_sel
-    ok = np.zeros(H * W, bool)
-    ok[pix] = valid
-    conf = np.zeros(H * W, np.float32)
-    conf[pix] = np.clip(1.0 - chosen, 0, 1) * valid
-    if method == "ml":
-        from colourhs.reconstruct.ml import ml_depth
-        from colourhs.reconstruct.sides import helmholtz_sides
-
-        sides = helmholtz_sides(frame, frame.variance, pairs)
-        z_ml, n_ml, good = ml_depth(cost, depths, pix, rays, ref.centre, sides, (H, W), max_cost)
-        z[pix] = np.where(good, z_ml, np.nan)
-        nrm[pix] = np.where(good[:, None], n_ml, np.nan)
-        ok[pix] = good
-    elif refine and ok.sum() > 10:
-        min_px = int(0.002 * H * W if min_component is None else min_component)
-        # Wrong labels (a few labels off or worse) must not move the surface.
-        anchor = 2.0 * float(depths[1] - depths[0]) / float(np.median(depths))
-        z, nrm, ok = initial_surface(z, nrm, ok, rays, pix, (H, W), evaluate, data_weight,
-                                     edge_m, refine_passes, link_m, min_px, anchor)  # fmt: skip
-        z, nrm, ok, weights, sinfo = _consistent_surface(frame, z, ok, rays, ref, pairs,
-                                                         surface_iterations, spline_px)  # fmt: skip
-        conf = np.where(ok, weights, 0.0).astype(np.float32)
-        info["surface"] = sinfo
-    erode_px = max(1, round(W / 320)) if erode_px is None else erode_px
-    if method == "bayes" and erode_px > 0:
-        from scipy.ndimage import binary_erosion
-
-        # Pixels next to where nothing was reconstructed (board edges, marker
-        # rims, silhouettes) mix surfaces within their footprint: leave them out.
-        ok &= binary_erosion(ok.reshape(H, W), iterations=erode_px).ravel()
+        labels, frac, normals = _bayes_labelling(cost / cost_scale, normals, pix, rays, depths,
+                                                 shape, alpha, tau, info,
+                                                 INVALID_COST / cost_scale)  # fmt: skip
+        z, nrm, ok, conf = _labelled_surface(cost, normals, labels, frac, depths, pix, shape,
+                                             max_cost)  # fmt: skip
+        del normals
+        if refine and ok.sum() > 10:
+            min_px = int(0.002 * H * W if min_component is None else min_component)
+            # Wrong labels (a few labels off or worse) must not move the surface.
+            anchor = 2.0 * float(depths[1] - depths[0]) / float(np.median(depths))
+            z, nrm, ok = initial_surface(z, nrm, ok, rays, pix, shape, evaluate, data_weight,
+                                         edge_m, refine_passes, link_m, min_px, anchor)  # fmt: skip
+            z, nrm, ok, weights, info["surface"] = _consistent_surface(
+                frame, z, ok, rays, ref, pairs, surface_iterations, spline_px
+            )
+            conf = np.where(ok, weights, 0.0).astype(np.float32)
+        erode_px = max(1, round(W / 320)) if erode_px is None else erode_px
+        ok = _without_rims(ok, shape, erode_px)
     z[~ok] = np.nan
     nrm[~ok] = np.nan
     conf[~ok] = 0.0
@@ -391,6 +338,103 @@ def reconstruct(
         ok.reshape(H, W),
         info | {"valid_pixels": int(ok.sum())},
     )
+
+
+def depth_hypotheses(
+    rig: Rig,
+    ref: Camera,
+    n_labels: int,
+    depth_range: tuple[float, float] | None = None,
+    working_radius: float = WORKING_RADIUS,
+    working_radius_m: float | None = None,
+) -> np.ndarray:
+    """The ``n_labels`` z-depths (metres, evenly spaced) hypothesised along every ray.
+
+    ``depth_range`` (near, far) when given, else the working depth zc of
+    ``ref`` (:func:`working_depth`) +- ``working_radius`` zc (or
+    +- ``working_radius_m`` metres).
+    """
+    if depth_range is None:
+        zc = working_depth(rig, ref)
+        radius = working_radius * zc if working_radius_m is None else working_radius_m
+        depth_range = (zc - radius, zc + radius)
+    return np.linspace(depth_range[0], depth_range[1], n_labels)
+
+
+def data_term_evaluator(frame: Frame, ref: Camera, pairs):
+    """``evaluate(rays, depths, normal_dtype=np.float32, bar=False)``: the eq. (5)
+    data term (:func:`colourhs.reconstruct.dataterm.data_term`) of rays from
+    ``ref``'s centre at each hypothesised depth, in chunks of ``CHUNK``
+    pixels (bounds the float32 normals buffer); returns the (N, L) cost and
+    (N, L, 3) normals."""
+    prepared = prepare_images(
+        frame.images, frame.saturated, pairs, frame.mu, frame.chroma, frame.silhouettes
+    )
+    cameras = frame.rig.cameras
+
+    def evaluate(pixel_rays, hypotheses, normal_dtype=np.float32, bar=False):
+        cost = np.empty((len(pixel_rays), len(hypotheses)), np.float32)
+        normals = np.empty((len(pixel_rays), len(hypotheses), 3), normal_dtype)
+        chunks = range(0, len(pixel_rays), CHUNK)
+        for s in tqdm(chunks, desc="data term", unit="chunk", disable=not bar, leave=False):
+            c, n = data_term(pixel_rays[s : s + CHUNK], ref.centre, hypotheses, cameras,
+                             prepared, pairs)  # fmt: skip
+            cost[s : s + len(c)] = c
+            normals[s : s + len(c)] = n
+        return cost, normals
+
+    return evaluate
+
+
+def _ml_solution(frame, cost, depths, pix, rays, ref, pairs, shape, max_cost):
+    """ML HS (:func:`colourhs.reconstruct.ml.ml_depth`) as (H*W,) depth, (H*W, 3)
+    normal, validity and confidence (1 - the best hypothesis' cost)."""
+    from colourhs.reconstruct.ml import ml_depth
+    from colourhs.reconstruct.sides import helmholtz_sides
+
+    H, W = shape
+    sides = helmholtz_sides(frame, frame.variance, pairs)
+    z_ml, n_ml, good = ml_depth(cost, depths, pix, rays, ref.centre, sides, shape, max_cost)
+    z = np.full(H * W, np.nan)
+    z[pix] = np.where(good, z_ml, np.nan)
+    nrm = np.zeros((H * W, 3))
+    nrm[pix] = np.where(good[:, None], n_ml, np.nan)
+    ok = np.zeros(H * W, bool)
+    ok[pix] = good
+    conf = np.zeros(H * W, np.float32)
+    conf[pix] = np.clip(1.0 - cost.min(axis=1), 0, 1) * good
+    return z, nrm, ok, conf
+
+
+def _labelled_surface(cost, normals, labels, frac, depths, pix, shape, max_cost):
+    """The labelling as (H*W,) depth, (H*W, 3) normal, validity (the chosen
+    hypothesis costs less than ``max_cost``) and confidence (1 - its cost)."""
+    H, W = shape
+    idx = np.arange(len(pix))
+    chosen = cost[idx, labels]
+    valid = chosen < max_cost
+    n_sel = normals[idx, labels].astype(float)
+    n_sel /= np.maximum(np.linalg.norm(n_sel, axis=1, keepdims=True), 1e-12)
+    z = np.full(H * W, np.nan)
+    z[pix] = _depth_at(depths, frac)
+    nrm = np.zeros((H * W, 3))
+    nrm[pix] = n_sel
+    ok = np.zeros(H * W, bool)
+    ok[pix] = valid
+    conf = np.zeros(H * W, np.float32)
+    conf[pix] = np.clip(1.0 - chosen, 0, 1) * valid
+    return z, nrm, ok, conf
+
+
+def _without_rims(ok, shape, erode_px):
+    """``ok`` (H*W,) eroded by ``erode_px`` pixels: pixels next to where nothing
+    was reconstructed (board edges, marker rims, silhouettes) mix surfaces
+    within their footprint, so they are left out."""
+    from scipy.ndimage import binary_erosion
+
+    if erode_px <= 0:
+        return ok
+    return ok & binary_erosion(ok.reshape(shape), iterations=erode_px).ravel()
 
 
 def _bayes_labelling(cost, normals, pix, rays, depths, shape, alpha, tau, info, invalid):
