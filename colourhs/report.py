@@ -9,7 +9,10 @@ failure leaves no partial HTML behind.
 
 The tables are computed by the small functions :func:`summarise_metrics`,
 :func:`read_benchmarks` and :func:`summarise_benchmarks`, which the tests call
-directly.
+directly; they live in :mod:`colourhs.reporttables` (reading and summarising
+``metrics.csv`` and the benchmark files) and are re-exported here. This module
+holds the page itself: the paper's reference numbers, the software versions
+and the HTML.
 """
 
 from __future__ import annotations
@@ -18,7 +21,6 @@ import base64
 import html
 import importlib.metadata
 import importlib.util
-import math
 import os
 import platform
 import sys
@@ -31,6 +33,19 @@ import pandas as pd
 import yaml
 
 from colourhs.io import atomic_output
+from colourhs.reporttables import (
+    AGGREGATION,
+    BENCHMARK_COLUMNS,
+    METRIC_COLUMNS,
+    REQUIRED_COLUMNS,
+    _aggregation_of,
+    find_benchmarks,
+    format_number,
+    read_benchmarks,
+    read_metrics,
+    summarise_benchmarks,
+    summarise_metrics,
+)
 from colourhs.variants import VARIANT_LABELS, VARIANT_ORDER
 
 __all__ = [
@@ -52,28 +67,6 @@ __all__ = [
     "summarise_metrics",
 ]
 
-#: The contract's key columns of ``metrics.csv``.
-KEY_COLUMNS = ("scene", "frame", "variant")
-#: The contract's metric columns of ``metrics.csv``, in order.
-METRIC_COLUMNS = (
-    "hausdorff_rms_mm", "hausdorff_mean_mm", "hausdorff_max_mm",
-    "depth_median_mm", "depth_rms_mm", "normal_median_deg",
-)  # fmt: skip
-#: Every column ``metrics.csv`` must have (results contract, version 1).
-REQUIRED_COLUMNS = KEY_COLUMNS + METRIC_COLUMNS
-
-#: How a contract metric is aggregated over the frames of one (scene, variant):
-#: "mean", "max", "median", "rms" (``sqrt(mean(x**2))``) or "sum". Other numeric
-#: columns are aggregated by :func:`_aggregation_of` (by their name's pattern).
-AGGREGATION = {
-    "hausdorff_rms_mm": "mean",
-    "hausdorff_mean_mm": "mean",
-    "hausdorff_max_mm": "max",
-    "depth_median_mm": "median",
-    "depth_rms_mm": "rms",
-    "normal_median_deg": "median",
-}
-
 #: Numbers the paper states, as ``{scene: {variant: {column: value}}}``. The paper
 #: gives only these two: the RMS Hausdorff distance (mm) of the ``plane`` scene
 #: (a held-out calibration board pose, real capture; no chromaticity calibration
@@ -92,12 +85,6 @@ PAPER_REFERENCE_SOURCE = (
     "RMS Hausdorff distance of 2.5 mm for BayesianHS_w/oPhCalib and 2 mm for "
     "BayesianHS_wPhCalib on the real test plane; Section V repeats the 2 mm."
 )
-
-#: Columns of a Snakemake benchmark TSV file.
-BENCHMARK_COLUMNS = (
-    "s", "h:m:s", "max_rss", "max_vms", "max_uss", "max_pss", "io_in", "io_out",
-    "mean_load", "cpu_time",
-)  # fmt: skip
 
 #: Packages whose versions the report lists: label -> (import name, distribution names).
 SOFTWARE = {
@@ -153,265 +140,6 @@ figure { margin: 0; max-width: 100%; }
 figure img { max-width: 100%; height: auto; border: 1px solid #eee; }
 figcaption { font-size: 0.85em; color: #444; text-align: center; }
 """
-
-
-# --------------------------------------------------------------------------- numbers
-
-
-def format_number(x) -> str:
-    """Three significant digits, no exponent from 1e-3 to 1e6; empty for missing values.
-
-    ``2.5 -> "2.50"``, ``2 -> "2.00"``, ``0.01234 -> "0.0123"``, ``1234.5 -> "1234"``
-    (numbers of four or more integer digits are rounded to integers).
-    """
-    if x is None:
-        return ""
-    try:
-        v = float(x)
-    except (TypeError, ValueError):
-        return html.escape(str(x))
-    if not math.isfinite(v):
-        return ""
-    if v == 0:
-        return "0"
-    a = abs(v)
-    if a >= 1000:
-        return f"{v:.0f}" if a < 1e6 else f"{v:.3g}"
-    s = f"{v:#.3g}"
-    return s[:-1] if s.endswith(".") else s
-
-
-def _rms(x: pd.Series) -> float:
-    """``sqrt(mean(x**2))`` over the finite values; NaN when there are none."""
-    v = pd.to_numeric(x, errors="coerce").to_numpy(float)
-    v = v[np.isfinite(v)]
-    return float(np.sqrt(np.mean(v**2))) if v.size else float("nan")
-
-
-def _aggregation_of(column: str) -> str:
-    """The aggregation over frames of a metric column (see :data:`AGGREGATION`).
-
-    Other columns, by their name: ``*_max_*`` -> max, ``*_median_*`` or ``*_p<NN>_*``
-    -> median, ``*_samples`` -> sum, anything else (``completeness_rms_mm``,
-    ``coverage``, ...) -> mean.
-    """
-    if column in AGGREGATION:
-        return AGGREGATION[column]
-    parts = column.split("_")
-    if "max" in parts:
-        return "max"
-    if "median" in parts or any(p[:1] == "p" and p[1:].isdigit() for p in parts):
-        return "median"
-    if parts[-1] == "samples":
-        return "sum"
-    return "mean"
-
-
-# --------------------------------------------------------------------------- metrics
-
-
-def read_metrics(metrics_csv: str | Path) -> pd.DataFrame:
-    """Read ``reports/NAME/metrics.csv``, checking the contract's columns.
-
-    ``scene``, ``frame`` and ``variant`` are read as strings (frame ids keep their
-    leading zeros); empty cells are NaN.
-
-    Raises
-    ------
-    ValueError
-        When the file is missing, empty, or lacks any of :data:`REQUIRED_COLUMNS`
-        (the message names the file and the missing columns).
-    """
-    path = Path(metrics_csv)
-    if not path.is_file():
-        raise ValueError(f"{path}: metrics CSV not found")
-    try:
-        df = pd.read_csv(path, dtype={k: str for k in KEY_COLUMNS}, keep_default_na=True)
-    except pd.errors.EmptyDataError:
-        df = pd.DataFrame()
-    missing = [c for c in REQUIRED_COLUMNS if c not in df.columns]
-    if missing:
-        raise ValueError(f"{path}: metrics CSV lacks the contract columns {missing}")
-    return df
-
-
-def _variant_sort_key(variants: Iterable[str]) -> list[str]:
-    """The paper's variants in its order, then any others alphabetically."""
-    variants = list(dict.fromkeys(variants))
-    known = [v for v in VARIANT_ORDER if v in variants]
-    return known + sorted(v for v in variants if v not in VARIANT_ORDER)
-
-
-def summarise_metrics(df: pd.DataFrame) -> pd.DataFrame:
-    """Aggregate a per-frame metrics table over frames, one row per (scene, variant).
-
-    Parameters
-    ----------
-    df
-        The contents of ``metrics.csv``: columns at least ``scene``, ``variant``
-        and the numeric metric columns; one row per (scene, frame, variant).
-
-    Returns
-    -------
-    DataFrame with columns ``scene``, ``variant``, ``frames`` (row count), then
-    every numeric metric column of ``df`` in its order, aggregated as
-    :data:`AGGREGATION` says for the contract's columns (mean of
-    ``hausdorff_rms_mm`` and ``hausdorff_mean_mm``, max of ``hausdorff_max_mm``,
-    median of ``depth_median_mm`` and ``normal_median_deg``, RMS of
-    ``depth_rms_mm``) and by :func:`_aggregation_of` for others. Missing values
-    are skipped; a value missing in every frame stays NaN. Rows are sorted by
-    scene, then variant in the paper's order (:data:`VARIANT_ORDER`) with other
-    variants after it. Non-numeric columns other than the keys are dropped.
-    """
-    for key in ("scene", "variant"):
-        if key not in df.columns:
-            raise ValueError(f"metrics table lacks the column {key!r}")
-    df = df.copy()
-    df["scene"] = df["scene"].astype(str)
-    df["variant"] = df["variant"].astype(str)
-    metric_cols = []
-    for c in df.columns:
-        if c in KEY_COLUMNS or c in ("method", "same_as"):  # labels, not metrics
-            continue
-        if c in METRIC_COLUMNS or pd.api.types.is_numeric_dtype(df[c]):
-            df[c] = pd.to_numeric(df[c], errors="coerce")
-            metric_cols.append(c)
-    # the contract's metrics first, in its order, then the others as they come
-    metric_cols = [c for c in METRIC_COLUMNS if c in metric_cols] + [
-        c for c in metric_cols if c not in METRIC_COLUMNS
-    ]
-
-    rows = []
-    for (scene, variant), g in df.groupby(["scene", "variant"], sort=False):
-        row = {"scene": scene, "variant": variant, "frames": len(g)}
-        for c in metric_cols:
-            how = _aggregation_of(c)
-            s = g[c]
-            if how == "rms":
-                row[c] = _rms(s)
-            elif s.notna().any():
-                row[c] = float(getattr(s, how)(skipna=True))
-            else:
-                row[c] = float("nan")
-        rows.append(row)
-    out = pd.DataFrame(rows, columns=["scene", "variant", "frames", *metric_cols])
-    if out.empty:
-        return out
-    order = {v: i for i, v in enumerate(_variant_sort_key(out["variant"]))}
-    out["_o"] = out["variant"].map(order)
-    out = out.sort_values(["scene", "_o"], kind="stable").drop(columns="_o")
-    out["frames"] = out["frames"].astype(int)
-    return out.reset_index(drop=True)
-
-
-# --------------------------------------------------------------------------- benchmarks
-
-
-def _rule_of(path: Path) -> str:
-    """The rule name of a benchmark file ``.../benchmarks/snakemake/<rule>/...``.
-
-    Falls back to the part after ``benchmarks``, then to the file's folder name.
-    """
-    parts = path.parts
-    for anchor in ("snakemake", "benchmarks"):
-        if anchor in parts[:-1]:
-            i = len(parts) - 1 - parts[::-1].index(anchor)
-            if i + 1 < len(parts) - 1:
-                return parts[i + 1]
-            if i + 1 == len(parts) - 1:  # benchmarks/snakemake/<rule>.tsv
-                return path.stem
-    return path.parent.name or path.stem
-
-
-def find_benchmarks(root: str | Path, name: str | None = None) -> list[Path]:
-    """The Snakemake benchmark files under ``root`` (e.g. ``benchmarks/snakemake``), sorted.
-
-    With ``name``, only those of that dataset: files named ``<name>.tsv`` or lying
-    in a folder ``<name>`` below the rule's folder (``<rule>/<name>/...``).
-    """
-    root = Path(root)
-    if not root.is_dir():
-        return []
-    out = []
-    for f in sorted(root.rglob("*.tsv")):
-        rel = f.relative_to(root).parts
-        if name is None or f.stem == name or name in rel[1:-1]:
-            out.append(f)
-    return out
-
-
-def read_benchmarks(tsv_paths: Iterable[str | Path]) -> pd.DataFrame:
-    """Read Snakemake benchmark TSV files into one table, one row per measured run.
-
-    Each file (written by a rule's ``benchmark:`` directive) has the header
-    :data:`BENCHMARK_COLUMNS` and one row per repeat. The rule name comes from
-    the path ``benchmarks/snakemake/<rule>/...``.
-
-    Returns
-    -------
-    DataFrame with columns ``rule``, ``job`` (the file's path), then the file's
-    columns (numeric ones as float, ``NA`` as NaN; ``s`` in seconds, ``max_rss``
-    and the other memory columns in MB).
-
-    Raises
-    ------
-    ValueError
-        For a missing file or one without the ``s`` column.
-    """
-    frames = []
-    for p in tsv_paths:
-        path = Path(p)
-        if not path.is_file():
-            raise ValueError(f"{path}: benchmark file not found")
-        try:
-            t = pd.read_csv(path, sep="\t", na_values=["NA", "-", ""])
-        except pd.errors.EmptyDataError:
-            t = pd.DataFrame()
-        if "s" not in t.columns:
-            raise ValueError(f"{path}: not a Snakemake benchmark file (no 's' column)")
-        for c in t.columns:
-            if c != "h:m:s":
-                t[c] = pd.to_numeric(t[c], errors="coerce")
-        t.insert(0, "job", str(path))
-        t.insert(0, "rule", _rule_of(path))
-        frames.append(t)
-    if not frames:
-        return pd.DataFrame(columns=["rule", "job", *BENCHMARK_COLUMNS])
-    return pd.concat(frames, ignore_index=True)
-
-
-def summarise_benchmarks(bench: pd.DataFrame) -> pd.DataFrame:
-    """Per-rule timing from :func:`read_benchmarks`' table, plus an ``all`` row.
-
-    Columns ``rule``, ``jobs`` (benchmark files), ``runs`` (rows; more than jobs
-    when a rule was benchmarked with repeats), ``total_s`` (sum of ``s``),
-    ``mean_s`` (mean of ``s`` per run), ``max_s``, ``cpu_time_s`` (sum) and
-    ``max_rss_mb`` (max of ``max_rss``). Rules in order of decreasing total time.
-    """
-    cols = ["rule", "jobs", "runs", "total_s", "mean_s", "max_s", "cpu_time_s", "max_rss_mb"]
-    if bench.empty:
-        return pd.DataFrame(columns=cols)
-    b = bench.copy()
-    for c in ("cpu_time", "max_rss"):
-        if c not in b.columns:
-            b[c] = np.nan
-
-    def one(rule: str, g: pd.DataFrame) -> dict:
-        return {
-            "rule": rule,
-            "jobs": int(g["job"].nunique()),
-            "runs": len(g),
-            "total_s": float(g["s"].sum(min_count=1)),
-            "mean_s": float(g["s"].mean()),
-            "max_s": float(g["s"].max()),
-            "cpu_time_s": float(g["cpu_time"].sum(min_count=1)),
-            "max_rss_mb": float(g["max_rss"].max()),
-        }
-
-    rows = [one(rule, g) for rule, g in b.groupby("rule", sort=True)]
-    rows.sort(key=lambda r: -(r["total_s"] if math.isfinite(r["total_s"]) else -1))
-    rows.append(one("all", b))
-    return pd.DataFrame(rows, columns=cols)
 
 
 # --------------------------------------------------------------------------- environment
