@@ -525,19 +525,28 @@ RIG_CASES = {
         assign("cameras", 1, "K", value=[["40", 0, 1], [0, 40, 1], [0, 0, 1]]),
         "cameras[1].K must be a 3x3 array of numbers",
     ),
-    "K-lower": (assign("cameras", 1, "K", 2, 0, value=0.5), "cameras[1].K is not upper-triangular"),
-    "K-22": (assign("cameras", 1, "K", 2, 2, value=2.0), "cameras[1].K[2][2] is 2, expected 1"),
-    "K-fx": (assign("cameras", 0, "K", 0, 0, value=-40.0), "focal lengths must be positive"),
-    "K-fy": (assign("cameras", 0, "K", 1, 1, value=0.0), "focal lengths must be positive"),
+    "K-lower": (
+        assign("cameras", 1, "K", 2, 0, value=0.5),
+        "cameras[1].K[2][0] must be 0, as K is upper triangular (to 1e-12), got 0.5",
+    ),
+    "K-22": (
+        assign("cameras", 1, "K", 2, 2, value=2.0),
+        "cameras[1].K[2][2] must be 1 (to 1e-12), got 2.0",
+    ),
+    "K-fx": (
+        assign("cameras", 0, "K", 0, 0, value=-40.0),
+        "cameras[0].K[0][0] must be fx > 0 (pixels), got -40.0",
+    ),
+    "K-fy": (assign("cameras", 0, "K", 1, 1, value=0.0), "cameras[0].K[1][1] must be fy > 0"),
     "dist-3": (
         assign("cameras", 0, "dist", value=[0.1, 0.2, 0.3]),
-        "cameras[0].dist has 3 coefficients, expected one of 0, 4, 5, 8, 12, 14",
+        "cameras[0].dist must be a list of 0, 4, 5, 8, 12 or 14 numbers",
     ),
-    "dist-6": (assign("cameras", 0, "dist", value=[0.0] * 6), "dist has 6 coefficients"),
+    "dist-6": (assign("cameras", 0, "dist", value=[0.0] * 6), "got a list of 6: [0.0, 0.0"),
     "dist-not-list": (assign("cameras", 0, "dist", value=0.0), "cameras[0].dist must be a list"),
     "dist-tilted": (
         assign("cameras", 0, "dist", value=[0.0] * 12 + [0.01, 0.0]),
-        "cameras[0].dist: the tilted-sensor model (tau_x, tau_y = [0.01, 0.0]) is not supported",
+        "cameras[0].dist[12] must be 0: the tilted-sensor model (tau_x, tau_y) is not supported",
     ),
     "R-scaled": (assign("cameras", 2, "R", value=NOT_ROTATION), "cameras[2].R is not a rotation"),
     "R-reflection": (assign("cameras", 2, "R", value=REFLECTION), "det(R) = -1, expected +1"),
@@ -556,12 +565,14 @@ RIG_CASES = {
         assign("cameras", 2, "name", value="cam1"),
         "camera name 'cam1' appears twice (cameras[0] and cameras[2])",
     ),
-    "name-space": (assign("cameras", 1, "name", value="cam 2"), "'cam 2' is not a valid camera"),
-    "name-slash": (
-        assign("cameras", 1, "name", value="../cam2"),
-        "'../cam2' is not a valid camera",
+    "name-space": (
+        assign("cameras", 1, "name", value="cam 2"),
+        "cameras[1].name must be a string of letters, digits, '_' and '-' (the image file stem), "
+        'got "cam 2"',
     ),
-    "name-empty": (assign("cameras", 1, "name", value=""), "'' is not a valid camera name"),
+    "name-slash": (assign("cameras", 1, "name", value="../cam2"), 'got "../cam2"'),
+    "name-empty": (assign("cameras", 1, "name", value=""), 'stem), got ""'),
+    "name-newline": (assign("cameras", 1, "name", value="cam2\n"), 'got "cam2\\n"'),
     "name-number": (assign("cameras", 1, "name", value=2), "cameras[1].name must be a string"),
     "colour-twice": (
         assign("cameras", 2, "light", "colour", value="blue"),
@@ -569,20 +580,24 @@ RIG_CASES = {
     ),
     "colour-yellow": (
         assign("cameras", 1, "light", "colour", value="yellow"),
-        "cameras[1].light.colour 'yellow' is not a light colour",
+        "cameras[1].light.colour is 'yellow', expected 'red', 'green' or 'blue'",
     ),
     "colour-case": (
         assign("cameras", 1, "light", "colour", value="Red"),
-        "'Red' is not a light colour",
+        "colour is 'Red', expected 'red'",
     ),
-    "two-cameras": (delete("cameras", 2), "rig has 2 cameras, expected exactly 3"),
+    "two-cameras": (
+        delete("cameras", 2),
+        "cameras must be a list of exactly 3 cameras (one per light colour: red, green, blue), "
+        "got a list of 2",
+    ),
     "four-cameras": (
         lambda doc: doc["cameras"].append(dict(doc["cameras"][0], name="cam4")),
-        "rig has 4 cameras, expected exactly 3",
+        "exactly 3 cameras (one per light colour: red, green, blue), got a list of 4",
     ),
     "bit-depth-12": (assign("image", "bit_depth", value=12), "image.bit_depth is 12, expected 8"),
     "bit-depth-str": (assign("image", "bit_depth", value="16"), "bit_depth must be an integer"),
-    "width-zero": (assign("image", "width", value=0), "image size 0x24 must be positive"),
+    "width-zero": (assign("image", "width", value=0), "image.width must be an integer > 0"),
     "width-float": (assign("image", "width", value=32.5), "image.width must be an integer"),
     "white-equals-black": (
         assign("image", "white_level", value=1024),
@@ -594,32 +609,39 @@ RIG_CASES = {
     ),
     "white-out-of-range": (
         assign("image", "white_level", value=65536),
-        "white_level 65536 is out of range for 16-bit (max 65535)",
+        "image.white_level must be at most 65535 (16-bit), got 65536",
     ),
     "white-out-of-range-8": (
         lambda doc: doc["image"].update(bit_depth=8, black_level=0, white_level=1000),
-        "out of range for 8-bit (max 255)",
+        "image.white_level must be at most 255 (8-bit), got 1000",
     ),
-    "black-negative": (assign("image", "black_level", value=-1), "black_level -1 is negative"),
+    "black-negative": (
+        assign("image", "black_level", value=-1),
+        "image.black_level must be a number >= 0 (raw value), got -1",
+    ),
     "dictionary-unknown": (
         assign("board", "dictionary", value="DICT_9X9_50"),
         "board.dictionary 'DICT_9X9_50' is not a known OpenCV ArUco dictionary",
     ),
     "dictionary-not-dict": (
         assign("board", "dictionary", value="getPredefinedDictionary"),
-        "is not a known OpenCV ArUco dictionary",
+        "board.dictionary must be the name of an OpenCV predefined ArUco dictionary (DICT_...)",
     ),
     "marker-id-letter": (
         assign("board", "markers", "a", value=[0.15, 0.1]),
-        "board.markers key 'a' is not a marker id",
+        "board.markers key 'a' must be a marker id (decimal digits)",
     ),
     "marker-id-float": (
         assign("board", "markers", "1.5", value=[0.15, 0.1]),
-        "key '1.5' is not a marker id",
+        "key '1.5' must be a marker id",
     ),
     "marker-id-negative": (
         assign("board", "markers", "-4", value=[0.15, 0.1]),
-        "key '-4' is not a marker id",
+        "key '-4' must be a marker id",
+    ),
+    "marker-id-newline": (
+        assign("board", "markers", "4\n", value=[0.15, 0.1]),
+        "key '4\\n' must be a marker id",
     ),
     "marker-id-twice": (
         assign("board", "markers", "01", value=[0.15, 0.1]),
@@ -641,8 +663,14 @@ RIG_CASES = {
         assign("board", "markers", "2", value=[0.27, 0.19, 0.0]),
         "board.markers.2 must be a list of 2 numbers",
     ),
-    "markers-empty": (assign("board", "markers", value={}), "board.markers is empty"),
-    "marker-length-zero": (assign("board", "marker_length", value=0), "must be positive"),
+    "markers-empty": (
+        assign("board", "markers", value={}),
+        "board.markers must be a JSON object of at least one marker id -> centre [x, y] (m)",
+    ),
+    "marker-length-zero": (
+        assign("board", "marker_length", value=0),
+        "board.marker_length must be a number > 0 (m): every marker's side, got 0",
+    ),
     "board-size-1": (assign("board", "size", value=[0.3]), "board.size must be a list of 2"),
     "no-chromatic-light": (delete("chromatic_light"), "missing required key chromatic_light"),
     "no-chromatic-position": (

@@ -18,8 +18,9 @@ Modules (everything public is re-exported here; import from ``colourhs.capture``
 - :mod:`~colourhs.capture.rig`: the rig's types (:class:`ImageSpec`,
   :class:`Camera`, :class:`Board`, :class:`ReciprocalPair`, :class:`Rig`);
 - :mod:`~colourhs.capture.dataset`: :class:`Scene` and :class:`Dataset`;
-- :mod:`~colourhs.capture.rigjson`: reading and validating rig.json;
-- :mod:`~colourhs.capture.jsonvalues`: JSON reading and value checks;
+- :mod:`~colourhs.capture.rigjson`: reading and validating rig.json (its JSON Schema,
+  ``rig.schema.json``, is :func:`rig_schema`);
+- :mod:`~colourhs.capture.jsonvalues`: JSON reading, schema and value checks;
 - :mod:`~colourhs.capture.png`: PNG header checks, :func:`read_image`, :func:`read_mask`;
 - :mod:`~colourhs.capture.layout`: the dataset folder, :func:`open_dataset`, :func:`validate`.
 """
@@ -38,7 +39,13 @@ from colourhs.capture.dataset import Dataset, Scene
 from colourhs.capture.layout import all_images, open_dataset, validate
 from colourhs.capture.png import read_image, read_mask
 from colourhs.capture.rig import Board, Camera, ImageSpec, ReciprocalPair, Rig
-from colourhs.capture.rigjson import DIST_LENGTHS, ROTATION_TOLERANCE, load_rig, rig_from_dict
+from colourhs.capture.rigjson import (
+    DIST_LENGTHS,
+    ROTATION_TOLERANCE,
+    load_rig,
+    rig_from_dict,
+    rig_schema,
+)
 
 __all__ = [
     "COLOURS",
@@ -62,5 +69,6 @@ __all__ = [
     "read_image",
     "read_mask",
     "rig_from_dict",
+    "rig_schema",
     "validate",
 ]

@@ -1,45 +1,52 @@
 """Read and validate rig.json: :func:`load_rig` and :func:`rig_from_dict`.
 
-Checks every key the format requires: the format version and units, the image
-encoding (size, bit depth, black and white levels), exactly three cameras with
-one light per colour (an upper-triangular K, an OpenCV distortion vector of
-a supported length, a proper rotation R, t, the light's colour and offset), the
-ArUco board (a known dictionary, ids within it, every marker inside the board)
-and the chromatic light's position. The first violation found is a
+The document is first checked against ``rig.schema.json`` (:func:`rig_schema`,
+JSON Schema Draft 2020-12, shipped with the package): the format's
+machine-readable spec of every key, type, array shape, enumeration and range.
+What a schema cannot say is checked here: each R is a rotation
+(:data:`ROTATION_TOLERANCE`), black_level < white_level, camera names are
+unique and the lights' colours all different, the board's dictionary is one
+OpenCV knows, its marker ids are unique (as integers) and in the dictionary,
+and every marker lies wholly on the board. The first violation found is a
 :class:`~colourhs.capture.base.CaptureFormatError`. Re-exported by
 :mod:`colourhs.capture`.
 """
 
 from __future__ import annotations
 
-import re
+import functools
+import json
+from importlib import resources
 from pathlib import Path
 from typing import Any
 
 import cv2
 import numpy as np
 
-from colourhs.capture.base import _NAME, COLOURS, FORMAT, CaptureFormatError
-from colourhs.capture.jsonvalues import (
-    _as_int,
-    _as_number,
-    _as_object,
-    _as_str,
-    _field,
-    _float_array,
-    _frozen,
-    _read_json,
-    _show,
-)
+from colourhs.capture.base import CaptureFormatError
+from colourhs.capture.jsonvalues import _check_schema, _frozen, _read_json, _Validator
 from colourhs.capture.rig import Board, Camera, ImageSpec, Rig, _square_corners
 
 DIST_LENGTHS = (0, 4, 5, 8, 12, 14)
-"""Lengths of an OpenCV distortion vector that rig.json may give."""
+"""Lengths of an OpenCV distortion vector that rig.json may give (as its schema says)."""
 
 ROTATION_TOLERANCE = 1e-6
 """Largest accepted entry of ``|R R^T - I|`` and of ``|det R - 1|``."""
 
-_MARKER_ID = re.compile(r"[0-9]+")
+
+@functools.cache
+def rig_schema() -> dict[str, Any]:
+    """rig.json's JSON Schema (Draft 2020-12), the package file ``rig.schema.json``.
+
+    The one parsed copy is shared: do not modify it.
+    """
+    text = resources.files(__package__).joinpath("rig.schema.json").read_text(encoding="utf-8")
+    return json.loads(text)
+
+
+@functools.cache
+def _rig_validator() -> _Validator:
+    return _Validator(rig_schema())
 
 
 def load_rig(path: str | Path) -> Rig:
@@ -82,61 +89,27 @@ def rig_from_dict(data: Any, path: str | Path = "rig.json") -> Rig:
         If ``data`` breaks the format.
     """
     path = Path(path)
-    top = _as_object(data, "the top level", path)
-    fmt = _as_str(_field(top, "format", "", path), "format", path)
-    if fmt != FORMAT:
-        raise CaptureFormatError(path, f"format is {fmt!r}, expected {FORMAT!r}")
-    units = _as_str(_field(top, "units", "", path), "units", path)
-    if units != "m":
-        raise CaptureFormatError(path, f"units is {units!r}, expected 'm' (metres)")
-    image = _parse_image(_field(top, "image", "", path), path)
-    cameras = _parse_cameras(_field(top, "cameras", "", path), path)
-    board = _parse_board(_field(top, "board", "", path), path)
-    chromatic = _as_object(_field(top, "chromatic_light", "", path), "chromatic_light", path)
-    position = _float_array(
-        _field(chromatic, "position", "chromatic_light", path),
-        (3,),
-        "chromatic_light.position",
-        path,
+    _check_schema(data, _rig_validator(), path)
+    return Rig(
+        image=_image(data["image"], path),
+        cameras=_cameras(data["cameras"], path),
+        board=_board(data["board"], path),
+        chromatic_light=_frozen(data["chromatic_light"]["position"]),
+        path=path,
     )
-    return Rig(cameras=cameras, image=image, board=board, chromatic_light=position, path=path)
 
 
-def _parse_image(value: Any, path: Path) -> ImageSpec:
-    obj = _as_object(value, "image", path)
-    width = _as_int(_field(obj, "width", "image", path), "image.width", path)
-    height = _as_int(_field(obj, "height", "image", path), "image.height", path)
-    if width <= 0 or height <= 0:
-        raise CaptureFormatError(path, f"image size {width}x{height} must be positive")
-    bit_depth = _as_int(_field(obj, "bit_depth", "image", path), "image.bit_depth", path)
-    if bit_depth not in (8, 16):
-        raise CaptureFormatError(path, f"image.bit_depth is {bit_depth}, expected 8 or 16")
-    black = _as_number(_field(obj, "black_level", "image", path), "image.black_level", path)
-    white = _as_number(_field(obj, "white_level", "image", path), "image.white_level", path)
-    top = 2**bit_depth - 1
-    if black < 0:
-        raise CaptureFormatError(path, f"image.black_level {black:g} is negative")
-    if white > top:
-        raise CaptureFormatError(
-            path, f"image.white_level {white:g} is out of range for {bit_depth}-bit (max {top})"
-        )
+def _image(obj: dict[str, Any], path: Path) -> ImageSpec:
+    black, white = float(obj["black_level"]), float(obj["white_level"])
     if white <= black:
         raise CaptureFormatError(
             path, f"image.white_level {white:g} must be greater than black_level {black:g}"
         )
-    return ImageSpec(width, height, bit_depth, float(black), float(white))
+    return ImageSpec(int(obj["width"]), int(obj["height"]), int(obj["bit_depth"]), black, white)
 
 
-def _parse_cameras(value: Any, path: Path) -> tuple[Camera, ...]:
-    if not isinstance(value, list):
-        raise CaptureFormatError(path, f"cameras must be a list, got {_show(value)}")
-    if len(value) != len(COLOURS):
-        raise CaptureFormatError(
-            path,
-            f"rig has {len(value)} cameras, expected exactly {len(COLOURS)} "
-            "(one per light colour: red, green, blue)",
-        )
-    cameras = tuple(_parse_camera(entry, i, path) for i, entry in enumerate(value))
+def _cameras(entries: list[dict[str, Any]], path: Path) -> tuple[Camera, ...]:
+    cameras = tuple(_camera(entry, f"cameras[{i}]", path) for i, entry in enumerate(entries))
     for i, cam in enumerate(cameras):
         for j in range(i):
             if cameras[j].name == cam.name:
@@ -152,62 +125,20 @@ def _parse_cameras(value: Any, path: Path) -> tuple[Camera, ...]:
     return cameras
 
 
-def _parse_camera(value: Any, index: int, path: Path) -> Camera:
-    where = f"cameras[{index}]"
-    obj = _as_object(value, where, path)
-    name = _as_str(_field(obj, "name", where, path), f"{where}.name", path)
-    if not _NAME.fullmatch(name):
-        raise CaptureFormatError(
-            path,
-            f"{where}.name {name!r} is not a valid camera name (letters, digits, '_' and '-' only)",
-        )
-    K = _float_array(_field(obj, "K", where, path), (3, 3), f"{where}.K", path)
-    _check_intrinsics(K, f"{where}.K", path)
-    dist = _float_array(obj.get("dist", []), (None,), f"{where}.dist", path)
-    if dist.size not in DIST_LENGTHS:
-        raise CaptureFormatError(
-            path,
-            f"{where}.dist has {dist.size} coefficients, expected one of "
-            f"{', '.join(map(str, DIST_LENGTHS))}",
-        )
-    if dist.size == 14 and np.any(dist[12:] != 0):
-        raise CaptureFormatError(
-            path,
-            f"{where}.dist: the tilted-sensor model (tau_x, tau_y = {dist[12:].tolist()}) is "
-            "not supported; use at most 12 coefficients (or 14 with the last two zero)",
-        )
-    dist = np.concatenate([dist, np.zeros(max(0, 5 - dist.size))])
-    R = _float_array(_field(obj, "R", where, path), (3, 3), f"{where}.R", path)
+def _camera(obj: dict[str, Any], where: str, path: Path) -> Camera:
+    R = np.array(obj["R"], dtype=np.float64)
     _check_rotation(R, f"{where}.R", path)
-    t = _float_array(_field(obj, "t", where, path), (3,), f"{where}.t", path)
-    light = _as_object(_field(obj, "light", where, path), f"{where}.light", path)
-    colour = _as_str(_field(light, "colour", f"{where}.light", path), f"{where}.light.colour", path)
-    if colour not in COLOURS:
-        raise CaptureFormatError(
-            path, f"{where}.light.colour {colour!r} is not a light colour (red, green or blue)"
-        )
-    offset = _float_array(light.get("offset", [0.0, 0.0, 0.0]), (3,), f"{where}.light.offset", path)
+    dist = np.array(obj.get("dist", []), dtype=np.float64)
+    light = obj["light"]
     return Camera(
-        name=name,
-        K=_frozen(K),
-        dist=_frozen(dist),
+        name=obj["name"],
+        K=_frozen(obj["K"]),
+        dist=_frozen(np.concatenate([dist, np.zeros(max(0, 5 - dist.size))])),
         R=_frozen(R),
-        t=_frozen(t),
-        light_colour=colour,
-        light_offset=_frozen(offset),
+        t=_frozen(obj["t"]),
+        light_colour=light["colour"],
+        light_offset=_frozen(light.get("offset", [0.0, 0.0, 0.0])),
     )
-
-
-def _check_intrinsics(K: np.ndarray, where: str, path: Path) -> None:
-    lower = (K[1, 0], K[2, 0], K[2, 1])
-    if any(abs(v) > 1e-12 for v in lower):
-        raise CaptureFormatError(path, f"{where} is not upper-triangular: {K.tolist()}")
-    if abs(K[2, 2] - 1.0) > 1e-12:
-        raise CaptureFormatError(path, f"{where}[2][2] is {K[2, 2]:g}, expected 1")
-    if K[0, 0] <= 0 or K[1, 1] <= 0:
-        raise CaptureFormatError(
-            path, f"{where} focal lengths must be positive, got fx={K[0, 0]:g}, fy={K[1, 1]:g}"
-        )
 
 
 def _check_rotation(R: np.ndarray, where: str, path: Path) -> None:
@@ -224,37 +155,25 @@ def _check_rotation(R: np.ndarray, where: str, path: Path) -> None:
         )
 
 
-def _parse_board(value: Any, path: Path) -> Board:
-    obj = _as_object(value, "board", path)
-    dictionary = _as_str(_field(obj, "dictionary", "board", path), "board.dictionary", path)
-    if not dictionary.startswith("DICT_") or not hasattr(cv2.aruco, dictionary):
+def _board(obj: dict[str, Any], path: Path) -> Board:
+    dictionary = obj["dictionary"]
+    capacity = _dictionary_size(dictionary)
+    if capacity is None:
         raise CaptureFormatError(
             path, f"board.dictionary {dictionary!r} is not a known OpenCV ArUco dictionary"
         )
-    length = _as_number(_field(obj, "marker_length", "board", path), "board.marker_length", path)
-    if length <= 0:
-        raise CaptureFormatError(path, f"board.marker_length {length:g} must be positive")
-    size = _float_array(_field(obj, "size", "board", path), (2,), "board.size", path)
-    if np.any(size <= 0):
-        raise CaptureFormatError(path, f"board.size {size.tolist()} must be positive")
-    markers_obj = _as_object(_field(obj, "markers", "board", path), "board.markers", path)
-    if not markers_obj:
-        raise CaptureFormatError(path, "board.markers is empty")
-    capacity = _dictionary_size(dictionary)
+    length = float(obj["marker_length"])
+    size = np.array(obj["size"], dtype=np.float64)
     markers: dict[int, np.ndarray] = {}
-    for key, centre in markers_obj.items():
-        if not _MARKER_ID.fullmatch(key):
-            raise CaptureFormatError(
-                path, f"board.markers key {key!r} is not a marker id (a non-negative integer)"
-            )
+    for key, centre in obj["markers"].items():
         marker_id = int(key)
         if marker_id in markers:
             raise CaptureFormatError(path, f"board.markers: marker id {marker_id} appears twice")
-        if capacity is not None and marker_id >= capacity:
+        if marker_id >= capacity:
             raise CaptureFormatError(
                 path, f"board.markers: id {marker_id} is not in {dictionary} ({capacity} markers)"
             )
-        xy = _float_array(centre, (2,), f"board.markers.{key}", path)
+        xy = np.array(centre, dtype=np.float64)
         corners = _square_corners(xy, length)
         margin = 1e-9
         if np.any(corners[:, :2] < -margin) or np.any(corners[:, :2] > size + margin):
@@ -266,7 +185,7 @@ def _parse_board(value: Any, path: Path) -> Board:
         markers[marker_id] = _frozen(xy)
     return Board(
         dictionary=dictionary,
-        marker_length=float(length),
+        marker_length=length,
         size=(float(size[0]), float(size[1])),
         markers=dict(sorted(markers.items())),
     )
