@@ -28,13 +28,10 @@ from typing import NamedTuple
 
 import numba as nb
 import numpy as np
-from llvmlite import ir
-from numba import types
-from numba.core import cgutils
-from numba.extending import intrinsic
 
 from colourhs.capture import MIN_SIGNAL
 from colourhs.geometry import model_coefficients
+from colourhs.reconstruct.simd import LANES, bilinear4, cache_tagged
 
 INVALID_COST = 1.0
 # sin(5 deg): a surface seen or lit within 5 degrees of grazing carries almost no
@@ -45,7 +42,6 @@ MIN_FACING_COS = 0.087
 HALLEY_STEPS = 3  # exact to float32 for sigma_3 / sigma_2 < 0.6; 4 for < 0.8
 TINY = 1e-300
 LOW, HIGH = 1e-150, 1e150  # clamps that keep a product of two of them finite
-LANES = 4  # slots per SIMD load: S holds a multiple of 4 slots per pixel
 SENTINEL = np.float32(-1.0e30)  # an unusable sample: any positive bilinear weight makes it < 0
 
 
@@ -58,7 +54,8 @@ class Prepared(NamedTuple):
         Per camera and pixel, the s Helmholtz-camera values J = mu * i / p of
         the camera's slots, then (with chromaticity calibration only) their
         chromaticities p, padded with 1 to nv, a multiple of 4 (the kernel
-        reads 4 slots with one SIMD load). ``SENTINEL`` where J is unusable.
+        reads 4 slots per call of :data:`~colourhs.reconstruct.simd.bilinear4`).
+        ``SENTINEL`` where J is unusable.
     slots : (P, 2) int64
         Slot of each side of each reciprocal pair in its camera's S.
     use_p : bool
@@ -68,48 +65,6 @@ class Prepared(NamedTuple):
     S: np.ndarray
     slots: np.ndarray
     use_p: bool
-
-
-@intrinsic
-def _bilinear4(typingctx, src, i, dx, dy, w00, w01, w10, w11, dst, j, step):
-    """``dst[j + s * step] = w00 src[i + s] + w01 src[i + dx + s]
-    + w10 src[i + dy + s] + w11 src[i + dx + dy + s]`` for s < 4, with flat
-    indices into C-contiguous float32 arrays and <4 x float> loads and
-    arithmetic: one bilinear footprint of a group of 4 packed slots. (Numba
-    leaves LLVM's SLP vectoriser off, and the loop vectoriser would need
-    gathers. No bounds checks: the caller keeps the footprint inside.)"""
-    sig = types.void(src, i, dx, dy, w00, w01, w10, w11, dst, j, step)
-
-    def codegen(context, builder, signature, args):
-        src_v, i_v, dx_v, dy_v = args[:4]
-        weights, dst_v, j_v, step_v = args[4:8], args[8], args[9], args[10]
-        v4 = ir.VectorType(ir.FloatType(), LANES)
-        sdata = cgutils.create_struct_proxy(signature.args[0])(context, builder, src_v).data
-        ddata = cgutils.create_struct_proxy(signature.args[8])(context, builder, dst_v).data
-
-        def texel(off):
-            ptr = builder.gep(sdata, [off], inbounds=True)
-            return builder.load(builder.bitcast(ptr, v4.as_pointer()), align=4)
-
-        def splat(w, ty):
-            x = context.cast(builder, w, ty, types.float32)
-            x = builder.insert_element(ir.Constant(v4, ir.Undefined), x, ir.IntType(32)(0))
-            zeros = ir.Constant(ir.VectorType(ir.IntType(32), LANES), [0] * LANES)
-            return builder.shuffle_vector(x, ir.Constant(v4, ir.Undefined), zeros)
-
-        i_dy = builder.add(i_v, dy_v)
-        offs = (i_v, builder.add(i_v, dx_v), i_dy, builder.add(i_dy, dx_v))
-        acc = None
-        for off, w, ty in zip(offs, weights, signature.args[4:8], strict=True):
-            term = builder.fmul(texel(off), splat(w, ty), flags=("fast",))
-            acc = term if acc is None else builder.fadd(acc, term, flags=("fast",))
-        for s in range(LANES):  # scattered: the next pass reads each slot over k
-            off = builder.add(j_v, builder.mul(step_v, step_v.type(s)))
-            lane = builder.extract_element(acc, ir.IntType(32)(s))
-            builder.store(lane, builder.gep(ddata, [off], inbounds=True))
-        return context.get_dummy_value()
-
-    return sig, codegen
 
 
 @nb.njit(cache=True, fastmath=True, inline="always")
@@ -187,15 +142,17 @@ def _footprint(u, v, Ww, Hh):
 
 
 @nb.njit(parallel=True, cache=True, fastmath=True)
+@cache_tagged
 def _kernel(
     rays, c_ref, depths, Ks, dists, Ps, lights, S, ns, slots, use_p, pair_cams, ref, others,
     nthreads, cost, normals,
 ):  # fmt: skip
     """Pixels over prange; per pixel, four passes over the hypotheses: project
     into every camera (OpenCV model), with the bilinear weights and the
-    light fall-offs; sample all packed slots of each footprint (SIMD over the
-    slots: no gathers); accumulate the Gram matrix of W row by row (eq. 5);
-    then sigma_3 / sigma_2 and the null vector; the facing test. Passes 1, 3,
+    light fall-offs; sample all packed slots of each footprint (4 at a time,
+    :mod:`colourhs.reconstruct.simd`: no gathers); accumulate the Gram matrix
+    of W row by row (eq. 5); then sigma_3 / sigma_2 and the null vector; the
+    facing test. Passes 1, 3,
     4 and 5 vectorise over the hypotheses. ``lights``: light centres minus ``c_ref``. ``ns``:
     offset of the p slots in S. ``ref``: the
     camera the rays leave from, or -1; every point of a ray through a camera's
@@ -240,7 +197,7 @@ def _kernel(
                 inside, u0, v0, w00, w01, w10, w11 = _footprint(u, v, Ww, Hh)
                 at = int(ref * plane + v0 * row + u0 * nv)
                 for g in range(0, nv, LANES):
-                    _bilinear4(Sf, at + g, nv, row, w00, w01, w10, w11,
+                    bilinear4(Sf, at + g, nv, row, w00, w01, w10, w11,
                                smp, (ref * nv + g) * Kn, Kn)  # fmt: skip
                 for g in range(nv):
                     val = smp[ref, g, 0]
@@ -301,7 +258,7 @@ def _kernel(
                 for k in range(Kn):
                     w00, w01, w10, w11 = wts[c, 0, k], wts[c, 1, k], wts[c, 2, k], wts[c, 3, k]
                     for g in range(0, nv, LANES):
-                        _bilinear4(Sf, base[c, k] + g, nv, row, w00, w01, w10, w11,
+                        bilinear4(Sf, base[c, k] + g, nv, row, w00, w01, w10, w11,
                                    smp, (c * nv + g) * Kn + k, Kn)  # fmt: skip
             # 3. The Gram matrix of W, row by row (eq. 5); a hypothesis with a
             # J sample <= 0 (dark, saturated, outside, no p) is invalid.

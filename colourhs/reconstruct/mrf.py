@@ -55,9 +55,8 @@ from __future__ import annotations
 
 import numba
 import numpy as np
-from llvmlite import ir
 from numba import njit, prange, types
-from numba.extending import intrinsic, overload
+from numba.extending import overload
 
 __all__ = ["labelling_energy", "sgm_depth_normal"]
 
@@ -71,38 +70,25 @@ _JH_MAX = 1e6  # |j_hat| beyond this: treated as uninformative (V = tau either w
 # ----------------------------------------------------------------------------------------------
 # float16 normals: numba has no CPU float16 type, so they are read as their uint16 bits.
 
-
-@intrinsic
-def _bits_to_f32(typingctx, bits):
-    """Reinterpret the low 32 bits of an integer as an IEEE float32."""
-    if not isinstance(bits, types.Integer):
-        return None
-
-    def codegen(context, builder, signature, args):
-        v = args[0]
-        i32 = ir.IntType(32)
-        if v.type.width > 32:
-            v = builder.trunc(v, i32)
-        elif v.type.width < 32:
-            v = builder.zext(v, i32)
-        return builder.bitcast(v, ir.FloatType())
-
-    return types.float32(bits), codegen
+# 2**(e - 25) for each exponent field e of a normal float16 (1 <= e <= 30): times the
+# 11-bit significand, exact in float32.
+_HALF_SCALE = np.ldexp(np.float32(1.0), np.arange(32) - 25).astype(np.float32)
 
 
 @njit(cache=True)
 def _half_to_f32(h):
-    """Exact float16 (given as its uint16 bits) to float32 conversion."""
+    """Exact float16 (given as its uint16 bits) to float32 conversion, in
+    arithmetic (plain numba: no bit cast)."""
     b = np.int64(h) & 0xFFFF
-    sign = (b & 0x8000) << 16
     e = (b >> 10) & 0x1F
     m = b & 0x3FF
     if e == 0:  # zero or subnormal: m * 2**-24
         f = np.float32(m) * np.float32(5.9604644775390625e-08)
-        return -f if sign != 0 else f
-    if e == 31:  # inf / nan
-        return _bits_to_f32(sign | 0x7F800000 | (m << 13))
-    return _bits_to_f32(sign | ((e + 112) << 23) | (m << 13))
+    elif e == 31:
+        f = np.float32(np.inf) if m == 0 else np.float32(np.nan)
+    else:
+        f = np.float32(m | 0x400) * _HALF_SCALE[e]
+    return -f if b & 0x8000 else f
 
 
 def _to_f32(x):  # pragma: no cover - replaced by the overload inside numba
