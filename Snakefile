@@ -14,7 +14,8 @@ min_version("9.0")
 configfile: "config.yaml"
 
 
-validate(config, "workflow/schemas/config.schema.yaml")
+# The schema's defaults fill in what the config leaves out (common.smk reads them).
+validate(config, "workflow/schemas/config.schema.yaml", set_default=True)
 
 
 # Dataset and scene names are single path components, so a dataset's own files

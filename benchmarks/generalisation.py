@@ -96,7 +96,7 @@ def calibrate(data: Path, calib: Path) -> dict:
 
 
 def variant_files(variant: str, files: dict, chromatic: str | None) -> dict:
-    """Calibration keyword arguments of ``reconstruct_frame`` for a variant (as common.smk)."""
+    """Calibration keyword arguments of ``reconstruct_frame`` for a variant (as workflow_plan)."""
     kw = {"noise_json": files["noise"]}
     if variant in ("ml_full", "bayes_ph", "bayes_full"):
         kw |= {"photometric_h5": files["photometric"], "crosstalk_json": files["crosstalk"]}

@@ -1,6 +1,6 @@
 """The paper's ablation (Figure 7): the variants every scene is reconstructed with.
 
-One table for the package, the workflow (``workflow/rules/common.smk``), the
+One table for the package, the workflow (``colourhs/workflow_plan.py``), the
 CLI and the report. Each variant id (the results contract's) has its method
 and the calibrations it uses, and the paper's name for it (Section IV-A).
 """

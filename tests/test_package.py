@@ -75,5 +75,8 @@ def test_one_variant_table():
     schema = yaml.safe_load((PACKAGE.parent / "workflow/schemas/config.schema.yaml").read_text())
     enum = schema["properties"]["reconstruction"]["properties"]["variants"]["items"]["enum"]
     assert enum == list(VARIANTS)
+    # The workflow reads it through colourhs.workflow_plan (common.smk's plan).
+    plan = (PACKAGE / "workflow_plan.py").read_text()
+    assert "from colourhs.variants import VARIANTS" in plan and "VARIANTS = {" not in plan
     common = (PACKAGE.parent / "workflow/rules/common.smk").read_text()
-    assert "from colourhs.variants import VARIANTS" in common and "VARIANTS = {" not in common
+    assert "from colourhs.workflow_plan import" in common and "VARIANTS" not in common

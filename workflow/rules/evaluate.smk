@@ -26,7 +26,7 @@ rule evaluate_frame:
         runtime=10,
     params:
         gt=lambda w, input: f"--gt {shlex.quote(str(input.gt))}" if input.gt else "",
-        options=lambda w: cli_options(section("evaluation")),
+        options=lambda w: cli_options(config["evaluation"]),
         same=lambda w, input: same_option(input),
     shell:
         '"$COLOURHS_PYTHON" -m colourhs evaluate {input.depth:q} {input.mesh:q} {output.json:q} {params.gt} '

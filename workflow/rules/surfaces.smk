@@ -23,7 +23,7 @@ rule visual_hull:
         runtime=10,
     params:
         dataset=lambda w: dataset_path(w.name),
-        options=lambda w: cli_options(section("surfaces").get("hull", {})),
+        options=lambda w: cli_options(config["surfaces"]["hull"]),
     shell:
         '"$COLOURHS_PYTHON" -m colourhs hull {params.dataset:q} {wildcards.scene} {wildcards.frame} '
         "{output.ply:q} --depth {output.depth:q} {params.options} > {log:q} 2>&1"
@@ -54,7 +54,7 @@ rule frame_mesh:
         hull=lambda w, input: (
             f"--hull {shlex.quote(str(input.hull))}" if input.hull else ""
         ),
-        options=lambda w: cli_options(section("surfaces").get("mesh", {})),
+        options=lambda w: cli_options(config["surfaces"]["mesh"]),
         same=lambda w, input: same_option(input),
     shell:
         '"$COLOURHS_PYTHON" -m colourhs mesh {input.depth:q} {output:q} {params.hull} {params.options} '

@@ -16,7 +16,7 @@ checkpoint synth_dataset:
         runtime=30,
     params:
         preset=lambda w: synth_settings(w.name)["preset"],
-        seed=lambda w: synth_settings(w.name).get("seed", 0),
+        seed=lambda w: synth_settings(w.name)["seed"],
     shell:
         '"$COLOURHS_PYTHON" -m colourhs synth --preset {params.preset} --seed {params.seed} '
         "--workers {threads} {output:q} 2> {log:q}"

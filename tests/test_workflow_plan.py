@@ -1,0 +1,194 @@
+"""colourhs.workflow_plan: what the Snakemake rules read, make and pass on (issue 12).
+
+On test_capture's small dataset (scene toy: one frame, masks, ground truth, the
+chromatic object slinky; scene wave: two frames, nothing else), with a config
+validated as the Snakefile does (the schema's defaults set).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+from pathlib import Path
+
+import pytest
+from snakemake.utils import validate
+from test_capture import make_dataset
+
+from colourhs.cli import PROJECT_ROOT
+from colourhs.workflow_plan import MalformedDatasetError, WorkflowPlan
+
+SCHEMA = str(PROJECT_ROOT / "workflow" / "schemas" / "config.schema.yaml")
+
+
+class NotRendered(Exception):
+    """Stands for Snakemake's IncompleteCheckpointException."""
+
+
+def not_rendered(name: str) -> str:
+    raise NotRendered(name)
+
+
+def plan_of(config: dict, wait=not_rendered) -> WorkflowPlan:
+    validate(config, SCHEMA, set_default=True)
+    return WorkflowPlan(config, wait)
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory) -> Path:
+    return make_dataset(tmp_path_factory.mktemp("plan") / "my data")
+
+
+@pytest.fixture
+def plan(data) -> WorkflowPlan:
+    return plan_of({"datasets": {"d": {"path": str(data)}}})
+
+
+def test_schema_defaults_and_the_calibration_layers(data):
+    config = {
+        "datasets": {
+            "d": {"path": str(data), "calibration": {"unmix_crosstalk": False,
+                                                     "photometric": {"smoothness": 0.001}}},
+            "s": {"synth": {"preset": "tiny"}},
+        },
+        "calibration": {"photometric": {"coupling": 0.2}},
+    }  # fmt: skip
+    plan = plan_of(config)
+    assert config["reconstruction"] == {
+        "variants": None, "scenes": None, "depth_from_hull": False, "params": {}
+    }  # fmt: skip
+    assert config["surfaces"] == {"hull": {}, "mesh": {}, "mesh_with_hull": False}
+    assert config["evaluation"] == {} and config["datasets"]["s"]["synth"]["seed"] == 0
+    # The dataset's own calibration overrides only what it names (no defaults of its own).
+    assert set(config["datasets"]["d"]["calibration"]) == {"unmix_crosstalk", "photometric"}
+    photometric = {"coupling": 0.2, "smoothness": 0.001}
+    assert plan.calibration("d") == {
+        "unmix_crosstalk": False, "chromaticity": {}, "photometric": photometric
+    }  # fmt: skip
+    assert plan.calibration("s") == {
+        "unmix_crosstalk": True, "chromaticity": {}, "photometric": {"coupling": 0.2}
+    }  # fmt: skip
+    assert plan.photometric_options("d", "") == "--coupling 0.2 --smoothness 0.001"
+    assert plan.photometric_options("s", "a b.json") == "--crosstalk 'a b.json' --coupling 0.2"
+    assert plan.calibration_targets("d") == [
+        "results/d/calib/marker_poses.csv", "results/d/calib/photometric.h5",
+        "results/d/calib/noise.json", "results/d/calib/chromaticity/slinky.h5",
+    ]  # fmt: skip
+
+
+def test_inputs_are_the_files_of_the_capture_format(plan, data):
+    rig = str(data / "rig.json")
+    files = sorted(str(p) for p in data.rglob("*") if p.is_file())
+    # Everything but the file the format does not list (notes.txt).
+    assert plan.capture_files("d") == [f for f in files if not f.endswith("notes.txt")]
+    assert len(plan.capture_files("d")) == 1 + 9 + 18 + 3 + 3 + 6 + 2 + 1
+    assert plan.photometric_inputs("d")[0] == rig and len(plan.photometric_inputs("d")) == 10
+    chroma = plan.chromaticity_inputs("d", "slinky")
+    assert chroma[:2] == [rig, str(data / "chromatic/slinky/blue/cam1.png")] and len(chroma) == 24
+    assert chroma[-5:] == [str(data / f"scenes/{s}/scene.json") for s in ("toy", "wave")] + [
+        str(data / f"scenes/toy/masks/000000/cam{i}.png") for i in (1, 2, 3)
+    ]
+    # No chromatic/white when a dataset has none: just rig.json.
+    assert plan.chromatic_inputs("d", "nosuch") == [rig]
+    assert plan.silhouette_inputs("d", "toy", "000000")[1:] == [
+        str(data / f"scenes/toy/masks/000000/cam{i}.png") for i in (1, 2, 3)
+    ]
+    assert plan.silhouette_inputs("d", "wave", "000001")[1:] == [
+        str(data / f"scenes/wave/frames/000001/cam{i}.png") for i in (1, 2, 3)
+    ]
+    assert len(plan.frame_inputs("d", "toy", "000000")) == 7  # rig, 3 images, 3 masks
+    assert len(plan.frame_inputs("d", "wave", "000000")) == 4
+    assert plan.gt_mesh("d", "toy", "000000") == [str(data / "scenes/toy/gt/000000.ply")]
+    assert plan.gt_mesh("d", "wave", "000000") == []
+    with pytest.raises(KeyError, match="000000, 000001"):
+        plan.frame_inputs("d", "wave", "000002")
+
+
+def test_variants_targets_and_options(data):
+    plan = plan_of({
+        "datasets": {"d": {"path": str(data)}},
+        "reconstruction": {"variants": ["vh", "bayes_full"], "params": {"n_labels": 7}},
+        "surfaces": {"mesh_with_hull": False},
+    })  # fmt: skip
+    assert plan.reconstruction_targets("d") == [
+        "results/d/toy/vh/depth/000000.h5", "results/d/toy/bayes_full/depth/000000.h5",
+        "results/d/wave/vh/depth/000000.h5", "results/d/wave/vh/depth/000001.h5",
+        "results/d/wave/bayes_full/depth/000000.h5", "results/d/wave/bayes_full/depth/000001.h5",
+    ]  # fmt: skip
+    assert len(plan.evaluation_targets("d")) == 6
+    assert plan.reconstruct_options("d", "toy", "bayes_full") == (
+        "--method bayes --noise results/d/calib/noise.json --photometric "
+        "results/d/calib/photometric.h5 --crosstalk results/d/calib/crosstalk.json "
+        "--chromaticity results/d/calib/chromaticity/slinky.h5 --n-labels 7"
+    )
+    assert plan.reconstruct_options("d", "wave", "vh") == "--method vh --n-labels 7"
+    # bayes_full on wave (no chromatic object) is bayes_ph: computed once, copied.
+    assert plan.same_result("d", "wave", "bayes_full", "000001", "mesh") == [
+        "results/d/wave/bayes_ph/mesh/000001.ply"
+    ]
+    assert plan.same_result("d", "toy", "bayes_full", "000000", "eval") == []
+    assert plan.reconstruction_hull("d", "toy", "000000") == []
+    assert plan.mesh_uses_hull("vh") and not plan.mesh_uses_hull("bayes_full")
+    assert plan.figure_options("d", "toy") == (
+        "--depth vh=results/d/toy/vh/depth/000000.h5 "
+        "bayes_full=results/d/toy/bayes_full/depth/000000.h5 "
+        "--mesh vh=results/d/toy/vh/mesh/000000.ply "
+        "bayes_full=results/d/toy/bayes_full/mesh/000000.ply "
+        f"--gt '{data}/scenes/toy/gt/000000.ply' --coloured vh=results/d/toy/vh/eval/000000.ply "
+        "bayes_full=results/d/toy/bayes_full/eval/000000.ply"
+    )
+    assert plan.figure_inputs("d", "wave")["animation"] == [
+        "results/d/wave/bayes_full/mesh/000000.ply", "results/d/wave/bayes_full/mesh/000001.ply"
+    ]  # fmt: skip
+    assert plan.report_inputs("d")["calibration"] == [
+        "results/d/calib/photometric.png", "results/d/calib/chromaticity/slinky.png"
+    ]  # fmt: skip
+
+
+def test_a_synthetic_dataset_waits_for_its_checkpoint(data, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # no data/synthetic/s here
+    plan = plan_of({"datasets": {"s": {"synth": {"preset": "demo"}}}})
+    assert plan.datasets == ["s"] and plan.dataset_path("s") == "data/synthetic/s"
+    plan.check_layouts()  # nothing to check before it is rendered
+    assert plan.unvalidated_captures() == []  # its own rule validates it
+    with pytest.raises(NotRendered):
+        plan.reconstruction_targets("s")
+    # Known before the run: the preset's objects.
+    assert plan.chromatic_objects("s") == ["statue", "toy"]
+    rendered = plan_of({"datasets": {"s": {"synth": {"preset": "demo"}}}}, wait=lambda n: str(data))
+    assert len(rendered.reconstruction_targets("s")) == 3 * 5
+
+
+def test_config_and_dataset_errors(data, tmp_path):
+    with pytest.raises(ValueError, match=r"`only` names unknown datasets \['x'\]"):
+        plan_of({"datasets": {"d": {"path": str(data)}}, "only": ["x"]})
+    with pytest.raises(ValueError, match="lives at data/synthetic/s; drop `path`"):
+        plan_of({"datasets": {"s": {"path": "elsewhere", "synth": {"preset": "tiny"}}}})
+    bad = tmp_path / "bad"
+    bad.mkdir()
+    (bad / "rig.json").write_text((data / "rig.json").read_text())
+    plan = plan_of({"datasets": {"d": {"path": str(data)}, "b": {"path": str(bad)}}, "only": ["d"]})
+    plan.check_layouts()  # only the datasets to process
+    with pytest.raises(MalformedDatasetError, match="dataset 'b' is malformed.*photometric"):
+        plan.layout("b")
+
+
+def test_captures_are_validated_when_their_summary_is_stale(data, tmp_path, monkeypatch):
+    copy = Path(shutil.copytree(data, tmp_path / "copy"))
+    monkeypatch.chdir(tmp_path)
+    plan = plan_of({"datasets": {"d": {"path": str(copy)}}})
+    assert plan.unvalidated_captures() == ["d"]  # no summary
+    summary = tmp_path / "results/d/capture/summary.json"
+    summary.parent.mkdir(parents=True)
+    summary.write_text("{}")
+    newest = max(p.stat().st_mtime for p in copy.rglob("*"))
+    os.utime(summary, (newest + 1, newest + 1))
+    assert plan.unvalidated_captures() == []
+    image = copy / "scenes/wave/frames/000001/cam2.png"
+    image.write_bytes(image.read_bytes()[:100])  # truncated, newer than the summary
+    os.utime(image, (newest + 2, newest + 2))
+    assert plan.unvalidated_captures() == ["d"]
+    message = f"dataset 'd' is malformed, no stage was run: {image}"
+    with pytest.raises(MalformedDatasetError, match=re.escape(message)):
+        plan.check_captures()
