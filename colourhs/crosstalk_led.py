@@ -77,7 +77,8 @@ def _solve_led_problem(prob: _LedProblem, theta, iterations: int, huber: float):
     cov = (Hi @ (score.T @ score) @ Hi)[:nth, :nth]
     # identifiability of theta: the Schur complement with the nuisances eliminated
     red = np.linalg.pinv(Hi[:nth, :nth], rcond=1e-15)
-    sv = np.linalg.svd(red / np.abs(red).max(), compute_uv=False)
+    # all zero where no camera's filters leak (nothing for F to scale): sv = 0
+    sv = np.linalg.svd(red / max(np.abs(red).max(), 1e-300), compute_uv=False)
     diag = {"iterations": len(steps), "last_step": steps[-1],
             "rms_log_residual": float(np.sqrt(np.sum(w * r**2) / np.sum(w)
                                               / np.mean(wn[w > 0]))),
@@ -110,6 +111,8 @@ def shrink_towards_filter(theta, cov) -> tuple[np.ndarray, np.ndarray, float]:
     tau2 = float(np.exp(2 * res.x))
     if nll(np.log(1e-4)) <= res.fun:
         tau2 = 0.0
+    if tau2 == 0.0:  # no evidence against the filters (or nothing fitted: C = 0)
+        return np.ones_like(d), np.zeros_like(C), 0.0
     A = C + tau2 * eye
     gain = tau2 * np.linalg.inv(A)
     return 1.0 + gain @ d, tau2 * eye - tau2 * gain, float(np.sqrt(tau2))

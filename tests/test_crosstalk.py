@@ -21,6 +21,7 @@ from colourhs.crosstalk import (
     fit_mixing_field,
     legendre_basis,
     load_crosstalk,
+    shrink_towards_filter,
     unmix,
 )
 
@@ -378,3 +379,26 @@ def test_matching_leds_and_filters_are_not_made_worse(fixed_tiny):
     ours = max_rms(load_crosstalk(root / "new.json"), truth)
     for cam in truth:
         assert ours[cam][0] <= today[cam][0] and ours[cam][1] <= today[cam][1] * 1.5
+
+
+def test_no_leak_gives_identity_not_a_crash():
+    """A camera whose filters pass no measurable leak (every other-channel
+    reading at black: 8-bit or 16-bit, no noise) calibrates to M = I and F = 1.
+
+    Found by benchmarks/nuisance_ladder.py (rung ``none``): the quantised
+    maximum likelihood of all-black readings has no maximum and returned
+    off-diagonals of -0.94; then the LED factor, with nothing to scale, failed
+    in an SVD and in shrink_towards_filter (singular matrix).
+    """
+    H, W = 24, 32
+    rng = np.random.default_rng(0)
+    white = {}
+    for b, colour in enumerate(COLOURS):
+        img = np.zeros((H, W, 3))
+        img[..., b] = np.round((0.4 + 0.2 * rng.random((H, W))) * 255) / 255
+        white[colour] = img
+    field, info = fit_mixing_field(white, degree=2, quantum=1 / 255)
+    M = field.dense()
+    assert np.array_equal(M, np.broadcast_to(np.eye(3), M.shape))
+    theta, cov, tau = shrink_towards_filter(np.ones(18), np.zeros((18, 18)))
+    assert np.array_equal(theta, np.ones(18)) and not cov.any() and tau == 0.0

@@ -1,0 +1,127 @@
+"""Exact data, then each nuisance alone, then all of them (issue 11, item 2).
+
+Run: ``.venv/bin/python benchmarks/nuisance_ladder.py [--seeds 1-3] [--size 320x240]``.
+
+For every seed (a random rig of the ``random-tiny`` ranges at ``--size``) it
+renders the plane and one frame of the sheet once per rung of a ladder and
+reconstructs them with ML HS (``ml_full``) and Bayesian HS (``bayes_ph``):
+
+- ``exact``: noise and cross-talk off, 16 bit, exact masks, the TRUE
+  calibration (``gt/photometric.h5``; no cross-talk to undo): the same as
+  ``tests/test_exact.py``.
+- ``none``: every effect off but quantisation (:meth:`Nuisances.none`), the
+  seed's own encoding (8 or 16 bit, its masks); from here on every
+  calibration comes from the pipeline (marker poses, cross-talk with the
+  LED factor, noise model, photometric maps), exactly as in
+  :mod:`benchmarks.generalisation`.
+- one rung per effect, alone on top of ``none``: ``light_falloff`` (the LED
+  beams' shape), ``vignetting`` (with per-channel colour shading),
+  ``gain_spread`` (per-camera, per-channel sensitivity), ``crosstalk`` (the
+  filters' and LEDs' mixing, with the chromatic light's filter tilt),
+  ``noise`` (shot and read noise), ``saturate``.
+- ``all``: every effect on (the generalisation benchmark's setting).
+
+A rung that adds error beyond its neighbours names the stage to look at.
+Writes ``benchmarks/results/nuisance_ladder.csv`` (one row per seed x rung x
+scene x variant: depth median, RMS, signed median (mm), normal median (deg),
+coverage; mu RMS log error of the pipeline's maps against the truth) and
+prints a median-over-seeds table. Nothing in the pipeline sees the seed, the
+rung or ``gt/`` (except the ``exact`` rung's calibration, on purpose).
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import pandas as pd
+from generalisation import _seeds, calibrate, calibration_errors, evaluate_variant
+
+HERE = Path(__file__).parent
+SCENES = ("plane", "sheet")
+VARIANTS = ("ml_full", "bayes_ph")
+EFFECTS = ("light_falloff", "vignetting", "gain_spread", "crosstalk", "noise", "saturate")
+
+
+def rungs() -> list[tuple[str, object]]:
+    """The ladder: (name, Nuisances), in order."""
+    from colourhs.synth.rig import Nuisances
+
+    none = Nuisances.none()
+    full = Nuisances()
+    out = [("exact", Nuisances().without("noise", "crosstalk")), ("none", none)]
+    for effect in EFFECTS:
+        on = {effect: getattr(full, effect)}
+        if effect == "crosstalk":
+            on["chromatic_filter_tilt"] = full.chromatic_filter_tilt
+        out.append((effect, replace(none, **on)))
+    return out + [("all", full)]
+
+
+def run_rung(seed: int, preset, name: str, nuisances, root: Path) -> list[dict]:
+    """One seed x rung: render, calibrate (or take the truth), reconstruct, evaluate."""
+    from colourhs.synth.dataset import synthesise
+
+    exact = name == "exact"
+    t0 = time.time()
+    data = synthesise(root / name / "data", preset, seed=seed, nuisances=nuisances, exact=exact,
+                      scenes=SCENES, progress=False)  # fmt: skip
+    files = calibrate(data, root / name / "calib")
+    mu = calibration_errors(data, files)["mu_rms_log_worst"]
+    if exact:
+        files = {"photometric": data / "gt" / "photometric.h5", "crosstalk": None,
+                 "noise": None}  # fmt: skip
+    rows = []
+    for scene in SCENES:
+        for variant in VARIANTS:
+            m = evaluate_variant(
+                data, scene, ["000000"], variant, files, None, root / name / "work"
+            )
+            rows.append({"seed": seed, "rung": name, "scene": scene, "variant": variant,
+                         "mu_rms_log_worst": mu, **m})  # fmt: skip
+            print(f"seed {seed} {name:13s} {scene:6s} {variant:9s} depth {m['depth_median_mm']:.3f}"
+                  f" mm (signed {m['depth_signed_median_mm']:+.3f}) coverage {m['coverage']:.3f}"
+                  f" mu {mu:.4f} ({time.time() - t0:.0f} s)", flush=True)  # fmt: skip
+    return rows
+
+
+def main(argv=None) -> pd.DataFrame:
+    from colourhs.synth.dataset import PRESETS
+
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--seeds", default="1-3", help="seeds, e.g. 1-5 (default 1-3)")
+    p.add_argument("--size", default="320x240", help="image size WxH (default 320x240)")
+    p.add_argument("--rungs", default=None, help="comma-separated subset of the rungs")
+    args = p.parse_args(argv)
+    w, h = (int(v) for v in args.size.lower().split("x"))
+    preset = replace(PRESETS["random-tiny"], name="ladder", width=w, height=h, sheet_frames=1)
+    chosen = [r for r in rungs() if args.rungs is None or r[0] in args.rungs.split(",")]
+    out = HERE / "results" / "nuisance_ladder.csv"
+    out.parent.mkdir(exist_ok=True)
+    rows = []
+    for seed in _seeds(args.seeds):
+        root = Path(tempfile.mkdtemp(prefix=f"colourhs-ladder-{seed}-"))
+        try:
+            for name, nuisances in chosen:
+                rows += run_rung(seed, preset, name, nuisances, root)
+                pd.DataFrame(rows).to_csv(out, index=False)  # a partial run counts
+        finally:
+            shutil.rmtree(root, ignore_errors=True)
+    table = pd.DataFrame(rows)
+    order = {name: i for i, (name, _) in enumerate(rungs())}
+    summary = (
+        table.groupby(["rung", "scene", "variant"])["depth_median_mm"]
+        .agg(["median", "max"])
+        .unstack(["scene", "variant"])
+        .sort_index(key=lambda idx: idx.map(order))
+    )
+    print(summary.round(3).to_string())
+    return table
+
+
+if __name__ == "__main__":
+    main()
