@@ -178,6 +178,7 @@ def report(tmp_path, metrics_csv, images, benchmarks) -> Path:
         benchmarks,
         config,
         extra={"dataset folder": "data/<demo>"},
+        embed_images=True,
     )
 
 
@@ -354,7 +355,6 @@ def test_report_links_instead_of_embedding(tmp_path, metrics_csv, images):
         {"plane": images["plane"]},
         [],
         {},
-        embed_images=False,
     )
     text = out.read_text(encoding="utf-8")
     assert "base64" not in text
@@ -405,6 +405,7 @@ def test_folders_config_file_and_find_benchmarks(tmp_path, metrics_csv, images, 
         {"plane": images["plane"][0].parent},
         find_benchmarks(root, "demo"),
         config,
+        embed_images=True,
     )
     text = out.read_text(encoding="utf-8")
     assert text.count("data:image/png;base64,") == 6 and text.count("data:image/gif;") == 2
