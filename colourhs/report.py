@@ -409,6 +409,7 @@ def build_report(
     scenes = list(dict.fromkeys([*sorted(summary["scene"].unique()), *figs]))
     key = [c for c in SUMMARY_COLUMNS if c in summary.columns]
     top, has_paper = with_paper_columns(summary[["scene", "variant", *key]])
+    top = top.drop(columns="paper name")  # in each scene's table; the summary stays narrow
     sections = []
     for scene in scenes:
         arranged = arrange_figures(figs.get(scene, []))
