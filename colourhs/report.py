@@ -380,8 +380,9 @@ def build_report(
         ``results/NAME`` (or None): each scene's meshes, error-coloured meshes
         and depth files are linked.
     provenance
-        ``{label: value}`` for the provenance table (default: the git commit
-        of the current folder and this process's command line).
+        ``{label: value}`` for the provenance table (default: the git commit of
+        the colourhs code and this process's command line, see
+        :func:`colourhs.reportinfo.git_provenance` and :func:`~colourhs.reportinfo.run_command`).
     config_resolved
         Whether ``config`` has the package's defaults filled in (said on the page).
 
@@ -403,7 +404,7 @@ def build_report(
     if isinstance(config, str | Path):
         config = yaml.safe_load(Path(config).read_text()) or {}
     if provenance is None:
-        provenance = {**git_provenance(Path.cwd()), **run_command()}
+        provenance = {**git_provenance(Path(__file__).parent), **run_command()}
     descriptions = scene_descriptions(dataset) if dataset is not None else {}
 
     scenes = list(dict.fromkeys([*sorted(summary["scene"].unique()), *figs]))
