@@ -440,7 +440,8 @@ def build_report(
     header.update({str(k): v for k, v in (extra or {}).items()})
     page = _template().render(
         name=dataset_name, header=header,
-        reproduce=f"colourhs run DATASET_DIR --name {dataset_name}",
+        reproduce=provenance.get("workflow command")
+        or f"colourhs run DATASET_DIR --name {dataset_name}",
         summary_table=_table(top, "summary") if len(top) else "", has_paper=has_paper,
         legend={c: COLUMN_LEGEND[c] for c in key if c in COLUMN_LEGEND}
         | ({"paper …": "the paper's number (see below)"} if has_paper else {}),

@@ -95,9 +95,11 @@ def resolve_config(
     """``config`` with the package's defaults in place of empty settings.
 
     ``reconstruction.params`` becomes ``reconstruct_defaults`` updated by the
-    configured values, and ``calibration.photometric`` (the same for each
-    dataset's own ``calibration.photometric``) ``photometric_defaults`` updated
-    by its non-null values. Everything else is copied as it is.
+    configured values, and ``calibration.photometric`` ``photometric_defaults``
+    updated by its non-null values; a dataset's own
+    ``datasets.<name>.calibration.photometric`` becomes that result updated by
+    its non-null values. Everything else is copied as it is (``config`` is not
+    changed).
     """
     out = {k: v for k, v in config.items()}
 
@@ -113,6 +115,15 @@ def resolve_config(
         cal = dict(out.get("calibration") or {})
         cal["photometric"] = merged(photometric_defaults, cal.get("photometric"))
         out["calibration"] = cal
+        datasets = {}
+        for name, entry in (out.get("datasets") or {}).items():
+            own = (entry or {}).get("calibration") or {}
+            if "photometric" in own:
+                own = {**own, "photometric": merged(cal["photometric"], own["photometric"])}
+                entry = {**entry, "calibration": own}
+            datasets[name] = entry
+        if datasets:
+            out["datasets"] = datasets
     return out
 
 

@@ -508,10 +508,15 @@ def test_sequence_plot_and_frame_note(tmp_path, metrics_csv, images):
 def test_git_provenance_and_resolve_config(tmp_path):
     assert git_provenance(tmp_path) == {"git commit": "not a git checkout"}
     config = {"reconstruction": {"params": {"alpha": 2.0}, "variants": None},
-              "calibration": {"photometric": {"step_px": None, "coupling": 0.5}}}  # fmt: skip
+              "calibration": {"photometric": {"step_px": None, "coupling": 0.5}},
+              "datasets": {"a": {"path": "x", "calibration": {"photometric": {"step_px": 9}}},
+                           "b": {"path": "y"}}}  # fmt: skip
     r = resolve_config(config, {"alpha": 1.0, "tau": 3}, {"step_px": 4, "coupling": 0.1})
     assert r["reconstruction"] == {"params": {"alpha": 2.0, "tau": 3}, "variants": None}
     assert r["calibration"]["photometric"] == {"step_px": 4, "coupling": 0.5}
+    own = r["datasets"]["a"]["calibration"]["photometric"]
+    assert own == {"step_px": 9, "coupling": 0.5} and r["datasets"]["b"] == {"path": "y"}
+    assert config["datasets"]["a"]["calibration"]["photometric"] == {"step_px": 9}
     assert config["reconstruction"]["params"] == {"alpha": 2.0}  # not changed in place
 
 
