@@ -224,14 +224,13 @@ def frame_error_svg(metrics: pd.DataFrame, scene: str, column: str = "depth_medi
     variants = [v for v in VARIANT_ORDER if v in table.columns]
     variants += [v for v in table.columns if v not in variants]
     x = np.array([int(f) if str(f).isdigit() else i for i, f in enumerate(table.index)])
-    fig, ax = plt.subplots(figsize=(9.0, 2.6))
+    fig, ax = plt.subplots(figsize=(10.0, 2.6), layout="constrained")
     for v in variants:
         ax.plot(x, table[v].to_numpy(float), marker=".", label=v)
     ax.set_xlabel("frame")
     ax.set_ylabel(column.replace("_mm", " (mm)").replace("_", " "))
     ax.grid(alpha=0.3)
-    ax.legend(fontsize="small", ncols=min(len(variants), 5), loc="best")
-    fig.tight_layout()
+    fig.legend(fontsize="small", loc="outside right upper")  # beside the lines, not on them
     buf = io.StringIO()
     fig.savefig(buf, format="svg")
     plt.close(fig)
