@@ -39,15 +39,17 @@ EXTRA_COLUMNS = (
     "depth_p95_mm", "coverage", "hausdorff_samples", "completeness_samples", "outside_share",
 )  # fmt: skip
 
-# Written into the page on load: overflow, the images' state, the page height,
-# the displayed width of Figure 7.
+# Written into the page on load: overflow, the images' state, the page height, the
+# summary table's scroll and client widths, the displayed width of Figure 7.
 MEASURE = """<script>addEventListener("load", () => {
   const d = document.documentElement, imgs = [...document.images];
   const f7 = imgs.filter(i => /figure7/.test(i.src)).map(i => i.clientWidth);
   const wide = [...document.querySelectorAll("body *")].filter(e =>
     !e.parentElement.closest(".scroll, pre") && e.getBoundingClientRect().right > innerWidth)
     .map(e => e.tagName + "." + e.className);
+  const summary = document.querySelector("#summary + .scroll");
   d.dataset.measure = JSON.stringify({scrollWidth: d.scrollWidth, height: d.scrollHeight,
+    summary: [summary.scrollWidth, summary.clientWidth],
     images: imgs.length, broken: imgs.filter(i => !i.complete || i.naturalWidth === 0)
     .map(i => i.getAttribute("src")), figure7: f7, wide: wide});
 });</script>"""
@@ -62,7 +64,7 @@ def _png(path: Path, w: int, h: int, value: int) -> None:
 def _make_report(root: Path, n_scenes: int, n_frames: int) -> Path:
     """A report of ``n_scenes`` scenes of ``n_frames`` frames, five variants each."""
     rng = np.random.default_rng(n_scenes * 100 + n_frames)
-    scenes = [f"scene{i}" for i in range(n_scenes)]
+    scenes = ["plane"] + [f"scene{i}" for i in range(1, n_scenes)]  # plane: the paper's column
     frames = [f"{f:06d}" for f in range(n_frames)]
     metric_cols = [*REQUIRED_COLUMNS[3:], *EXTRA_COLUMNS]
     rows = [
@@ -133,6 +135,7 @@ def test_report_fits_1400px_and_stays_short(tmp_path):
         assert m["scrollWidth"] <= WIDTH, m["wide"]  # measured 1400: nothing wider
         assert not m["wide"]
         assert m["broken"] == []  # every <img> loaded
+        assert m["summary"][0] <= m["summary"][1], m["summary"]  # the summary needs no scrolling
         # Figure 7 full width (the body's 72 em less padding), not a ~100 px tile
         assert all(1050 <= w <= 1160 for w in m["figure7"]), m["figure7"]
     assert small["images"] == 2 + 2 * 14 and long["images"] == 2 + 2 * 15  # + animation
