@@ -307,7 +307,8 @@ def render_grid_figure(
     title : str
         Figure title.
     colourbar : (cmap, vmin, vmax, label), optional
-        One colour bar at the right for every panel (panels coloured on one scale).
+        One colour bar at the right for every panel (panels coloured on one scale;
+        values above ``vmax`` have its colour, shown by the bar's pointed end).
     """
     if not images:
         raise ValueError("render_grid_figure: no images")
@@ -363,8 +364,14 @@ def render_grid_figure(
             (right + 0.15 / fig.get_figwidth(), 0.12, 0.18 / fig.get_figwidth(), 0.7)
         )
         norm = matplotlib.colors.Normalize(vmin, vmax)
-        fig.colorbar(matplotlib.cm.ScalarMappable(norm, cmap), cax=cax, label=label)
+        fig.colorbar(matplotlib.cm.ScalarMappable(norm, cmap), cax=cax, label=label, extend="max")
     return _save_png(fig, path)
+
+
+def _median_p95(values) -> float:
+    """The median over arrays of each one's 95th percentile of its finite values."""
+    tops = [np.percentile(v[np.isfinite(v)], 95.0) for v in values if np.isfinite(v).any()]
+    return float(np.median(tops)) if tops else 1.0
 
 
 def shared_scale_images(
@@ -377,8 +384,10 @@ def shared_scale_images(
     errors : dict of str to ndarray, shape (H, W)
         Label (variant) -> non-negative error (any unit), NaN where none.
     vmax : float, optional
-        Top of the shared scale (0 is the bottom); default the 95th percentile of
-        all the finite errors together.
+        Top of the shared scale (0 is the bottom; larger errors get the top colour);
+        default the median over the labels of each one's 95th percentile, so that
+        one far worse variant (the visual hull's 100 mm beside HS's few mm)
+        saturates instead of turning every other map black.
     cmap : str
         Matplotlib colormap name.
 
@@ -392,7 +401,7 @@ def shared_scale_images(
     arrays = {k: np.asarray(e, dtype=np.float64) for k, e in errors.items()}
     finite = _finite_or_raise(np.concatenate([e.ravel() for e in arrays.values()]), "errors")
     if vmax is None:
-        vmax = float(np.percentile(finite, 95.0))
+        vmax = _median_p95(arrays.values())
     if not vmax > 0:
         vmax = float(max(finite.max(), 1e-12))
     images = {}
@@ -481,9 +490,9 @@ def scene_figures(
     shaded reconstruction over the frames; with ``coloured`` (variant -> mesh
     coloured by its Hausdorff distance, from :func:`colourhs.evaluate.evaluate_frame`,
     its metrics JSON beside it), ``hausdorff.png``: those meshes rendered, recoloured
-    on one scale (viridis, 0 to the 95th percentile of all the variants'
-    distances, recovered from the colours by :func:`colourhs.colours.colour_values`)
-    with its colour bar.
+    on one scale (viridis, 0 to the median of the variants' 95th percentiles, as
+    :func:`shared_scale_images`; distances recovered from the colours by
+    :func:`colourhs.colours.colour_values`) with its colour bar.
 
     Parameters
     ----------
@@ -551,9 +560,7 @@ def scene_figures(
             else:
                 d = np.full(len(v), np.nan)
             meshes_mm[variant] = (v, t, d)
-        pooled = np.concatenate([d for _, _, d in meshes_mm.values()])
-        pooled = pooled[np.isfinite(pooled)]
-        top = float(np.percentile(pooled, 95.0)) if pooled.size else 1.0
+        top = _median_p95([d for _, _, d in meshes_mm.values()])
         tiles = {
             variant: shaded_render(v, t, cam.K, cam.R, cam.t, cam.width, cam.height,
                                    vertex_rgb=value_colours(d, 0.0, top), dist=cam.dist)

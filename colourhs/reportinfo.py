@@ -219,6 +219,7 @@ def frame_error_svg(metrics: pd.DataFrame, scene: str, column: str = "depth_medi
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import matplotlib.ticker
 
     table = rows.assign(v=values).pivot_table(index="frame", columns="variant", values="v")
     variants = [v for v in VARIANT_ORDER if v in table.columns]
@@ -228,6 +229,7 @@ def frame_error_svg(metrics: pd.DataFrame, scene: str, column: str = "depth_medi
     for v in variants:
         ax.plot(x, table[v].to_numpy(float), marker=".", label=v)
     ax.set_xlabel("frame")
+    ax.xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(integer=True))
     ax.set_ylabel(column.replace("_mm", " (mm)").replace("_", " "))
     ax.grid(alpha=0.3)
     fig.legend(fontsize="small", loc="outside right upper")  # beside the lines, not on them
