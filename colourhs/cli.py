@@ -8,13 +8,15 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import shlex
 import subprocess
 import sys
 from pathlib import Path
 
 import yaml
 
-from colourhs.capture import LIT_THRESHOLD, MIN_SIGNAL, UnknownNameError, validate
+from colourhs.capture import LIT_THRESHOLD, MIN_SIGNAL, UnknownNameError, open_dataset, validate
 
 PROJECT_ROOT = Path(__file__).resolve().parents[1]
 SNAKEFILE = PROJECT_ROOT / "Snakefile"
@@ -47,7 +49,6 @@ def _validate(args) -> int:
 
 
 def _run(args) -> int:
-    from colourhs.capture import open_dataset
     from colourhs.variants import parse_variants
 
     dataset = Path(args.dataset).resolve()
@@ -80,7 +81,9 @@ def _run(args) -> int:
         *args.snakemake_args,
         "--configfile", str(PROJECT_ROOT / "config.yaml"), str(config_path.resolve()),
     ]  # fmt: skip
-    return subprocess.call(cmd)
+    from colourhs.reportinfo import COMMAND_ENV  # the report names this command
+
+    return subprocess.call(cmd, env={**os.environ, COMMAND_ENV: shlex.join(args.command_line)})
 
 
 def _markers(args) -> int:
@@ -235,11 +238,16 @@ def _figures(args) -> int:
 
 def _report(args) -> int:
     from colourhs.report import build_report, find_benchmarks
+    from colourhs.reportinfo import resolve_config
 
     figures = _pairs(args.figures, "--figures")
     tsvs = find_benchmarks(args.benchmarks, args.name)
-    config = args.config if args.config else {}
-    build_report(args.out, args.name, args.metrics, args.calibration or [], figures, tsvs, config)
+    config = yaml.safe_load(args.config.read_text()) or {} if args.config else {}
+    config = resolve_config(config, _defaults("reconstruct"), _defaults("photometric"))
+    dataset = open_dataset(args.dataset, check_images=False) if args.dataset else None
+    build_report(args.out, args.name, args.metrics, args.calibration or [], figures, tsvs, config,
+                 embed_images=args.embed_images, dataset=dataset, results_dir=args.results,
+                 config_resolved=True)  # fmt: skip
     print(f"wrote {args.out}")
     return 0
 
@@ -493,6 +501,9 @@ def build_parser(show_defaults: bool = False) -> argparse.ArgumentParser:
         help="Snakemake benchmark files (default benchmarks/snakemake)",
     )
     rp.add_argument("--config", type=Path, default=None, help="the run's configuration (YAML)")
+    rp.add_argument("--dataset", type=Path, default=None, help="the dataset (rig, scene.json)")
+    rp.add_argument("--results", type=Path, default=None, help="results/NAME: link its files")
+    rp.add_argument("--embed-images", action="store_true", help="embed images (base64)")
     rp.set_defaults(func=_report)
 
     cf = sub.add_parser("config", help="write a run's configuration (JSON text) as YAML")
@@ -547,7 +558,7 @@ INPUTS = {
     "mesh": ("depth", "hull", "same_as"),
     "evaluate": ("depth", "mesh", "gt", "same_as"),
     "metrics": ("json",),
-    "report": ("metrics", "calibration", "config"),
+    "report": ("metrics", "calibration", "config", "dataset"),
 }
 
 #: Errors of the user's input (a file, a name, a value), not of the program:
@@ -568,12 +579,12 @@ def main(argv: list[str] | None = None) -> int:
     """Run a subcommand. Exit status: 0 done; 1 an error in the input (one line on
     stderr naming the file or name and what exists); 2 a usage error (argparse)."""
     argv = list(sys.argv[1:] if argv is None else argv)
-    extra = []
+    command_line, extra = ["colourhs", *argv], []
     if "--" in argv:
         k = argv.index("--")
         argv, extra = argv[:k], argv[k + 1 :]
     args = build_parser(show_defaults=bool({"-h", "--help"} & set(argv))).parse_args(argv)
-    args.snakemake_args = extra
+    args.snakemake_args, args.command_line = extra, command_line
     try:
         _check_inputs(args)
         return args.func(args)

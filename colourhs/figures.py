@@ -13,22 +13,22 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from colourhs.geometry import vertex_normals  # noqa: E402
+from colourhs.colours import value_colours  # noqa: E402
+from colourhs.render import BACKGROUND, shaded_render  # noqa: E402
 
 __all__ = [
     "chromaticity_figure",
     "chromaticity_rgb",
     "depth_map_figure",
     "error_map_figure",
+    "error_maps_figure",
     "mu_maps_figure",
     "normal_map_figure",
     "render_grid_figure",
     "shaded_render",
+    "shared_scale_images",
     "write_animation",
 ]
-
-#: Colour of pixels with no value (NaN) in the image figures and renders.
-BACKGROUND = (1.0, 1.0, 1.0)
 
 
 def chromaticity_rgb(p: np.ndarray) -> np.ndarray:
@@ -285,96 +285,12 @@ def error_map_figure(
     return _scalar_map_figure(error, path, title, "inferno", 0.0, vmax, f"error ({unit})")
 
 
-def shaded_render(
-    vertices: np.ndarray,
-    triangles: np.ndarray,
-    K: np.ndarray,
-    R: np.ndarray,
-    t: np.ndarray,
-    width: int,
-    height: int,
-    vertex_rgb: np.ndarray | None = None,
-    dist: np.ndarray | None = None,
-    ambient: float = 0.1,
-) -> np.ndarray:
-    """Shaded image of a triangle mesh seen by a pinhole camera (ray cast, no OpenGL).
-
-    One ray per pixel centre (open3d ``RaycastingScene``, via
-    :func:`colourhs.raycast._cast_pixels`); Lambertian shading from a
-    headlight at the camera centre, ``ambient + (1 - ambient) |n . ray|``
-    with the interpolated (area-weighted) vertex normal ``n``.
-
-    Parameters
-    ----------
-    vertices : ndarray, shape (V, 3)
-        World points, metres.
-    triangles : ndarray of int, shape (T, 3)
-        Vertex indices.
-    K, R, t : ndarray
-        Intrinsics (3, 3), world-to-camera rotation (3, 3) and translation (3,), metres.
-    width, height : int
-        Image size, pixels.
-    vertex_rgb : ndarray, shape (V, 3), optional
-        Per-vertex albedo, floats in [0, 1] or uint8; interpolated with the
-        hit's barycentric coordinates. Default light grey.
-    dist : ndarray, optional
-        OpenCV distortion coefficients; default none.
-    ambient : float
-        Ambient term in [0, 1].
-
-    Returns
-    -------
-    ndarray of uint8, shape (height, width, 3)
-        The render, white where no ray hits the mesh.
-    """
-    from colourhs.capture import Camera
-    from colourhs.raycast import _cast_pixels
-
-    vertices = np.asarray(vertices, dtype=np.float64)
-    triangles = np.asarray(triangles, dtype=np.int64)
-    camera = Camera(
-        name="render", K=np.asarray(K, float),
-        dist=np.zeros(5) if dist is None else np.asarray(dist, float),
-        R=np.asarray(R, float), t=np.asarray(t, float).reshape(3),
-        light_colour="red", light_offset=np.zeros(3),
-    )  # fmt: skip
-    normals = vertex_normals(vertices, triangles)
-    scene, hit, points, n = _cast_pixels(vertices, triangles, normals, camera, width, height)
-    ray = points - camera.centre
-    ray /= np.linalg.norm(ray, axis=1, keepdims=True)
-    cos = np.nan_to_num(np.abs(np.sum(n * ray, axis=1)), nan=1.0)
-    shade = ambient + (1.0 - ambient) * np.clip(cos, 0.0, 1.0)
-    if vertex_rgb is None:
-        albedo = np.full((len(points), 3), 0.8)
-    else:
-        rgb = np.asarray(vertex_rgb)
-        rgb = rgb / 255.0 if np.issubdtype(rgb.dtype, np.integer) else rgb.astype(np.float64)
-        if rgb.shape != vertices.shape:
-            raise ValueError(f"vertex_rgb must be (V, 3) = {vertices.shape}, got {rgb.shape}")
-        # Triangle and barycentric coordinates of each hit (the hit points lie on the mesh).
-        closest = scene.compute_closest_points(_o3d_tensor(points))
-        tri = closest["primitive_ids"].numpy().astype(np.int64)
-        uv = closest["primitive_uvs"].numpy().astype(np.float64)
-        bary = np.stack([1.0 - uv[:, 0] - uv[:, 1], uv[:, 0], uv[:, 1]], axis=1)
-        albedo = np.einsum("mk,mkj->mj", bary, rgb[triangles[tri]])
-    image = np.empty((height * width, 3))
-    image[:] = BACKGROUND
-    image[hit] = np.clip(albedo, 0.0, 1.0) * shade[:, None]
-    return np.round(image.reshape(height, width, 3) * 255.0).astype(np.uint8)
-
-
-def _o3d_tensor(a: np.ndarray):
-    """A float32 open3d tensor of ``a``."""
-    import open3d as o3d
-
-    return o3d.core.Tensor(np.ascontiguousarray(a, dtype=np.float32))
-
-
 def render_grid_figure(
     images: Mapping[str, np.ndarray] | Mapping[str, Mapping[str, np.ndarray]],
     path: str | Path,
     title: str = "",
     ncols: int | None = None,
+    colourbar: tuple[str, float, float, str] | None = None,
 ) -> Path:
     """The paper's Figure 7: shaded renders side by side, labelled by variant.
 
@@ -390,6 +306,9 @@ def render_grid_figure(
         PNG file to write (atomically).
     title : str
         Figure title.
+    colourbar : (cmap, vmin, vmax, label), optional
+        One colour bar at the right for every panel (panels coloured on one scale;
+        values above ``vmax`` have its colour, shown by the bar's pointed end).
     """
     if not images:
         raise ValueError("render_grid_figure: no images")
@@ -415,8 +334,10 @@ def render_grid_figure(
     h, w = np.asarray(shown[0]).shape[:2]
     nr, nc = len(cells), max(len(r) for r in cells)
     cell_w = 3.0
+    bar_w = 1.1 if colourbar else 0.0
     fig, axes = plt.subplots(
-        nr, nc, figsize=(cell_w * nc + 0.2, (cell_w * h / w + 0.35) * nr + (0.4 if title else 0.0)),
+        nr, nc, figsize=(cell_w * nc + 0.2 + bar_w,
+                         (cell_w * h / w + 0.35) * nr + (0.4 if title else 0.0)),
         squeeze=False,
     )  # fmt: skip
     for r, row in enumerate(cells):
@@ -435,8 +356,75 @@ def render_grid_figure(
                 ax.set_ylabel(row_labels[r])
     if title:
         fig.suptitle(title)
-    fig.tight_layout()
+    right = 1.0 - bar_w / fig.get_figwidth()
+    fig.tight_layout(rect=(0.0, 0.0, right, 1.0))
+    if colourbar:
+        cmap, vmin, vmax, label = colourbar
+        cax = fig.add_axes(
+            (right + 0.15 / fig.get_figwidth(), 0.12, 0.18 / fig.get_figwidth(), 0.7)
+        )
+        norm = matplotlib.colors.Normalize(vmin, vmax)
+        fig.colorbar(matplotlib.cm.ScalarMappable(norm, cmap), cax=cax, label=label, extend="max")
     return _save_png(fig, path)
+
+
+def _median_p95(values) -> float:
+    """The median over arrays of each one's 95th percentile of its finite values."""
+    tops = [np.percentile(v[np.isfinite(v)], 95.0) for v in values if np.isfinite(v).any()]
+    return float(np.median(tops)) if tops else 1.0
+
+
+def shared_scale_images(
+    errors: Mapping[str, np.ndarray], vmax: float | None = None, cmap: str = "inferno"
+) -> tuple[dict[str, np.ndarray], float]:
+    """Per-pixel errors of several variants as RGB images on one colour scale.
+
+    Parameters
+    ----------
+    errors : dict of str to ndarray, shape (H, W)
+        Label (variant) -> non-negative error (any unit), NaN where none.
+    vmax : float, optional
+        Top of the shared scale (0 is the bottom; larger errors get the top colour);
+        default the median over the labels of each one's 95th percentile, so that
+        one far worse variant (the visual hull's 100 mm beside HS's few mm)
+        saturates instead of turning every other map black.
+    cmap : str
+        Matplotlib colormap name.
+
+    Returns
+    -------
+    images : dict of str to ndarray of uint8, shape (H, W, 3)
+        The same value has the same colour in every image; NaN is the background.
+    vmax : float
+        The scale's top.
+    """
+    arrays = {k: np.asarray(e, dtype=np.float64) for k, e in errors.items()}
+    finite = _finite_or_raise(np.concatenate([e.ravel() for e in arrays.values()]), "errors")
+    if vmax is None:
+        vmax = _median_p95(arrays.values())
+    if not vmax > 0:
+        vmax = float(max(finite.max(), 1e-12))
+    images = {}
+    for k, e in arrays.items():
+        rgb = value_colours(e, 0.0, vmax, cmap).reshape(*e.shape, 3)
+        rgb[~np.isfinite(e)] = BACKGROUND
+        images[k] = np.round(rgb * 255.0).astype(np.uint8)
+    return images, vmax
+
+
+def error_maps_figure(
+    errors: Mapping[str, np.ndarray], path: str | Path, title: str, unit: str = "mm",
+    vmax: float | None = None,
+) -> Path:  # fmt: skip
+    """Every variant's error map side by side on one colour scale, with its colour bar.
+
+    ``errors``: label -> (H, W) error in ``unit``, NaN where none; ``vmax``: top of
+    the scale (default: :func:`shared_scale_images`'). Up to four panels in a row, else three.
+    """
+    images, top = shared_scale_images(errors, vmax)
+    ncols = len(images) if len(images) <= 4 else 3
+    return render_grid_figure(images, path, title, ncols=ncols,
+                              colourbar=("inferno", 0.0, top, f"error ({unit})"))  # fmt: skip
 
 
 def write_animation(images: list[np.ndarray], path: str | Path, fps: float = 8) -> Path:
@@ -495,13 +483,16 @@ def scene_figures(
     Writes into ``out_dir``: ``figure7.png`` (shaded renders of every variant's
     mesh, and of the ground truth when given, from the reference camera: the
     paper's Figure 7), and per variant ``<variant>_depth.png``,
-    ``<variant>_normal.png`` and, with ground truth, ``<variant>_depth_error.png``
-    (|depth error|, mm) and ``<variant>_normal_error.png`` (degrees); with
+    ``<variant>_normal.png`` and, with ground truth, ``depth_error.png``
+    (|depth error|, mm) and ``normal_error.png`` (degrees), every variant's map
+    on one colour scale with its colour bar (:func:`error_maps_figure`); with
     ``animation`` (frame -> mesh of a dynamic scene), ``animation.gif`` of the
     shaded reconstruction over the frames; with ``coloured`` (variant -> mesh
     coloured by its Hausdorff distance, from :func:`colourhs.evaluate.evaluate_frame`,
-    its metrics JSON beside it), ``hausdorff.png``: those meshes rendered, each
-    titled with its colour scale (viridis, 0 to the top in mm).
+    its metrics JSON beside it), ``hausdorff.png``: those meshes rendered, recoloured
+    on one scale (viridis, 0 to the median of the variants' 95th percentiles, as
+    :func:`shared_scale_images`; distances recovered from the colours by
+    :func:`colourhs.colours.colour_values`) with its colour bar.
 
     Parameters
     ----------
@@ -523,7 +514,7 @@ def scene_figures(
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     written = []
-    renders = {}
+    renders, dz_mm, dn_deg = {}, {}, {}
     gt = load_mesh(gt_ply) if gt_ply is not None else None
     cam = None
     for variant, path in depths.items():
@@ -534,10 +525,11 @@ def scene_figures(
         if gt is not None:
             dz, dn, _ = depth_errors(dm, *gt)
             if np.isfinite(dz).any():
-                name = out / f"{variant}_depth_error.png"
-                written.append(error_map_figure(np.abs(dz) * 1e3, name, f"{variant}: |dz|"))
-                name = out / f"{variant}_normal_error.png"
-                written.append(error_map_figure(dn, name, f"{variant}: normal error", unit="deg"))
+                dz_mm[variant], dn_deg[variant] = np.abs(dz) * 1e3, dn
+    if dz_mm:
+        written.append(error_maps_figure(dz_mm, out / "depth_error.png", "|depth error|"))
+        written.append(error_maps_figure(dn_deg, out / "normal_error.png", "normal error",
+                                         unit="deg"))  # fmt: skip
 
     def render(ply):
         v, t, _ = load_mesh(ply)
@@ -555,18 +547,29 @@ def scene_figures(
 
         import open3d as o3d
 
-        tiles = {}
+        from colourhs.colours import colour_values
+
+        meshes_mm = {}  # variant -> (vertices, triangles, distance per vertex in mm)
         for variant, ply in coloured.items():
             mesh = o3d.io.read_triangle_mesh(str(ply))
             v, t = np.asarray(mesh.vertices), np.asarray(mesh.triangles)
-            rgb = np.asarray(mesh.vertex_colors) if mesh.has_vertex_colors() else None
             meta = Path(ply).with_suffix(".json")
             top = json.loads(meta.read_text()).get("colour_vmax_mm") if meta.exists() else None
-            label = f"{variant} (0-{top:.3g} mm)" if top else variant
-            tiles[label] = shaded_render(v, t, cam.K, cam.R, cam.t, cam.width, cam.height,
-                                         vertex_rgb=rgb, dist=cam.dist)  # fmt: skip
-        title = "Hausdorff distance to the ground truth (viridis, grey: not evaluated)"
-        written.append(render_grid_figure(tiles, out / "hausdorff.png", title))
+            if top and mesh.has_vertex_colors():  # the distances, from the colours (to 1/255)
+                d = colour_values(np.asarray(mesh.vertex_colors), 0.0, top)
+            else:
+                d = np.full(len(v), np.nan)
+            meshes_mm[variant] = (v, t, d)
+        top = _median_p95([d for _, _, d in meshes_mm.values()])
+        tiles = {
+            variant: shaded_render(v, t, cam.K, cam.R, cam.t, cam.width, cam.height,
+                                   vertex_rgb=value_colours(d, 0.0, top), dist=cam.dist)
+            for variant, (v, t, d) in meshes_mm.items()
+        }  # fmt: skip
+        title = "Hausdorff distance to the ground truth (grey: not evaluated)"
+        ncols = 3 if len(tiles) > 4 else None
+        bar = ("viridis", 0.0, top, "distance (mm)")
+        written.append(render_grid_figure(tiles, out / "hausdorff.png", title, ncols, bar))
     if animation:
         frames = [render(ply) for ply in animation.values()]
         written.append(write_animation(frames, out / "animation.gif", fps=fps))

@@ -1,18 +1,20 @@
-"""The evaluation report ``reports/NAME/index.html``: one self-contained HTML page.
+"""The evaluation report ``reports/NAME/index.html``: one HTML page that reads at a glance.
 
 :func:`build_report` gathers what earlier stages wrote (the metrics table of the
 results contract, the calibration and per-scene figures, Snakemake benchmark
-files, the run's configuration) into one page that needs no network and no
-files beside it: images (PNG, GIF, JPEG, SVG) are embedded as base64 data URIs,
-styles are inline. The page is built in memory and written atomically, so a
-failure leaves no partial HTML behind.
+files, the run's configuration, the dataset's rig and scene descriptions, the
+result files) into one page rendered from the jinja2 template
+``colourhs/templates/report.html`` (package data). Images are linked from
+``reports/NAME/figures/`` by relative paths (or, with ``embed_images``, embedded
+as base64 data URIs so the page stands alone); styles are inline. The page is
+built in memory and written atomically, so a failure leaves no partial HTML
+behind.
 
 The tables are computed by the small functions :func:`summarise_metrics`,
-:func:`read_benchmarks` and :func:`summarise_benchmarks`, which the tests call
-directly; they live in :mod:`colourhs.reporttables` (reading and summarising
-``metrics.csv`` and the benchmark files) and are re-exported here. This module
-holds the page itself: the paper's reference numbers, the software versions
-and the HTML.
+:func:`read_benchmarks` and :func:`summarise_benchmarks` in
+:mod:`colourhs.reporttables` (re-exported here); provenance, rig summary, file
+links and the figures' arrangement by :mod:`colourhs.reportinfo`. This module
+holds the paper's reference numbers, the software versions and the page.
 """
 
 from __future__ import annotations
@@ -33,6 +35,15 @@ import pandas as pd
 import yaml
 
 from colourhs.io import atomic_output
+from colourhs.reportinfo import (
+    arrange_figures,
+    frame_error_svg,
+    git_provenance,
+    result_files,
+    rig_summary,
+    run_command,
+    scene_descriptions,
+)
 from colourhs.reporttables import (
     AGGREGATION,
     BENCHMARK_COLUMNS,
@@ -118,29 +129,6 @@ _MIME = {
     ".webp": "image/webp",
 }
 
-_CSS = """
-body { font-family: system-ui, -apple-system, "Segoe UI", Helvetica, Arial, sans-serif;
-       margin: 2em auto; max-width: 72em; padding: 0 1em; color: #222; line-height: 1.4; }
-h1 { margin-bottom: 0.2em; }
-h2 { border-bottom: 2px solid #ddd; padding-bottom: 0.2em; margin-top: 2em; }
-code, pre { font-family: ui-monospace, Menlo, Consolas, monospace; font-size: 0.9em; }
-pre { background: #f6f8fa; padding: 0.8em; overflow-x: auto; border-radius: 4px; }
-table.metrics, table.bench, table.kv { border-collapse: collapse; margin: 0.8em 0;
-       font-size: 0.9em; }
-table.metrics th, table.metrics td, table.bench th, table.bench td, table.kv th, table.kv td {
-       border: 1px solid #ccc; padding: 0.25em 0.6em; text-align: right; }
-table.metrics th, table.bench th, table.kv th { background: #f0f0f0; }
-table.metrics td:first-child, table.metrics td:nth-child(2), table.bench td:first-child,
-table.kv td, table.kv th { text-align: left; }
-span.paper { background: #fff7e0; }
-.meta { color: #555; }
-.note { color: #555; font-size: 0.9em; }
-.figures { display: flex; flex-wrap: wrap; gap: 1em; }
-figure { margin: 0; max-width: 100%; }
-figure img { max-width: 100%; height: auto; border: 1px solid #eee; }
-figcaption { font-size: 0.85em; color: #444; text-align: center; }
-"""
-
 
 # --------------------------------------------------------------------------- environment
 
@@ -190,11 +178,24 @@ def _plain(obj):
     return str(obj)
 
 
-# --------------------------------------------------------------------------- html pieces
+# --------------------------------------------------------------------------- page pieces
 
-
-def _e(s) -> str:
-    return html.escape(str(s), quote=True)
+#: What each metric column means (units in the names), for the summary's legend.
+COLUMN_LEGEND = {
+    "frames": "frames of the scene evaluated",
+    "hausdorff_rms_mm": "accuracy: RMS distance from the reconstructed mesh to the seen "
+    "ground-truth surface (the paper's 'RMS Hausdorff distance'), mean over frames",
+    "hausdorff_mean_mm": "accuracy: mean of that distance, mean over frames",
+    "hausdorff_max_mm": "accuracy: largest such distance, max over frames",
+    "depth_median_mm": "median |depth error| per pixel against the ground truth rendered "
+    "into the reference camera, median over frames",
+    "depth_rms_mm": "RMS depth error per pixel, RMS over frames",
+    "normal_median_deg": "median angle between reconstructed and true normals, median over frames",
+    "coverage": "share of the ground truth's pixels that have a depth, mean over frames",
+}
+#: The summary table's metric columns (those present are shown).
+SUMMARY_COLUMNS = ("frames", "hausdorff_rms_mm", "depth_median_mm", "depth_rms_mm",
+                   "normal_median_deg", "coverage")  # fmt: skip
 
 
 def _image_src(path: Path, out_dir: Path, embed: bool) -> str:
@@ -204,22 +205,11 @@ def _image_src(path: Path, out_dir: Path, embed: bool) -> str:
     return f"data:{mime};base64," + base64.b64encode(path.read_bytes()).decode("ascii")
 
 
-def _caption(path: Path) -> str:
-    return path.stem.replace("_", " ")
-
-
-def _figure(path: Path, out_dir: Path, embed: bool, caption: str | None = None) -> str:
-    cap = caption if caption is not None else _caption(path)
-    return (
-        f'<figure><img src="{_e(_image_src(path, out_dir, embed))}" alt="{_e(cap)}">'
-        f"<figcaption>{_e(cap)}<br><code>{_e(path.name)}</code></figcaption></figure>"
-    )
-
-
-def _figures(paths: Sequence[Path], out_dir: Path, embed: bool) -> str:
-    if not paths:
-        return '<p class="note">No figures.</p>'
-    return '<div class="figures">' + "".join(_figure(p, out_dir, embed) for p in paths) + "</div>"
+def _figure(path: Path, out_dir: Path, embed: bool, cls: str = "") -> dict:
+    """A figure for the template: src, a link to the file (when linked), caption."""
+    src = _image_src(path, out_dir, embed)
+    href = None if embed else src
+    return {"src": src, "href": href, "caption": path.stem.replace("_", " "), "cls": cls}
 
 
 def _check_figures(paths: Iterable[str | Path] | str | Path, what: str) -> list[Path]:
@@ -241,55 +231,40 @@ def _check_figures(paths: Iterable[str | Path] | str | Path, what: str) -> list[
 def _table(df: pd.DataFrame, css_class: str) -> str:
     """``DataFrame.to_html`` with escaping, empty NaN cells and :func:`format_number`."""
     return df.to_html(
-        classes=css_class,
-        index=False,
-        na_rep="",
-        float_format=format_number,
-        escape=True,
-        border=0,
-    )
+        classes=css_class, index=False, na_rep="", float_format=format_number,
+        escape=True, border=0,
+    )  # fmt: skip
 
 
-def _kv_table(items: Mapping) -> str:
-    rows = "".join(f"<tr><th>{_e(k)}</th><td>{_e(v)}</td></tr>" for k, v in items.items())
-    return f'<table class="kv">{rows}</table>'
-
-
-def _scene_table(summary: pd.DataFrame, scene: str) -> tuple[str, bool]:
-    """The HTML table of one scene's variants, with the paper's numbers beside ours."""
-    t = summary[summary["scene"] == scene].drop(columns="scene").copy()
-    t.insert(1, "paper name", t["variant"].map(VARIANT_LABELS).fillna(""))
-    ref = PAPER_REFERENCE.get(scene, {})
-    ref_cols = sorted({c for per_variant in ref.values() for c in per_variant})
+def with_paper_columns(table: pd.DataFrame) -> tuple[pd.DataFrame, bool]:
+    """``table`` (columns ``scene``, ``variant``, metrics) with the paper's name of each
+    variant and, right after each metric the paper states, a column ``paper <metric>``
+    (:data:`PAPER_REFERENCE`; empty where the paper gives no number). Also returns
+    whether any such column was added."""
+    t = table.copy()
+    t.insert(t.columns.get_loc("variant") + 1, "paper name",
+             t["variant"].map(VARIANT_LABELS).fillna(""))  # fmt: skip
+    scenes = set(t["scene"]) if "scene" in t.columns else set()
+    refs = {s: PAPER_REFERENCE[s] for s in scenes if s in PAPER_REFERENCE}
+    ref_cols = sorted({c for r in refs.values() for per in r.values() for c in per})
     for c in ref_cols:
         col = f"paper {c}"
-        t[col] = t["variant"].map(lambda v, c=c: ref.get(v, {}).get(c, np.nan)).astype(float)
-        # put the paper's column right after ours
-        if c in t.columns:
+        t[col] = [refs.get(s, {}).get(v, {}).get(c, np.nan)
+                  for s, v in zip(t["scene"], t["variant"], strict=True)]  # fmt: skip
+        t[col] = t[col].astype(float)
+        if c in t.columns:  # right after our column
             cols = list(t.columns)
             cols.remove(col)
             cols.insert(cols.index(c) + 1, col)
             t = t[cols]
-    return _table(t, "metrics"), bool(ref_cols)
+    return t, bool(ref_cols)
 
 
-def _aggregation_legend(summary: pd.DataFrame) -> str:
-    words = {
-        "mean": "mean over frames",
-        "max": "max over frames",
-        "median": "median over frames",
-        "rms": "RMS over frames, sqrt(mean(x²))",
-        "sum": "sum over frames",
-    }
+def _aggregation_text(summary: pd.DataFrame) -> str:
+    words = {"mean": "mean", "max": "max", "median": "median", "rms": "RMS", "sum": "sum"}
     cols = [c for c in summary.columns if c not in ("scene", "variant", "frames")]
-    items = "; ".join(f"<code>{_e(c)}</code>: {_e(words[_aggregation_of(c)])}" for c in cols)
-    return (
-        f'<p class="note">Aggregation over a scene\'s frames: {items}. '
-        "Empty cells: no value (e.g. a scene without ground truth).</p>"
-    )
-
-
-# --------------------------------------------------------------------------- the report
+    items = "; ".join(f"{c}: {words[_aggregation_of(c)]}" for c in cols)
+    return f"Aggregation over a scene's frames: {items}."
 
 
 def _same_as_note(metrics: pd.DataFrame, scene: str) -> str:
@@ -310,6 +285,44 @@ def _same_as_note(metrics: pd.DataFrame, scene: str) -> str:
     )
 
 
+def _e(s) -> str:
+    return html.escape(str(s), quote=True)
+
+
+def _frames_note(metrics: pd.DataFrame, scene: str, figures: Sequence[Path]) -> str:
+    """Which frame the maps show, for a scene of several frames (or "")."""
+    frames = sorted(metrics.loc[metrics["scene"] == scene, "frame"].astype(str).unique())
+    if len(frames) < 2:
+        return ""
+    anim = " The animation shows every frame." if any(p.suffix == ".gif" for p in figures) else ""
+    return (
+        f"Sequence of {len(frames)} frames ({frames[0]} to {frames[-1]}): the tables "
+        f"aggregate every frame; the maps and renders show frame {frames[0]}.{anim}"
+    )
+
+
+def _file_links(results_dir, scene: str, out_dir: Path) -> dict:
+    files = result_files(results_dir, scene)
+    return {
+        v: {k: [{"href": Path(os.path.relpath(p.resolve(), out_dir.resolve())).as_posix(),
+                 "label": p.stem} for p in ps] for k, ps in kinds.items() if ps}
+        for v, kinds in files.items()
+    }  # fmt: skip
+
+
+def _template():
+    import jinja2
+
+    env = jinja2.Environment(
+        loader=jinja2.PackageLoader("colourhs", "templates"),
+        autoescape=True, undefined=jinja2.StrictUndefined, trim_blocks=True, lstrip_blocks=True,
+    )  # fmt: skip
+    return env.get_template("report.html")
+
+
+# --------------------------------------------------------------------------- the report
+
+
 def build_report(
     out_html: str | Path,
     dataset_name: str,
@@ -320,9 +333,20 @@ def build_report(
     config: Mapping | str | Path,
     extra: Mapping | None = None,
     *,
-    embed_images: bool = True,
+    embed_images: bool = False,
+    dataset=None,
+    results_dir: str | Path | None = None,
+    provenance: Mapping | None = None,
+    config_resolved: bool = False,
 ) -> Path:
     """Write the evaluation report ``reports/NAME/index.html`` and return its path.
+
+    The page (template ``colourhs/templates/report.html``) opens with a summary
+    table (scene x variant, key metrics beside the paper's numbers, a legend);
+    per scene: its description, every metric in a scrollable table, the
+    Figure 7 renders and error maps full width, the other figures as
+    thumbnails, a per-frame plot for sequences and links to the result files;
+    then timing, provenance, configuration and software versions.
 
     Parameters
     ----------
@@ -332,25 +356,35 @@ def build_report(
         The dataset's NAME (``results/NAME``).
     metrics_csv
         ``reports/NAME/metrics.csv`` of the results contract; aggregated by
-        :func:`summarise_metrics`, one table per scene.
+        :func:`summarise_metrics`.
     calibration_pngs
-        Calibration figures (mu maps, chromaticity maps), shown with their file
-        names as captions. A folder stands for its images (PNG, GIF, JPEG, SVG,
-        WebP), sorted by name.
+        Calibration figures (mu maps, chromaticity maps). A folder stands for
+        its images (PNG, GIF, JPEG, SVG, WebP), sorted by name.
     scene_figures
-        ``{scene: [figure paths]}`` (or ``{scene: folder}``): grid renders, error
-        maps, animation GIFs. Scenes here without metrics still get a section.
+        ``{scene: [figure paths]}`` (or ``{scene: folder}``), arranged by
+        :func:`colourhs.reportinfo.arrange_figures`. Scenes here without
+        metrics still get a section.
     benchmark_tsvs
-        Snakemake benchmark files ``benchmarks/snakemake/<rule>/...``; summarised
-        per rule by :func:`summarise_benchmarks` (see :func:`find_benchmarks`).
+        Snakemake benchmark files; summarised per rule by :func:`summarise_benchmarks`.
     config
         The run's configuration (a mapping, or a YAML file's path), shown as YAML.
     extra
-        Further ``{label: value}`` lines for the page's header table (e.g. the
-        dataset folder, a git commit).
+        Further ``{label: value}`` lines for the page's header table.
     embed_images
-        Embed images as base64 data URIs (default: the page stands alone); if
-        false, link them by paths relative to the page.
+        Embed images as base64 data URIs (the page then stands alone); by
+        default they are linked by paths relative to the page.
+    dataset
+        The :class:`colourhs.capture.Dataset` (or None): its rig summary and
+        the scenes' descriptions are shown.
+    results_dir
+        ``results/NAME`` (or None): each scene's meshes, error-coloured meshes
+        and depth files are linked.
+    provenance
+        ``{label: value}`` for the provenance table (default: the git commit of
+        the colourhs code and this process's command line, see
+        :func:`colourhs.reportinfo.git_provenance` and :func:`~colourhs.reportinfo.run_command`).
+    config_resolved
+        Whether ``config`` has the package's defaults filled in (said on the page).
 
     Raises
     ------
@@ -369,83 +403,55 @@ def build_report(
     bench = summarise_benchmarks(read_benchmarks(benchmark_tsvs))
     if isinstance(config, str | Path):
         config = yaml.safe_load(Path(config).read_text()) or {}
-    config_yaml = yaml.safe_dump(_plain(config), sort_keys=False, allow_unicode=True)
-    versions = software_versions()
-    generated = datetime.now(UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
+    if provenance is None:
+        provenance = {**git_provenance(Path(__file__).parent), **run_command()}
+    descriptions = scene_descriptions(dataset) if dataset is not None else {}
 
     scenes = list(dict.fromkeys([*sorted(summary["scene"].unique()), *figs]))
-    name = _e(dataset_name)
-    parts = [
-        "<!DOCTYPE html>",
-        '<html lang="en"><head><meta charset="utf-8">',
-        '<meta name="viewport" content="width=device-width, initial-scale=1">',
-        f"<title>Colour HS evaluation: {name}</title>",
-        f"<style>{_CSS}</style></head><body>",
-        f"<h1>Colour Helmholtz Stereopsis: evaluation of <code>{name}</code></h1>",
-    ]
-    header = {"dataset": dataset_name, "generated": generated}
-    header.update({str(k): v for k, v in (extra or {}).items()})
-    parts.append(_kv_table(header))
-    parts.append(
-        '<p class="meta">Reproduce with <code>colourhs run DATASET_DIR --name '
-        f"{name}</code> (writes <code>results/{name}/</code> and "
-        f"<code>reports/{name}/</code>).</p>"
-    )
-
-    # contents
-    toc = ['<li><a href="#calibration">Calibration</a></li>']
-    toc += [f'<li><a href="#scene-{_e(s)}">Scene {_e(s)}</a></li>' for s in scenes]
-    toc += ['<li><a href="#timing">Timing</a></li>', '<li><a href="#env">Configuration</a></li>']
-    parts.append("<nav><ul>" + "".join(toc) + "</ul></nav>")
-
-    # 1. calibration
-    parts.append('<h2 id="calibration">Calibration</h2>')
-    parts.append(
-        '<p class="note">Photometric calibration: mu maps per camera and light colour '
-        "(eq. 8); surface chromaticity per camera (eq. 12).</p>"
-    )
-    parts.append(_figures(calib, out_dir, embed_images))
-
-    # 2. scenes
+    key = [c for c in SUMMARY_COLUMNS if c in summary.columns]
+    top, has_paper = with_paper_columns(summary[["scene", "variant", *key]])
+    top = top.drop(columns="paper name")  # in each scene's table; the summary stays narrow
+    sections = []
     for scene in scenes:
-        parts.append(f'<h2 id="scene-{_e(scene)}">Scene <code>{_e(scene)}</code></h2>')
-        if (summary["scene"] == scene).any():
-            table, has_ref = _scene_table(summary, scene)
-            parts.append(table)
-            parts.append(_same_as_note(metrics, scene))
-            parts.append(_aggregation_legend(summary))
-            if has_ref:
-                parts.append(
-                    '<p class="note"><span class="paper">Columns "paper …"</span>: the '
-                    f"paper's numbers for a real capture of this scene, not this dataset "
-                    f"({_e(PAPER_REFERENCE_SOURCE)})</p>"
-                )
-        else:
-            parts.append('<p class="note">No metrics for this scene.</p>')
-        parts.append(_figures(figs.get(scene, []), out_dir, embed_images))
+        arranged = arrange_figures(figs.get(scene, []))
+        s = {"name": scene, "description": descriptions.get(scene, ""), "table": "",
+             "frames_note": _frames_note(metrics, scene, figs.get(scene, [])),
+             "plot": frame_error_svg(metrics, scene), "plot_caption":
+             "Median depth error per frame and variant (depth_median_mm, mm).",
+             **{k: [_figure(p, out_dir, embed_images, "wide" if k == "wide" else "")
+                    for p in ps] for k, ps in arranged.items()}}  # fmt: skip
+        rows = summary[summary["scene"] == scene]
+        if len(rows):
+            t, _ = with_paper_columns(rows)
+            s["table"] = _table(t.drop(columns="scene"), "metrics")
+            s["n_columns"] = t.shape[1] - 1
+            s["aggregation"] = _aggregation_text(summary)
+            s["same_as"] = _same_as_note(metrics, scene)
+        s["files"] = _file_links(results_dir, scene, out_dir) if results_dir else {}
+        s["n_files"] = sum(len(ls) for k in s["files"].values() for ls in k.values())
+        sections.append(s)
 
-    # 3. timing
-    parts.append('<h2 id="timing">Timing per stage</h2>')
-    if bench.empty:
-        parts.append('<p class="note">No benchmark files.</p>')
-    else:
-        parts.append(_table(bench, "bench"))
-        parts.append(
-            '<p class="note">From Snakemake <code>benchmark:</code> files: wall-clock '
-            "seconds (<code>s</code>), CPU seconds, peak resident memory "
-            "(<code>max_rss</code>, MB); row <code>all</code> totals every rule.</p>"
-        )
-
-    # 4. configuration and software
-    parts.append('<h2 id="env">Configuration and software</h2>')
-    parts.append(f"<pre>{_e(config_yaml)}</pre>")
-    env = dict(versions)
+    env = dict(software_versions())
     env["platform"] = platform.platform()
     env["python executable"] = sys.executable
     env["CPU count"] = os.cpu_count() or "unknown"
-    parts.append(_kv_table(env))
-    parts.append("</body></html>")
-
+    header = {"dataset": dataset_name,
+              "generated": datetime.now(UTC).strftime("%Y-%m-%d %H:%M:%S UTC")}  # fmt: skip
+    header.update({str(k): v for k, v in (extra or {}).items()})
+    page = _template().render(
+        name=dataset_name, header=header,
+        reproduce=provenance.get("workflow command")
+        or f"colourhs run DATASET_DIR --name {dataset_name}",
+        summary_table=_table(top, "summary") if len(top) else "", has_paper=has_paper,
+        legend={c: COLUMN_LEGEND[c] for c in key if c in COLUMN_LEGEND}
+        | ({"paper …": "the paper's number (see below)"} if has_paper else {}),
+        paper_source=PAPER_REFERENCE_SOURCE,
+        calibration=[_figure(p, out_dir, embed_images) for p in calib], scenes=sections,
+        timing_table=_table(bench, "bench") if not bench.empty else "",
+        provenance=provenance, rig=rig_summary(dataset) if dataset is not None else {},
+        env=env, config_resolved=config_resolved,
+        config_yaml=yaml.safe_dump(_plain(config), sort_keys=False, allow_unicode=True),
+    )  # fmt: skip
     with atomic_output(out) as tmp:
-        tmp.write_text("\n".join(parts) + "\n", encoding="utf-8")
+        tmp.write_text(page, encoding="utf-8")
     return out

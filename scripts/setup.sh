@@ -7,6 +7,8 @@ cd "$(dirname "$0")/.."
 
 # System libraries that open3d and pymeshlab load, and venv support.
 pkgs=(libusb-1.0-0 libgl1 libegl1 libx11-6 libudev1 libglib2.0-0 libgomp1)
+# Headless Chromium for the report's browser test (tests/test_report_browser.py).
+pkgs+=(chromium)
 py=$(command -v python3.11 || command -v python3)
 if ! "$py" -m venv --help >/dev/null 2>&1 || ! "$py" -c "import ensurepip" >/dev/null 2>&1; then
   pkgs+=(python3-venv)

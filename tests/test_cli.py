@@ -82,7 +82,8 @@ def test_run_does_the_whole_job_through_snakemake(tiny_dataset, tmp_path):
             a, b = res / scene / "bayes_full" / kind, res / scene / "bayes_ph" / kind
             assert a.read_bytes() == b.read_bytes()
     html = (tmp_path / "reports" / "t" / "index.html").read_text()
-    assert "bayes_full" in html and "data:image/png;base64," in html
+    assert "bayes_full" in html and "base64," not in html and 'src="figures/sheet/' in html
+    assert "workflow command" in html and "frames per scene" in html  # provenance, rig
     assert "<code>bayes_full</code> is <code>bayes_ph</code> on this scene" in html
     assert (tmp_path / "reports" / "t" / "figures" / "sheet" / "animation.gif").exists()
     # A second run does nothing.

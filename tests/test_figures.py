@@ -9,13 +9,15 @@ import open3d as o3d
 import pytest
 from PIL import Image
 
-from colourhs.colours import value_colours
+from colourhs.colours import colour_values, value_colours
 from colourhs.figures import (
     depth_map_figure,
     error_map_figure,
+    error_maps_figure,
     normal_map_figure,
     render_grid_figure,
     shaded_render,
+    shared_scale_images,
     write_animation,
 )
 
@@ -147,3 +149,81 @@ def test_render_grid_figure(tmp_path):
     assert full.shape[0] > row.shape[0] * 1.5  # two rows
     with pytest.raises(ValueError):
         render_grid_figure({}, tmp_path / "none.png")
+
+
+def test_shared_scale_and_error_maps_figure(tmp_path):
+    a = np.array([[0.0, 1.0], [2.0, np.nan]])
+    b = np.array([[2.0, 10.0], [1.0, 0.0]])
+    images, vmax = shared_scale_images({"vh": a, "bayes_full": b})
+    # the median of each map's 95th percentile: (1.9 + 8.8) / 2 mm
+    assert vmax == pytest.approx(5.35)
+    # one scale: the same error has the same colour in both maps
+    np.testing.assert_array_equal(images["vh"][1, 0], images["bayes_full"][0, 0])  # 2 mm
+    np.testing.assert_array_equal(images["vh"][0, 1], images["bayes_full"][1, 0])  # 1 mm
+    np.testing.assert_array_equal(images["vh"][1, 1], [255, 255, 255])  # NaN: background
+    assert shared_scale_images({"x": b}, vmax=4.0)[1] == 4.0
+    # one figure with the panels side by side and a colour bar (wider than without)
+    img = np.full((30, 40, 3), 200, np.uint8)
+    plain = cv2.imread(str(render_grid_figure({"a": img, "b": img}, tmp_path / "p.png")))
+    path = error_maps_figure({"vh": a, "bayes_full": b}, tmp_path / "e.png", "|dz|")
+    fig = cv2.imread(str(path))
+    assert fig.shape[1] - plain.shape[1] == pytest.approx(110, abs=2)  # 1.1 in at 100 dpi
+    with pytest.raises(ValueError, match="no finite values"):
+        error_maps_figure({"vh": np.full((2, 2), np.nan)}, tmp_path / "x.png", "e")
+
+
+def test_colour_values_inverts_value_colours():
+    v = np.array([0.0, 0.3, 1.7, 2.5, np.nan, 4.0])
+    rgb8 = np.round(value_colours(v, 0.0, 2.5) * 255).astype(np.uint8)  # as a PLY stores them
+    back = colour_values(rgb8, 0.0, 2.5)
+    finite = np.isfinite(v)
+    np.testing.assert_allclose(back[finite], np.clip(v[finite], 0, 2.5), atol=2.5 / 255)
+    assert np.isnan(back[4])  # the no-value grey
+
+
+def test_scene_figures_share_one_scale(tmp_path):
+    """Two variants (depth 1 mm and 3 mm behind a sphere's truth): one depth-error and one
+    normal-error figure for both, Figure 7, and hausdorff.png from error-coloured meshes
+    whose own colour scales differ (2 and 8 mm), recoloured on one scale."""
+    import json
+
+    from colourhs.capture import Camera
+    from colourhs.depthfile import DepthResult, write_depth
+    from colourhs.figures import scene_figures
+    from colourhs.geometry import look_at, vertex_normals
+    from colourhs.ply import write_ply
+    from colourhs.raycast import render_depth_normals
+
+    v, f = _sphere(30)
+    n = vertex_normals(v, f)
+    R, t = look_at(np.array([0.0, 0.0, -0.5]), np.zeros(3))
+    cam = Camera("cam1", K, np.zeros(5), R, t, "red", np.zeros(3))
+    gd, gn = render_depth_normals(v, f, n, cam, W, H)
+    gt = write_ply(tmp_path / "gt.ply", v, f, n)
+    depths, meshes, coloured = {}, {}, {}
+    for variant, dz_mm, top in (("vh", 3.0, 8.0), ("bayes_full", 1.0, 2.0)):
+        ok = np.isfinite(gd)
+        res = DepthResult((gd + dz_mm / 1e3).astype(np.float32), gn.astype(np.float32),
+                          ok.astype(np.float32), ok, {})  # fmt: skip
+        depths[variant] = tmp_path / f"{variant}.h5"
+        write_depth(depths[variant], res, cam, {"method": "test"})
+        meshes[variant] = gt
+        coloured[variant] = tmp_path / f"{variant}_eval.ply"
+        write_ply(coloured[variant], v, f, n, colours=value_colours(np.full(len(v), dz_mm), 0, top))
+        coloured[variant].with_suffix(".json").write_text(json.dumps({"colour_vmax_mm": top}))
+    written = scene_figures(tmp_path / "figs", depths, meshes, gt, coloured=coloured)
+    names = sorted(p.name for p in written)
+    assert names == ["bayes_full_depth.png", "bayes_full_normal.png", "depth_error.png",
+                     "figure7.png", "hausdorff.png", "normal_error.png", "vh_depth.png",
+                     "vh_normal.png"]  # fmt: skip
+    # one scale, 0 to 2 mm (the median of the variants' 3 and 1 mm): the centre of vh's
+    # panel has the top colour (3 mm, saturated), bayes_full's half of it (1 mm), in both
+    # figures (each PLY's own scale had 3/8 and 1/2 of its top: vh the darker one)
+    for name, cmap in (("hausdorff.png", "viridis"), ("depth_error.png", "inferno")):
+        img = cv2.imread(str(tmp_path / "figs" / name))[..., ::-1].astype(float)
+        row = img[img.shape[0] // 2]
+        cols = np.flatnonzero(np.any(row < 250, axis=-1))
+        runs = np.split(cols, np.flatnonzero(np.diff(cols) > 1) + 1)[:2]  # the two panels
+        for run, mm in zip(runs, (3.0, 1.0), strict=True):
+            want = value_colours(np.array([mm]), 0.0, 2.0, cmap)[0] * 255
+            np.testing.assert_allclose(row[run[len(run) // 2]], want, atol=12)  # shaded 0.97

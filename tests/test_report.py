@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import base64
 import math
+import re
 from html.parser import HTMLParser
 from pathlib import Path
 
@@ -25,6 +26,7 @@ from colourhs.report import (
     summarise_benchmarks,
     summarise_metrics,
 )
+from colourhs.reportinfo import arrange_figures, git_provenance, resolve_config
 
 HEADER = "s\th:m:s\tmax_rss\tmax_vms\tmax_uss\tmax_pss\tio_in\tio_out\tmean_load\tcpu_time\n"
 VARIANTS = ("bayes_ph", "vh", "bayes_nocalib")  # deliberately not in the paper's order
@@ -178,6 +180,7 @@ def report(tmp_path, metrics_csv, images, benchmarks) -> Path:
         benchmarks,
         config,
         extra={"dataset folder": "data/<demo>"},
+        embed_images=True,
     )
 
 
@@ -354,7 +357,6 @@ def test_report_links_instead_of_embedding(tmp_path, metrics_csv, images):
         {"plane": images["plane"]},
         [],
         {},
-        embed_images=False,
     )
     text = out.read_text(encoding="utf-8")
     assert "base64" not in text
@@ -405,8 +407,128 @@ def test_folders_config_file_and_find_benchmarks(tmp_path, metrics_csv, images, 
         {"plane": images["plane"][0].parent},
         find_benchmarks(root, "demo"),
         config,
+        embed_images=True,
     )
     text = out.read_text(encoding="utf-8")
     assert text.count("data:image/png;base64,") == 6 and text.count("data:image/gif;") == 2
     assert "lambda: 0.25" in text
     assert _as_dicts(_tables(text)["timing"][0])["all"]["total_s"] == "16.1"
+
+
+# --------------------------------------------------------------------------- layout and provenance
+
+
+def _fake_dataset(root: Path):
+    """A stand-in for colourhs.capture.Dataset with what the report reads."""
+    from types import SimpleNamespace as NS
+
+    cams = tuple(NS(name=f"cam{i}", light_colour=c) for i, c in enumerate(("red", "green", "blue")))
+    scenes = {
+        "plane": NS(frames=("000000",), dynamic=False, chromatic=None, has_gt=True,
+                    description="held-out <board> pose"),
+        "sheet": NS(frames=tuple(f"{i:06d}" for i in range(4)), dynamic=True,
+                    chromatic="slinky", has_gt=False, description=""),
+    }  # fmt: skip
+    rig = NS(cameras=cams, image=NS(width=640, height=480, bit_depth=16))
+    return NS(root=root, rig=rig, poses=("p0", "p1"), chromatic_objects=("slinky",), scenes=scenes)
+
+
+def test_report_layout_provenance_and_links(tmp_path, metrics_csv, images):
+    """Summary table with legend first, Figure 7 full width, other figures as linked
+    thumbnails, rig and scene.json facts, result-file links, git provenance."""
+    results = tmp_path / "results" / "demo"
+    for v, kind, name in [
+        ("bayes_ph", "mesh", "000000.ply"),
+        ("bayes_ph", "eval", "000000.ply"),
+        ("bayes_ph", "depth", "000000.h5"),
+        ("vh", "mesh", "000000.ply"),
+    ]:
+        (results / "plane" / v / kind).mkdir(parents=True, exist_ok=True)
+        (results / "plane" / v / kind / name).write_text("x")  # fmt: skip
+    figs = images["plane"][0].parent
+    for stem in ("figure7", "vh_depth_error", "vh_depth", "bayes_ph_depth"):
+        assert cv2.imwrite(str(figs / f"{stem}.png"), np.zeros((4, 4, 3), np.uint8))
+    out = build_report(
+        tmp_path / "reports" / "demo" / "index.html", "demo", metrics_csv, [],
+        {"plane": [figs / f for f in ("vh_depth.png", "figure7.png", "bayes_ph_depth.png",
+                                      "vh_depth_error.png")]},
+        [], {}, dataset=_fake_dataset(tmp_path / "data"), results_dir=results,
+    )  # fmt: skip
+    text = out.read_text(encoding="utf-8")
+    tables = _tables(text)
+    # the summary (first section) with the key columns and the paper's number
+    (summary,) = tables["summary"]
+    assert summary[0] == ["scene", "variant", "frames", "hausdorff_rms_mm",
+                          "paper hausdorff_rms_mm", "depth_median_mm", "depth_rms_mm",
+                          "normal_median_deg", "coverage"]  # fmt: skip
+    assert len(summary) == 1 + 6 and summary[3][:5] == ["plane", "bayes_ph", "2", "2.50", "2.00"]
+    assert text.index('id="summary"') < text.index('id="scene-plane"')
+    assert "<dt>hausdorff_rms_mm</dt><dd>accuracy: RMS distance" in text
+    # figures: Figure 7 first and wide, error maps next, then thumbnails linked to full size
+    wide = text.index('<figure class="wide"><a href="../../results/demo/figures/figure7.png">')
+    assert wide < text.index("vh_depth_error.png") < text.index("vh_depth.png")
+    assert text.index("vh_depth.png") < text.index("bayes_ph_depth.png")  # paper's order
+    assert '<a href="../../results/demo/figures/vh_depth.png"><img' in text
+    # rig summary and scene.json
+    rig = {r[0]: r[1] for r in tables["provenance"][1]}
+    assert rig["cameras"] == "3: cam0 (red light), cam1 (green light), cam2 (blue light)"
+    assert (
+        rig["image"] == "640 x 480 px, 16 bit" and rig["frames per scene"] == "plane: 1, sheet: 4"
+    )
+    assert "held-out &lt;board&gt; pose (static; white surface; ground truth)" in text
+    assert "dynamic, 4 frames; chromatic object slinky; no ground truth" in text
+    # result files, relative to the page
+    for rel in (
+        "bayes_ph/mesh/000000.ply",
+        "bayes_ph/eval/000000.ply",
+        "bayes_ph/depth/000000.h5",
+        "vh/mesh/000000.ply",
+    ):
+        assert f'href="../../results/demo/plane/{rel}"' in text  # fmt: skip
+    assert "Result files (4)" in text
+    # provenance: this checkout's commit
+    prov = {r[0]: r[1] for r in tables["provenance"][0]}
+    assert re.fullmatch(r"[0-9a-f]{40}", prov["git commit"]), prov
+    assert prov["git work tree"] in ("clean",) or prov["git work tree"].startswith("modified (")
+    assert prov["report command"]
+
+
+def test_sequence_plot_and_frame_note(tmp_path, metrics_csv, images):
+    out = build_report(tmp_path / "index.html", "demo", metrics_csv, [], {"plane": []}, [], {})
+    text = out.read_text(encoding="utf-8")
+    # two frames: the maps' frame is named and the depth error is plotted over frames
+    assert "Sequence of 2 frames (000000 to 000001)" in text
+    assert "the maps and renders show frame 000000." in text
+    plane = text[text.index('id="scene-plane"') : text.index('id="scene-sheet"')]
+    assert plane.count("<svg") == 1 and "Median depth error per frame" in plane
+    sheet = text[text.index('id="scene-sheet"') : text.index('id="timing"')]
+    assert "<svg" not in sheet  # no finite depth errors: no plot
+
+
+def test_git_provenance_and_resolve_config(tmp_path):
+    assert git_provenance(tmp_path) == {"git commit": "not a git checkout"}
+    config = {"reconstruction": {"params": {"alpha": 2.0}, "variants": None},
+              "calibration": {"photometric": {"step_px": None, "coupling": 0.5}},
+              "datasets": {"a": {"path": "x", "calibration": {"photometric": {"step_px": 9}}},
+                           "b": {"path": "y"}}}  # fmt: skip
+    r = resolve_config(config, {"alpha": 1.0, "tau": 3}, {"step_px": 4, "coupling": 0.1})
+    assert r["reconstruction"] == {"params": {"alpha": 2.0, "tau": 3}, "variants": None}
+    assert r["calibration"]["photometric"] == {"step_px": 4, "coupling": 0.5}
+    own = r["datasets"]["a"]["calibration"]["photometric"]
+    assert own == {"step_px": 9, "coupling": 0.5} and r["datasets"]["b"] == {"path": "y"}
+    assert config["datasets"]["a"]["calibration"]["photometric"] == {"step_px": 9}
+    assert config["reconstruction"]["params"] == {"alpha": 2.0}  # not changed in place
+
+
+def test_arrange_figures_and_template_is_package_data():
+    from importlib.resources import files
+
+    names = ["bayes_ph_normal.png", "hausdorff.png", "vh_normal_error.png", "animation.gif",
+             "vh_depth.png", "figure7.png", "bayes_ph_depth.png", "vh_depth_error.png"]  # fmt: skip
+    a = arrange_figures([Path(n) for n in names])
+    assert [p.name for p in a["wide"]] == ["figure7.png", "hausdorff.png"]
+    assert [p.name for p in a["errors"]] == ["vh_depth_error.png", "vh_normal_error.png"]
+    thumbs = ["animation.gif", "vh_depth.png", "bayes_ph_depth.png", "bayes_ph_normal.png"]
+    assert [p.name for p in a["thumbs"]] == thumbs  # by kind, then the paper's variant order
+    assert (files("colourhs") / "templates" / "report.html").is_file()
+    assert 'colourhs = ["templates/*.html"]' in Path("pyproject.toml").read_text()

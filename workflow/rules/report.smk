@@ -67,8 +67,10 @@ rule report:
             shlex.quote(f"{Path(d).name}={d}")
             for d in report_inputs(w.name)["figures"]
         ),
+        dataset=lambda w: dataset_path(w.name),
     shell:
         '"$COLOURHS_PYTHON" -m colourhs report {output:q} --name {wildcards.name} '
         "--metrics {input.metrics:q} --config {input.config:q} "
         "--calibration {input.calibration:q} --figures {params.figures} "
+        "--dataset {params.dataset:q} --results results/{wildcards.name} "
         "--benchmarks benchmarks/snakemake > {log:q} 2>&1"

@@ -1,0 +1,149 @@
+"""The evaluation report as a browser shows it (headless Chromium at 1400 x 900).
+
+Reports are built from synthetic inputs shaped like a real run's (five variants,
+every metric column of colourhs.evaluate, the figures colourhs.figures writes
+at their real pixel sizes), loaded by ``chromium --headless --dump-dom`` with a
+small script that writes the page's measurements into the DOM on ``load``, and
+by ``--screenshot``. Skipped when no Chromium is installed (scripts/setup.sh
+installs Debian's ``chromium``).
+"""
+
+from __future__ import annotations
+
+import html
+import json
+import re
+import shutil
+import subprocess
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pandas as pd
+import pytest
+from PIL import Image
+
+from colourhs.report import REQUIRED_COLUMNS, build_report
+from colourhs.variants import VARIANT_ORDER
+
+CHROMIUM = next(
+    (p for p in map(shutil.which, ("chromium", "chromium-browser", "google-chrome")) if p), None
+)
+pytestmark = pytest.mark.skipif(
+    CHROMIUM is None, reason="no chromium on PATH (scripts/setup.sh installs Debian's chromium)"
+)
+WIDTH, HEIGHT = 1400, 900
+# colourhs.evaluate's extra columns (not imported: it loads open3d, 7 s here)
+EXTRA_COLUMNS = (
+    "hausdorff_median_mm", "completeness_rms_mm", "completeness_mean_mm", "completeness_max_mm",
+    "depth_p95_mm", "coverage", "hausdorff_samples", "completeness_samples", "outside_share",
+)  # fmt: skip
+
+# Written into the page on load: overflow, the images' state, the page height, the
+# summary table's scroll and client widths, the displayed width of Figure 7.
+MEASURE = """<script>addEventListener("load", () => {
+  const d = document.documentElement, imgs = [...document.images];
+  const f7 = imgs.filter(i => /figure7/.test(i.src)).map(i => i.clientWidth);
+  const wide = [...document.querySelectorAll("body *")].filter(e =>
+    !e.parentElement.closest(".scroll, pre") && e.getBoundingClientRect().right > innerWidth)
+    .map(e => e.tagName + "." + e.className);
+  const summary = document.querySelector("#summary + .scroll");
+  d.dataset.measure = JSON.stringify({scrollWidth: d.scrollWidth, height: d.scrollHeight,
+    summary: [summary.scrollWidth, summary.clientWidth],
+    images: imgs.length, broken: imgs.filter(i => !i.complete || i.naturalWidth === 0)
+    .map(i => i.getAttribute("src")), figure7: f7, wide: wide});
+});</script>"""
+
+
+def _png(path: Path, w: int, h: int, value: int) -> None:
+    img = np.full((h, w, 3), value, np.uint8)
+    img[h // 4 : 3 * h // 4, w // 4 : 3 * w // 4] = 255 - value
+    assert cv2.imwrite(str(path), img)
+
+
+def _make_report(root: Path, n_scenes: int, n_frames: int) -> Path:
+    """A report of ``n_scenes`` scenes of ``n_frames`` frames, five variants each."""
+    rng = np.random.default_rng(n_scenes * 100 + n_frames)
+    scenes = ["plane"] + [f"scene{i}" for i in range(1, n_scenes)]  # plane: the paper's column
+    frames = [f"{f:06d}" for f in range(n_frames)]
+    metric_cols = [*REQUIRED_COLUMNS[3:], *EXTRA_COLUMNS]
+    rows = [
+        {
+            "scene": s,
+            "frame": f,
+            "variant": v,
+            **dict(zip(metric_cols, rng.uniform(0, 9, 15), strict=True)),
+        }
+        for s in scenes
+        for f in frames
+        for v in VARIANT_ORDER
+    ]
+    metrics = root / "reports" / "demo" / "metrics.csv"
+    metrics.parent.mkdir(parents=True)
+    pd.DataFrame(rows, columns=[*REQUIRED_COLUMNS, *EXTRA_COLUMNS]).to_csv(metrics, index=False)
+    figures = {}
+    for i, s in enumerate(scenes):
+        d = root / "reports" / "demo" / "figures" / s
+        d.mkdir(parents=True)
+        _png(d / "figure7.png", 1820, 300, 40 * i)  # render_grid_figure's size, 6 panels
+        for stem in ("depth_error", "normal_error", "hausdorff"):  # 3 x 2 panels, colour bar
+            _png(d / f"{stem}.png", 1030, 560, 60)
+        for v in VARIANT_ORDER:
+            _png(d / f"{v}_depth.png", 630, 425, 90)  # _image_axes with a colour bar
+            _png(d / f"{v}_normal.png", 520, 425, 120)
+        if n_frames > 1:
+            ims = [Image.fromarray(np.full((480, 640, 3), 30 * k, np.uint8)) for k in range(3)]
+            ims[0].save(d / "animation.gif", save_all=True, append_images=ims[1:], loop=0)
+        figures[s] = d
+    calib = root / "results" / "demo" / "calib"
+    calib.mkdir(parents=True)
+    _png(calib / "photometric.png", 1080, 720, 100)
+    _png(calib / "chromaticity_toy.png", 1200, 400, 200)
+    long_value = "/a/very/long/path/without/any/spaces/" * 8  # must wrap, not overflow
+    config = {"datasets": {"demo": {"path": long_value}}, "reconstruction": {"params": {}}}
+    return build_report(
+        root / "reports" / "demo" / "index.html", "demo", metrics,
+        sorted(calib.iterdir()), figures, [], config, extra={"note": long_value},
+    )  # fmt: skip
+
+
+def _start(page: Path, screenshot: Path | None = None) -> subprocess.Popen:
+    """Load ``page`` (a copy with :data:`MEASURE` added, beside it) in headless Chromium."""
+    probe = page.with_name("_measure.html")
+    probe.write_text(page.read_text(encoding="utf-8").replace("</body>", MEASURE + "</body>"))
+    cmd = [CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
+           f"--window-size={WIDTH},{HEIGHT}", "--dump-dom", probe.as_uri()]  # fmt: skip
+    if screenshot is not None:
+        cmd.insert(-2, f"--screenshot={screenshot}")
+    return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def _measurements(run: subprocess.Popen) -> dict:
+    """What :data:`MEASURE` wrote, from Chromium's DOM dump."""
+    out, err = run.communicate(timeout=120)
+    m = re.search(r'data-measure="([^"]*)"', out)
+    assert m, f"no measurements from chromium (rc {run.returncode}): {err[-2000:]}"
+    return json.loads(html.unescape(m.group(1)))
+
+
+def test_report_fits_1400px_and_stays_short(tmp_path):
+    runs = [_start(_make_report(tmp_path / "s2f1", 2, 1), tmp_path / "report.png"),
+            _start(_make_report(tmp_path / "s6f1", 6, 1)),
+            _start(_make_report(tmp_path / "s2f30", 2, 30))]  # fmt: skip
+    small, many, long = map(_measurements, runs)
+    for m in (small, many, long):
+        assert m["scrollWidth"] <= WIDTH, m["wide"]  # measured 1400: nothing wider
+        assert not m["wide"]
+        assert m["broken"] == []  # every <img> loaded
+        assert m["summary"][0] <= m["summary"][1], m["summary"]  # the summary needs no scrolling
+        # Figure 7 full width (the body's 72 em less padding), not a ~100 px tile
+        assert all(1050 <= w <= 1160 for w in m["figure7"]), m["figure7"]
+    assert small["images"] == 2 + 2 * 14 and long["images"] == 2 + 2 * 15  # + animation
+    shot = Image.open(tmp_path / "report.png")
+    assert shot.size == (WIDTH, HEIGHT)
+    # height: linear in scenes, nearly flat in frames
+    per_scene = (many["height"] - small["height"]) / 4
+    assert 2500 < per_scene < 3500, per_scene  # measured 3059 px
+    assert small["height"] < 9000, small["height"]  # measured 8224 px
+    # 30 frames: a per-frame plot and the animation (measured +1112 px for two scenes)
+    assert 0 < long["height"] - small["height"] < 1500, (long["height"], small["height"])
