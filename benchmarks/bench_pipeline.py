@@ -42,11 +42,13 @@ def main() -> None:
             if args.render or "synth" not in f.parts:
                 f.unlink()
     t = time.perf_counter()
-    subprocess.run([sys.executable, "-m", "snakemake", "--cores", str(args.cores)], cwd=ROOT,
-                   check=True)  # fmt: skip
+    subprocess.run(
+        [sys.executable, "-m", "snakemake", "--cores", str(args.cores)], cwd=ROOT, check=True
+    )
     wall = time.perf_counter() - t
-    table = summarise_benchmarks(read_benchmarks(find_benchmarks(ROOT / "benchmarks" / "snakemake",
-                                                                 "demo")))  # fmt: skip
+    table = summarise_benchmarks(
+        read_benchmarks(find_benchmarks(ROOT / "benchmarks" / "snakemake", "demo"))
+    )
     result = {
         "command": f"snakemake --cores {args.cores}",
         "fresh": args.fresh,

@@ -53,8 +53,9 @@ def main() -> None:
     args = ap.parse_args()
     name = Path(args.dataset).name
     cal = Path("results") / name / "calib"
-    frame = load_frame(args.dataset, args.scene, "000000", cal / "crosstalk.json",
-                       cal / "photometric.h5")  # fmt: skip
+    frame = load_frame(
+        args.dataset, args.scene, "000000", cal / "crosstalk.json", cal / "photometric.h5"
+    )
     rig = frame.rig
     ref = rig.cameras[0]
     W, H = rig.image.width, rig.image.height
@@ -65,18 +66,30 @@ def main() -> None:
     prepared = prepare_images(frame.images, frame.saturated, pairs, frame.mu, None, None)
     data_term(rays[:64], ref.centre, depths, rig.cameras, prepared, pairs)  # JIT warm-up
     chunk = rays[: 16384 * 4]
-    whole = rates(lambda: data_term(chunk, ref.centre, depths, rig.cameras, prepared, pairs),
-                  len(chunk) * len(depths), args.repeat)  # fmt: skip
+    whole = rates(
+        lambda: data_term(chunk, ref.centre, depths, rig.cameras, prepared, pairs),
+        len(chunk) * len(depths),
+        args.repeat,
+    )
     fg = prepare_images(frame.images, frame.saturated, pairs, frame.mu, None, frame.silhouettes)
     sil = frame.silhouettes[0].ravel() if frame.silhouettes is not None else np.ones(H * W, bool)
     sel = rays[sil][: 16384 * 4]
-    fg_rate = rates(lambda: data_term(sel, ref.centre, depths, rig.cameras, fg, pairs),
-                    len(sel) * len(depths), args.repeat)  # fmt: skip
+    fg_rate = rates(
+        lambda: data_term(sel, ref.centre, depths, rig.cameras, fg, pairs),
+        len(sel) * len(depths),
+        args.repeat,
+    )
     few = sel[:2000]
-    plain = rates(lambda: reference_data_term(few, ref.centre, depths, rig.cameras, fg, pairs),
-                  len(few) * len(depths), 1)  # fmt: skip
-    compiled = rates(lambda: data_term(few, ref.centre, depths, rig.cameras, fg, pairs),
-                     len(few) * len(depths), args.repeat)  # fmt: skip
+    plain = rates(
+        lambda: reference_data_term(few, ref.centre, depths, rig.cameras, fg, pairs),
+        len(few) * len(depths),
+        1,
+    )
+    compiled = rates(
+        lambda: data_term(few, ref.centre, depths, rig.cameras, fg, pairs),
+        len(few) * len(depths),
+        args.repeat,
+    )
     reconstruct(frame, "bayes", n_labels=args.labels)  # warm-up of every kernel
     t = time.perf_counter()
     res = reconstruct(frame, "bayes", n_labels=args.labels)

@@ -76,14 +76,16 @@ def main() -> None:
             "machine": platform.machine(),
             "wall_s": round(wall, 2),
             "cpu_s": round(
-                (c1.user - c0.user) + (c1.system - c0.system)
+                (c1.user - c0.user)
+                + (c1.system - c0.system)
                 + (c1.children_user - c0.children_user)
-                + (c1.children_system - c0.children_system), 2
+                + (c1.children_system - c0.children_system),
+                2,
             ),
             "peak_rss_tree_mb": round(peak[0] / 2**20, 1),
             "images": sum(p.suffix == ".png" for p in files),
             "dataset_mb": round(sum(p.stat().st_size for p in files) / 2**20, 1),
-        }  # fmt: skip
+        }
     (HERE / "results").mkdir(exist_ok=True)
     path = HERE / "results" / f"synth_{args.preset}.json"
     path.write_text(json.dumps(result, indent=2))

@@ -44,8 +44,14 @@ def main(name: str = "demo") -> dict:
         p = row[["point_x", "point_y", "point_z"]].to_numpy(float)
         ang = np.degrees(np.arccos(np.clip(n @ n_true, -1, 1)))
         off = max(abs((p_true - p) @ n), abs((p - p_true) @ n_true)) * 1e3
-        poses.append({"pose": row["pose"], "normal_err_deg": ang, "offset_err_mm": off,
-                      "rms_px": float(row["rms_px"])})  # fmt: skip
+        poses.append(
+            {
+                "pose": row["pose"],
+                "normal_err_deg": ang,
+                "offset_err_mm": off,
+                "rms_px": float(row["rms_px"]),
+            }
+        )
     out["marker_poses"] = poses
 
     with h5py.File(calib / "photometric.h5") as f:

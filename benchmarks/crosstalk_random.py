@@ -85,8 +85,14 @@ def run_seed(root: Path, preset: str, seed: int, workers: int) -> dict:
     t2 = time.time()
     today = errors(load_crosstalk(root / f"{preset}-seed{seed}_today.json"), truth)
     ours = errors(load_crosstalk(root / f"{preset}-seed{seed}_new.json"), truth)
-    return {"seed": seed, "today": today, "new": ours, "time_today_s": t1 - t0,
-            "time_new_s": t2 - t1, "led_fit": new["led_fit"]}  # fmt: skip
+    return {
+        "seed": seed,
+        "today": today,
+        "new": ours,
+        "time_today_s": t1 - t0,
+        "time_new_s": t2 - t1,
+        "led_fit": new["led_fit"],
+    }
 
 
 def main(argv=None) -> int:
@@ -104,8 +110,10 @@ def main(argv=None) -> int:
         for method in ("today", "new"):
             cells = "  ".join(f"{c} {m * 100:.3f}/{q * 100:.3f}" for c, (m, q) in r[method].items())
             print(f"seed {s} {method:5s} max/RMS %: {cells}", flush=True)
-        print(f"seed {s} times: today {r['time_today_s']:.1f} s, new {r['time_new_s']:.1f} s",
-              flush=True)  # fmt: skip
+        print(
+            f"seed {s} times: today {r['time_today_s']:.1f} s, new {r['time_new_s']:.1f} s",
+            flush=True,
+        )
     print(f"\n{args.preset}, {len(results)} seeds: |M_est(u) - M_true(u)|, % of full scale")
     print("method  stat  median-seed  worst-seed   (per seed: worst camera)")
     for method in ("today", "new"):

@@ -68,24 +68,41 @@ def run_rung(seed: int, preset, name: str, nuisances, root: Path) -> list[dict]:
 
     exact = name == "exact"
     t0 = time.time()
-    data = synthesise(root / name / "data", preset, seed=seed, nuisances=nuisances, exact=exact,
-                      scenes=SCENES, progress=False)  # fmt: skip
+    data = synthesise(
+        root / name / "data",
+        preset,
+        seed=seed,
+        nuisances=nuisances,
+        exact=exact,
+        scenes=SCENES,
+        progress=False,
+    )
     files = calibrate(data, root / name / "calib")
     mu = calibration_errors(data, files)["mu_rms_log_worst"]
     if exact:
-        files = {"photometric": data / "gt" / "photometric.h5", "crosstalk": None,
-                 "noise": None}  # fmt: skip
+        files = {"photometric": data / "gt" / "photometric.h5", "crosstalk": None, "noise": None}
     rows = []
     for scene in SCENES:
         for variant in VARIANTS:
             m = evaluate_variant(
                 data, scene, ["000000"], variant, files, None, root / name / "work"
             )
-            rows.append({"seed": seed, "rung": name, "scene": scene, "variant": variant,
-                         "mu_rms_log_worst": mu, **m})  # fmt: skip
-            print(f"seed {seed} {name:13s} {scene:6s} {variant:9s} depth {m['depth_median_mm']:.3f}"
-                  f" mm (signed {m['depth_signed_median_mm']:+.3f}) coverage {m['coverage']:.3f}"
-                  f" mu {mu:.4f} ({time.time() - t0:.0f} s)", flush=True)  # fmt: skip
+            rows.append(
+                {
+                    "seed": seed,
+                    "rung": name,
+                    "scene": scene,
+                    "variant": variant,
+                    "mu_rms_log_worst": mu,
+                    **m,
+                }
+            )
+            print(
+                f"seed {seed} {name:13s} {scene:6s} {variant:9s} depth {m['depth_median_mm']:.3f}"
+                f" mm (signed {m['depth_signed_median_mm']:+.3f}) coverage {m['coverage']:.3f}"
+                f" mu {mu:.4f} ({time.time() - t0:.0f} s)",
+                flush=True,
+            )
     return rows
 
 

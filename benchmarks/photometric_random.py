@@ -64,8 +64,11 @@ def load_baseline(rev: str):
     """The module ``colourhs/photometric.py`` as it was at git revision ``rev``."""
     src = subprocess.run(
         ["git", "show", f"{rev}:colourhs/photometric.py"],
-        cwd=ROOT, check=True, capture_output=True, text=True,
-    ).stdout  # fmt: skip
+        cwd=ROOT,
+        check=True,
+        capture_output=True,
+        text=True,
+    ).stdout
     path = Path(tempfile.mkdtemp()) / f"photometric_{rev}.py"
     path.write_text(src)
     spec = importlib.util.spec_from_file_location(f"photometric_{rev}", path)
@@ -89,8 +92,16 @@ def dataset(root: Path, preset: str, seed: int, nuisances: str, n_poses: int | N
     if not (out / "rig.json").exists():
         nuis = Nuisances().without("crosstalk") if nuisances == "noxt" else Nuisances()
         t = time.time()
-        synthesise(out, preset, seed=seed, scenes=("plane",), nuisances=nuis, progress=False,
-                   parts=("photometric", "chromatic", "scenes"), overwrite=True)  # fmt: skip
+        synthesise(
+            out,
+            preset,
+            seed=seed,
+            scenes=("plane",),
+            nuisances=nuis,
+            progress=False,
+            parts=("photometric", "chromatic", "scenes"),
+            overwrite=True,
+        )
         print(f"rendered {out} in {time.time() - t:.0f} s", flush=True)
     return out
 
@@ -156,13 +167,22 @@ def run(args) -> pd.DataFrame:
                     result = mod.calibrate(rig, sub)
                     dt = time.time() - t
                     maps, pairs = score(result, truth, rig, gt, [v.name for v in sub])
-                    base = {"seed": seed, "nuisances": args.nuisances, "poses": poses,
-                            "n_poses": len(sub), "method": name, "seconds": dt}  # fmt: skip
+                    base = {
+                        "seed": seed,
+                        "nuisances": args.nuisances,
+                        "poses": poses,
+                        "n_poses": len(sub),
+                        "method": name,
+                        "seconds": dt,
+                    }
                     rows += [base | {"kind": "map"} | r for r in maps]
                     rows += [base | {"kind": "pair"} | r for r in pairs]
                     worst = max(r["rms_log_error"] for r in maps)
-                    print(f"seed {seed} {poses:6s} n={len(sub)} {name:8s} worst map "
-                          f"{100 * worst:.2f} % ({dt:.0f} s)", flush=True)  # fmt: skip
+                    print(
+                        f"seed {seed} {poses:6s} n={len(sub)} {name:8s} worst map "
+                        f"{100 * worst:.2f} % ({dt:.0f} s)",
+                        flush=True,
+                    )
     return pd.DataFrame(rows)
 
 

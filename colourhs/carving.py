@@ -100,13 +100,23 @@ def _frustum_clearance(Xc: np.ndarray, inner: np.ndarray, outer: np.ndarray) -> 
         return sign * (coord - a * z) / np.sqrt(1 + a * a)
 
     inside = np.minimum.reduce(
-        [z, plane(inner[0], x, 1), plane(inner[1], x, -1), plane(inner[2], y, 1),
-         plane(inner[3], y, -1)]
-    )  # fmt: skip
+        [
+            z,
+            plane(inner[0], x, 1),
+            plane(inner[1], x, -1),
+            plane(inner[2], y, 1),
+            plane(inner[3], y, -1),
+        ]
+    )
     outside = np.maximum.reduce(
-        [-z, plane(outer[0], x, -1), plane(outer[1], x, 1), plane(outer[2], y, -1),
-         plane(outer[3], y, 1)]
-    )  # fmt: skip
+        [
+            -z,
+            plane(outer[0], x, -1),
+            plane(outer[1], x, 1),
+            plane(outer[2], y, -1),
+            plane(outer[3], y, 1),
+        ]
+    )
     return np.maximum(inside, outside)
 
 
@@ -277,13 +287,16 @@ def carve_field(
     radius = 1.25 * _HALF_DIAGONAL * B * voxel_m + voxel_m + 3 * max(footprint, 0.0)
     # Cameras whose frustum boundary crosses a block see only part of it.
     points = (lo + (centre.T + 0.5) * B * voxel_m).T
-    crossing = np.array([
-        _frustum_clearance(
-            np.asarray(c.R, float) @ points + np.asarray(c.t, float)[:, None],
-            *_image_boxes(c, sil.shape[1], sil.shape[0]),
-        ) <= radius
-        for sil, c in zip(silhouettes, cameras, strict=True)
-    ])  # fmt: skip
+    crossing = np.array(
+        [
+            _frustum_clearance(
+                np.asarray(c.R, float) @ points + np.asarray(c.t, float)[:, None],
+                *_image_boxes(c, sil.shape[1], sil.shape[0]),
+            )
+            <= radius
+            for sil, c in zip(silhouettes, cameras, strict=True)
+        ]
+    )
     whole = seen & ~crossing  # cameras seeing the whole block
     # Wholly outside: a camera seeing all of the block carves all of it, or too
     # few cameras can see any of it. Wholly inside: every camera sees all of it

@@ -63,8 +63,10 @@ def _run(args) -> int:
         scenes = [v.strip() for v in args.scenes.split(",") if v.strip()]
         unknown = [v for v in scenes if v not in known]
         if unknown or not scenes:
-            raise ValueError(f"unknown scene(s) {', '.join(map(repr, unknown)) or '(none given)'}"
-                             f" in {dataset}; scenes: {', '.join(known)}")  # fmt: skip
+            raise ValueError(
+                f"unknown scene(s) {', '.join(map(repr, unknown)) or '(none given)'}"
+                f" in {dataset}; scenes: {', '.join(known)}"
+            )
         reconstruction["scenes"] = scenes
     name = args.name or dataset.name
     config_path = Path(args.directory) / "results" / name / "run-config.yaml"
@@ -76,11 +78,20 @@ def _run(args) -> int:
     # Snakemake's own arguments (targets included) go before --configfile,
     # whose list of files would otherwise swallow them.
     cmd = [
-        sys.executable, "-m", "snakemake", "--snakefile", str(SNAKEFILE),
-        "--directory", str(Path(args.directory).resolve()), "--cores", str(args.cores),
+        sys.executable,
+        "-m",
+        "snakemake",
+        "--snakefile",
+        str(SNAKEFILE),
+        "--directory",
+        str(Path(args.directory).resolve()),
+        "--cores",
+        str(args.cores),
         *args.snakemake_args,
-        "--configfile", str(PROJECT_ROOT / "config.yaml"), str(config_path.resolve()),
-    ]  # fmt: skip
+        "--configfile",
+        str(PROJECT_ROOT / "config.yaml"),
+        str(config_path.resolve()),
+    ]
     from colourhs.reportinfo import COMMAND_ENV  # the report names this command
 
     return subprocess.call(cmd, env={**os.environ, COMMAND_ENV: shlex.join(args.command_line)})
@@ -149,12 +160,23 @@ def _reconstruct(args) -> int:
     params = {k: v for k, v in vars(args).items() if k in RECONSTRUCT_PARAMS and v is not None}
     params["progress"] = sys.stderr.isatty()  # a bar at a terminal, none in a rule's log
     result = reconstruct_frame(
-        args.dataset, args.scene, args.frame, args.out, args.method, args.crosstalk,
-        args.photometric, args.chromaticity, args.hull, noise_json=args.noise, **params,
-    )  # fmt: skip
+        args.dataset,
+        args.scene,
+        args.frame,
+        args.out,
+        args.method,
+        args.crosstalk,
+        args.photometric,
+        args.chromaticity,
+        args.hull,
+        noise_json=args.noise,
+        **params,
+    )
     info = result.info
-    print(f"{args.scene}/{args.frame} {args.method}: {info['valid_pixels']} of {info['pixels']} "
-          f"pixels, energy {info.get('energy', '-')}; wrote {args.out}")  # fmt: skip
+    print(
+        f"{args.scene}/{args.frame} {args.method}: {info['valid_pixels']} of {info['pixels']} "
+        f"pixels, energy {info.get('energy', '-')}; wrote {args.out}"
+    )
     return 0
 
 
@@ -181,8 +203,15 @@ def _pairs(items: list[str], what: str) -> dict[str, str]:
 def _hull(args) -> int:
     from colourhs.hull import visual_hull
 
-    info = visual_hull(args.dataset, args.scene, args.frame, args.out, voxel_m=args.voxel_m,
-                       threshold=args.threshold, out_depth_h5=args.depth)  # fmt: skip
+    info = visual_hull(
+        args.dataset,
+        args.scene,
+        args.frame,
+        args.out,
+        voxel_m=args.voxel_m,
+        threshold=args.threshold,
+        out_depth_h5=args.depth,
+    )
     print(json.dumps(info, indent=2, default=str))
     return 0
 
@@ -192,8 +221,13 @@ def _mesh(args) -> int:
         return _same_as(args.same_as, args.out)
     from colourhs.mesh import frame_mesh
 
-    info = frame_mesh(args.depth, args.out, hull_ply=args.hull, poisson_depth=args.poisson_depth,
-                      density_quantile=args.density_quantile)  # fmt: skip
+    info = frame_mesh(
+        args.depth,
+        args.out,
+        hull_ply=args.hull,
+        poisson_depth=args.poisson_depth,
+        density_quantile=args.density_quantile,
+    )
     print(json.dumps(info, indent=2, default=str))
     return 0
 
@@ -211,9 +245,17 @@ def _evaluate(args) -> int:
         return 0
     from colourhs.evaluate import evaluate_frame
 
-    info = evaluate_frame(args.depth, args.mesh, args.gt, args.out, out_ply=args.coloured,
-                          scene=args.scene, frame=args.frame, variant=args.variant,
-                          vmax_mm=args.vmax_mm)  # fmt: skip
+    info = evaluate_frame(
+        args.depth,
+        args.mesh,
+        args.gt,
+        args.out,
+        out_ply=args.coloured,
+        scene=args.scene,
+        frame=args.frame,
+        variant=args.variant,
+        vmax_mm=args.vmax_mm,
+    )
     print(json.dumps(info, indent=2, default=str))
     return 0
 
@@ -229,9 +271,14 @@ def _metrics(args) -> int:
 def _figures(args) -> int:
     from colourhs.figures import scene_figures
 
-    written = scene_figures(args.out, _pairs(args.depth, "--depth"), _pairs(args.mesh, "--mesh"),
-                            args.gt, _pairs(args.animate, "--animate"),
-                            coloured=_pairs(args.coloured, "--coloured"))  # fmt: skip
+    written = scene_figures(
+        args.out,
+        _pairs(args.depth, "--depth"),
+        _pairs(args.mesh, "--mesh"),
+        args.gt,
+        _pairs(args.animate, "--animate"),
+        coloured=_pairs(args.coloured, "--coloured"),
+    )
     print(f"wrote {len(written)} figures into {args.out}")
     return 0
 
@@ -245,9 +292,19 @@ def _report(args) -> int:
     config = yaml.safe_load(args.config.read_text()) or {} if args.config else {}
     config = resolve_config(config, _defaults("reconstruct"), _defaults("photometric"))
     dataset = open_dataset(args.dataset, check_images=False) if args.dataset else None
-    build_report(args.out, args.name, args.metrics, args.calibration or [], figures, tsvs, config,
-                 embed_images=args.embed_images, dataset=dataset, results_dir=args.results,
-                 config_resolved=True)  # fmt: skip
+    build_report(
+        args.out,
+        args.name,
+        args.metrics,
+        args.calibration or [],
+        figures,
+        tsvs,
+        config,
+        embed_images=args.embed_images,
+        dataset=dataset,
+        results_dir=args.results,
+        config_resolved=True,
+    )
     print(f"wrote {args.out}")
     return 0
 
@@ -320,8 +377,14 @@ def _tuning_options(parser, params: dict, defaults: dict | None) -> None:
         default = (defaults or {}).get(name)
         if defaults is not None and default is not None and "default" not in text:
             text = f"{text} (default {default:g})" if kind is not str else text
-        parser.add_argument("--" + name.replace("_", "-"), dest=name, type=kind, default=None,
-                            metavar=kind.__name__.upper(), help=text)  # fmt: skip
+        parser.add_argument(
+            "--" + name.replace("_", "-"),
+            dest=name,
+            type=kind,
+            default=None,
+            metavar=kind.__name__.upper(),
+            help=text,
+        )
 
 
 def _frame_arguments(parser) -> None:
@@ -409,8 +472,12 @@ def build_parser(show_defaults: bool = False) -> argparse.ArgumentParser:
     rc = sub.add_parser("reconstruct", help="depth and normals of one frame (ML or Bayesian HS)")
     _frame_arguments(rc)
     rc.add_argument("out", type=Path, help="depth HDF5 to write")
-    rc.add_argument("--method", choices=("ml", "bayes"), default="bayes",
-                    help="ML HS or Bayesian HS (default bayes)")  # fmt: skip
+    rc.add_argument(
+        "--method",
+        choices=("ml", "bayes"),
+        default="bayes",
+        help="ML HS or Bayesian HS (default bayes)",
+    )
     rc.add_argument("--crosstalk", type=Path, default=None, help="unmix with this calibration")
     rc.add_argument("--photometric", type=Path, default=None, help="mu maps (photometric.h5)")
     rc.add_argument("--chromaticity", type=Path, default=None, help="chromaticity maps (.h5)")
@@ -420,8 +487,12 @@ def build_parser(show_defaults: bool = False) -> argparse.ArgumentParser:
         default=None,
         help="sensor noise model (colourhs noise); default: estimated from the frame",
     )
-    rc.add_argument("--hull", type=Path, default=None,
-                    help="visual hull PLY: depth hypotheses over its depth range")  # fmt: skip
+    rc.add_argument(
+        "--hull",
+        type=Path,
+        default=None,
+        help="visual hull PLY: depth hypotheses over its depth range",
+    )
     rc.add_argument("--same-as", type=Path, default=None, help=SAME_AS_HELP)
     _tuning_options(rc, RECONSTRUCT_PARAMS, _defaults("reconstruct") if show_defaults else None)
     rc.set_defaults(func=_reconstruct)
@@ -436,9 +507,13 @@ def build_parser(show_defaults: bool = False) -> argparse.ArgumentParser:
         default=None,
         help="voxel size, metres (default: about two pixel footprints)",
     )
-    h.add_argument("--threshold", type=float, default=LIT_THRESHOLD,
-                   help="silhouettes of scenes without masks: lit pixels above this fraction "
-                        f"of full scale (default {LIT_THRESHOLD})")  # fmt: skip
+    h.add_argument(
+        "--threshold",
+        type=float,
+        default=LIT_THRESHOLD,
+        help="silhouettes of scenes without masks: lit pixels above this fraction "
+        f"of full scale (default {LIT_THRESHOLD})",
+    )
     h.set_defaults(func=_hull)
 
     me = sub.add_parser("mesh", help="oriented points of a depth file -> Poisson mesh (PLY)")
@@ -447,8 +522,12 @@ def build_parser(show_defaults: bool = False) -> argparse.ArgumentParser:
     me.add_argument("--hull", type=Path, default=None, help="visual hull PLY to close the cloud")
     me.add_argument("--same-as", type=Path, default=None, help=SAME_AS_HELP)
     me.add_argument("--poisson-depth", type=int, default=8, help="octree depth (default 8)")
-    me.add_argument("--density-quantile", type=float, default=0.02,
-                    help="fraction of lowest-density vertices trimmed (default 0.02)")  # fmt: skip
+    me.add_argument(
+        "--density-quantile",
+        type=float,
+        default=0.02,
+        help="fraction of lowest-density vertices trimmed (default 0.02)",
+    )
     me.set_defaults(func=_mesh)
 
     ev = sub.add_parser("evaluate", help="Hausdorff and depth/normal errors of one frame")
@@ -518,11 +597,14 @@ def build_parser(show_defaults: bool = False) -> argparse.ArgumentParser:
     r.add_argument(
         "--directory", default=".", help="where results/ and reports/ go (default: here)"
     )
-    r.add_argument("--variants", default=None,
-                   help="comma-separated variant ids (default: vh,ml_full,bayes_nocalib,"
-                        "bayes_ph,bayes_full)")  # fmt: skip
-    r.add_argument("--scenes", default=None,
-                   help="comma-separated scenes to reconstruct (default: all)")  # fmt: skip
+    r.add_argument(
+        "--variants",
+        default=None,
+        help="comma-separated variant ids (default: vh,ml_full,bayes_nocalib,bayes_ph,bayes_full)",
+    )
+    r.add_argument(
+        "--scenes", default=None, help="comma-separated scenes to reconstruct (default: all)"
+    )
     r.set_defaults(func=_run)
     r.epilog = "Arguments after `--` are passed on to snakemake."
     return p

@@ -201,10 +201,13 @@ def calibrate_crosstalk(
             quantum = 1.0 / (ds.rig.image.white_level - ds.rig.image.black_level)
             field, info = fit_mixing_field(imgs, sats, degree=degree, quantum=quantum)
             fields[cam] = field
-            out["cameras"][cam] |= {"M": field.median.tolist(), "filter_M": M.tolist(),
-                                    "field": field.to_json(),
-                                    "field_rms": info["rms"].tolist(),
-                                    "field_quantised": info["quantised"].tolist()}  # fmt: skip
+            out["cameras"][cam] |= {
+                "M": field.median.tolist(),
+                "filter_M": M.tolist(),
+                "field": field.to_json(),
+                "field_rms": info["rms"].tolist(),
+                "field_quantised": info["quantised"].tolist(),
+            }
     if spatial:
         out["method"] = (
             f"per-pixel I_c / I_b under light b alone (white reference), Legendre degree {degree}"

@@ -79,8 +79,9 @@ def legendre_basis(uv: np.ndarray, width: int, height: int, degree: int) -> np.n
     y = 2.0 * uv[..., 1] / max(height - 1, 1) - 1.0
     px = np.polynomial.legendre.legvander(x, degree)
     py = np.polynomial.legendre.legvander(y, degree)
-    cols = [px[..., i] * py[..., j] for n in range(degree + 1) for j in range(n + 1)
-            for i in (n - j,)]  # fmt: skip
+    cols = [
+        px[..., i] * py[..., j] for n in range(degree + 1) for j in range(n + 1) for i in (n - j,)
+    ]
     return np.stack(cols, axis=-1)
 
 
@@ -138,8 +139,13 @@ class MixingField:
         return MixingField(self.width, self.height, self.degree, self.coefficients * f[..., None])
 
     def to_json(self) -> dict:
-        return {"basis": "legendre2d", "degree": self.degree, "width": self.width,
-                "height": self.height, "coefficients": self.coefficients.tolist()}  # fmt: skip
+        return {
+            "basis": "legendre2d",
+            "degree": self.degree,
+            "width": self.width,
+            "height": self.height,
+            "coefficients": self.coefficients.tolist(),
+        }
 
     @classmethod
     def from_json(cls, data: dict) -> MixingField:

@@ -40,9 +40,18 @@ class BoardShot:
         return self.R @ np.array([0.0, 0.0, -1.0])
 
 
-LED_DEFAULTS = {"step_px": None, "margin_m": 0.002, "min_cos": 0.3, "min_signal": 0.03,
-                "sigma_degree": 4, "pose_refinement": False, "iterations": 10,
-                "huber": 3.0, "constraints": ("own", "same_light"), "shrink": True}  # fmt: skip
+LED_DEFAULTS = {
+    "step_px": None,
+    "margin_m": 0.002,
+    "min_cos": 0.3,
+    "min_signal": 0.03,
+    "sigma_degree": 4,
+    "pose_refinement": False,
+    "iterations": 10,
+    "huber": 3.0,
+    "constraints": ("own", "same_light"),
+    "shrink": True,
+}
 
 
 def _solve_led_problem(prob: _LedProblem, theta, iterations: int, huber: float):
@@ -79,10 +88,12 @@ def _solve_led_problem(prob: _LedProblem, theta, iterations: int, huber: float):
     red = np.linalg.pinv(Hi[:nth, :nth], rcond=1e-15)
     # all zero where no camera's filters leak (nothing for F to scale): sv = 0
     sv = np.linalg.svd(red / max(np.abs(red).max(), 1e-300), compute_uv=False)
-    diag = {"iterations": len(steps), "last_step": steps[-1],
-            "rms_log_residual": float(np.sqrt(np.sum(w * r**2) / np.sum(w)
-                                              / np.mean(wn[w > 0]))),
-            "singular_values": [float(v) for v in sv]}  # fmt: skip
+    diag = {
+        "iterations": len(steps),
+        "last_step": steps[-1],
+        "rms_log_residual": float(np.sqrt(np.sum(w * r**2) / np.sum(w) / np.mean(wn[w > 0]))),
+        "singular_values": [float(v) for v in sv],
+    }
     return theta, cov, diag
 
 
@@ -196,9 +207,15 @@ def led_factor(rig, shots: list[BoardShot], fields: dict, **params) -> dict:
         for q, (c, b) in enumerate(OFF_DIAGONAL):
             S[c, b] = sd[kk * len(OFF_DIAGONAL) + q]
         sds[name] = S
-    diag = {"rows_own": int(np.sum(prob.kind == 0)), "rows_same_light": int(np.sum(prob.kind == 1)),
-            "box_px": prob.box} | diag | {"params": {k: v for k, v in opts.items()
-                                                     if k in LED_DEFAULTS}}  # fmt: skip
+    diag = (
+        {
+            "rows_own": int(np.sum(prob.kind == 0)),
+            "rows_same_light": int(np.sum(prob.kind == 1)),
+            "box_px": prob.box,
+        }
+        | diag
+        | {"params": {k: v for k, v in opts.items() if k in LED_DEFAULTS}}
+    )
     return {"factor": factor, "sd": sds, "diagnostics": diag}
 
 

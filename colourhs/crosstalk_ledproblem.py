@@ -29,10 +29,19 @@ def _inv3(M: np.ndarray) -> np.ndarray:
     d, e, f = M[:, 1, 0], M[:, 1, 1], M[:, 1, 2]
     g, h, i = M[:, 2, 0], M[:, 2, 1], M[:, 2, 2]
     co = np.stack(
-        [e * i - f * h, c * h - b * i, b * f - c * e,
-         f * g - d * i, a * i - c * g, c * d - a * f,
-         d * h - e * g, b * g - a * h, a * e - b * d], axis=1
-    ).reshape(-1, 3, 3)  # fmt: skip
+        [
+            e * i - f * h,
+            c * h - b * i,
+            b * f - c * e,
+            f * g - d * i,
+            a * i - c * g,
+            c * d - a * f,
+            d * h - e * g,
+            b * g - a * h,
+            a * e - b * d,
+        ],
+        axis=1,
+    ).reshape(-1, 3, 3)
     det = a * co[:, 0, 0] + b * co[:, 1, 0] + c * co[:, 2, 0]
     return co / det[:, None, None]
 
@@ -297,16 +306,26 @@ def _build_led_problem(rig, shots, fields, opts) -> _LedProblem:
                 # the camera's own-channel vignetting at its pixel, S_a, as in (b)
                 base = n_pose_cols + a * nbs
                 z[:, base : base + nbs] = legendre_basis(uo[idx], W, H, sdeg)[:, 1:]
-            parts.append({"kind": np.zeros(len(idx), int), "cam": np.full(len(idx), a),
-                          "cam2": np.full(len(idx), -1), "ch": np.full(len(idx), o),
-                          "Y1": yo[idx], "Q1": qo[idx],
-                          "M1": MA[idx] if collocated else fields[A.name].at(uo[idx]),
-                          "Y2": np.ones((len(idx), 3)), "Q2": np.ones((len(idx), 3)),
-                          "M2": np.broadcast_to(np.eye(3), (len(idx), 3, 3)),
-                          "logG": np.log(cos_l[idx] / dl2[idx]), "Z": z,
-                          "group": a * npx + idx, "u1": uv[idx],
-                          "u2": np.full((len(idx), 2), np.nan) if collocated else uo[idx],
-                          "pose": np.full(len(idx), j)})  # fmt: skip
+            parts.append(
+                {
+                    "kind": np.zeros(len(idx), int),
+                    "cam": np.full(len(idx), a),
+                    "cam2": np.full(len(idx), -1),
+                    "ch": np.full(len(idx), o),
+                    "Y1": yo[idx],
+                    "Q1": qo[idx],
+                    "M1": MA[idx] if collocated else fields[A.name].at(uo[idx]),
+                    "Y2": np.ones((len(idx), 3)),
+                    "Q2": np.ones((len(idx), 3)),
+                    "M2": np.broadcast_to(np.eye(3), (len(idx), 3, 3)),
+                    "logG": np.log(cos_l[idx] / dl2[idx]),
+                    "Z": z,
+                    "group": a * npx + idx,
+                    "u1": uv[idx],
+                    "u2": np.full((len(idx), 2), np.nan) if collocated else uo[idx],
+                    "pose": np.full(len(idx), j),
+                }
+            )
             # (b) the light of camera m seen by camera a and by camera m itself
             for m, B in enumerate(cams):
                 if m == a or "same_light" not in opts["constraints"]:
@@ -333,16 +352,31 @@ def _build_led_problem(rig, shots, fields, opts) -> _LedProblem:
                 z = np.zeros((len(idx), ncols))
                 base = n_pose_cols + m * nbs
                 z[:, base : base + nbs] = -legendre_basis(ub, W, H, sdeg)[:, 1:]
-                parts.append({"kind": np.ones(len(idx), int), "cam": np.full(len(idx), a),
-                              "cam2": np.full(len(idx), m), "ch": np.full(len(idx), oB),
-                              "Y1": yA[idx], "Q1": qA[idx], "M1": MA[idx], "Y2": yB, "Q2": qB,
-                              "M2": fields[B.name].at(ub), "logG": np.zeros(len(idx)), "Z": z,
-                              "group": nc * npx + (a * nc + m) * npx + idx, "u1": uv[idx],
-                              "u2": ub, "pose": np.full(len(idx), j)})  # fmt: skip
+                parts.append(
+                    {
+                        "kind": np.ones(len(idx), int),
+                        "cam": np.full(len(idx), a),
+                        "cam2": np.full(len(idx), m),
+                        "ch": np.full(len(idx), oB),
+                        "Y1": yA[idx],
+                        "Q1": qA[idx],
+                        "M1": MA[idx],
+                        "Y2": yB,
+                        "Q2": qB,
+                        "M2": fields[B.name].at(ub),
+                        "logG": np.zeros(len(idx)),
+                        "Z": z,
+                        "group": nc * npx + (a * nc + m) * npx + idx,
+                        "u1": uv[idx],
+                        "u2": ub,
+                        "pose": np.full(len(idx), j),
+                    }
+                )
     rows = {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}
     block = np.floor(rows["u1"] / (8 * step)).astype(int)
-    rows["cluster"] = np.stack([rows["kind"], rows["cam"], rows["cam2"], rows["pose"],
-                                block[:, 0], block[:, 1]], axis=1)  # fmt: skip
+    rows["cluster"] = np.stack(
+        [rows["kind"], rows["cam"], rows["cam2"], rows["pose"], block[:, 0], block[:, 1]], axis=1
+    )
     # a pixel seen in a single pose carries nothing once its h(u) is eliminated
     _, inv, counts = np.unique(rows["group"], return_inverse=True, return_counts=True)
     keep = counts[inv] >= 2

@@ -186,5 +186,6 @@ def read_depth(path: str | Path) -> DepthMap:
             params = {}
     if not np.any(finite & (depth > 0)):
         raise ValueError(f"{path}: no reconstructed pixels (depth is empty or all NaN)")
-    return DepthMap(depth, normal, confidence, mask, camera, K, dist, R, t, method, params,
-                    str(path))  # fmt: skip
+    return DepthMap(
+        depth, normal, confidence, mask, camera, K, dist, R, t, method, params, str(path)
+    )

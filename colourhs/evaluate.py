@@ -69,14 +69,28 @@ __all__ = [
 
 #: The results contract's columns of ``reports/NAME/metrics.csv``, in order.
 CONTRACT_COLUMNS = (
-    "scene", "frame", "variant", "hausdorff_rms_mm", "hausdorff_mean_mm", "hausdorff_max_mm",
-    "depth_median_mm", "depth_rms_mm", "normal_median_deg",
-)  # fmt: skip
+    "scene",
+    "frame",
+    "variant",
+    "hausdorff_rms_mm",
+    "hausdorff_mean_mm",
+    "hausdorff_max_mm",
+    "depth_median_mm",
+    "depth_rms_mm",
+    "normal_median_deg",
+)
 #: Extra metric columns, after the contract's.
 EXTRA_COLUMNS = (
-    "hausdorff_median_mm", "completeness_rms_mm", "completeness_mean_mm", "completeness_max_mm",
-    "depth_p95_mm", "coverage", "hausdorff_samples", "completeness_samples", "outside_share",
-)  # fmt: skip
+    "hausdorff_median_mm",
+    "completeness_rms_mm",
+    "completeness_mean_mm",
+    "completeness_max_mm",
+    "depth_p95_mm",
+    "coverage",
+    "hausdorff_samples",
+    "completeness_samples",
+    "outside_share",
+)
 #: Offset (metres) of a visibility ray's start from the vertex it tests (avoids self-hits).
 VISIBILITY_EPS_M = 1e-4
 
@@ -147,10 +161,16 @@ def hausdorff(
     ms.add_mesh(_ml_mesh(va, triangles_a if has_faces else None), "a")
     ms.add_mesh(_ml_mesh(vb, triangles_b), "b")
     out = ms.get_hausdorff_distance(
-        sampledmesh=0, targetmesh=1, savesample=True, samplevert=bool(sample_vertices),
-        sampleedge=False, samplefauxedge=False, sampleface=not sample_vertices,
-        samplenum=int(n_samples), maxdist=pymeshlab.PureValue(max_dist),
-    )  # fmt: skip
+        sampledmesh=0,
+        targetmesh=1,
+        savesample=True,
+        samplevert=bool(sample_vertices),
+        sampleedge=False,
+        samplefauxedge=False,
+        sampleface=not sample_vertices,
+        samplenum=int(n_samples),
+        maxdist=pymeshlab.PureValue(max_dist),
+    )
     labels = {}
     for mid in range(ms.mesh_number()):
         labels[ms.mesh(mid).label()] = ms.mesh(mid)
@@ -343,10 +363,14 @@ def depth_summary(
     a = np.asarray(normal_error_deg, float).ravel()
     a = a[np.isfinite(a)]
     truth_pixels = int(truth_pixels)
-    out = {"depth_median_mm": None, "depth_rms_mm": None, "depth_p95_mm": None,
-           "normal_median_deg": None,
-           "coverage": e.size / truth_pixels if truth_pixels > 0 else None,
-           "truth_pixels": truth_pixels}  # fmt: skip
+    out = {
+        "depth_median_mm": None,
+        "depth_rms_mm": None,
+        "depth_p95_mm": None,
+        "normal_median_deg": None,
+        "coverage": e.size / truth_pixels if truth_pixels > 0 else None,
+        "truth_pixels": truth_pixels,
+    }
     if e.size:
         out["depth_median_mm"] = float(np.median(e))
         out["depth_rms_mm"] = float(np.sqrt(np.mean(e**2)))
@@ -394,9 +418,13 @@ def depth_errors(
             f"{depth_map.path}: depth map is {depth_map.depth.shape}, image is {(height, width)}"
         )
     gd, gn = render_depth_normals(
-        np.asarray(gt_vertices, float), np.asarray(gt_triangles), np.asarray(gt_normals, float),
-        depth_map, width, height,
-    )  # fmt: skip
+        np.asarray(gt_vertices, float),
+        np.asarray(gt_triangles),
+        np.asarray(gt_normals, float),
+        depth_map,
+        width,
+        height,
+    )
     depth = np.asarray(depth_map.depth, float)
     err = depth - gd  # NaN where either is NaN
     n = np.asarray(depth_map.normal, float)
@@ -470,8 +498,13 @@ def evaluate_frame(
 
     t0 = time.perf_counter()
     dm = read_depth(depth_h5)
-    info = {"scene": str(scene), "frame": str(frame), "variant": str(variant),
-            "method": dm.method, "camera": dm.camera}  # fmt: skip
+    info = {
+        "scene": str(scene),
+        "frame": str(frame),
+        "variant": str(variant),
+        "method": dm.method,
+        "camera": dm.camera,
+    }
     info.update(_empty_metrics())
     mesh = TriMesh(*load_mesh(mesh_ply)) if mesh_ply is not None else None
     dist_v = None
@@ -492,38 +525,50 @@ def evaluate_frame(
                 if evaluated.any():  # the evaluated vertices as a point set, in vertex order
                     acc = hausdorff(v[evaluated], None, gv, target)
                     dist_v[evaluated] = acc["distances"]
-                    info.update({
-                        "hausdorff_rms_mm": _mm(acc["rms_m"]),
-                        "hausdorff_mean_mm": _mm(acc["mean_m"]),
-                        "hausdorff_max_mm": _mm(acc["max_m"]),
-                        "hausdorff_median_mm": _mm(float(np.median(acc["distances"]))),
-                    })  # fmt: skip
+                    info.update(
+                        {
+                            "hausdorff_rms_mm": _mm(acc["rms_m"]),
+                            "hausdorff_mean_mm": _mm(acc["mean_m"]),
+                            "hausdorff_max_mm": _mm(acc["max_m"]),
+                            "hausdorff_median_mm": _mm(float(np.median(acc["distances"]))),
+                        }
+                    )
                 step = max(1, -(-len(gt_points) // int(completeness_samples)))
                 comp = hausdorff(gt_points[::step], None, v, tri)
-                info.update({
-                    "completeness_rms_mm": _mm(comp["rms_m"]),
-                    "completeness_mean_mm": _mm(comp["mean_m"]),
-                    "completeness_max_mm": _mm(comp["max_m"]),
-                    "completeness_samples": comp["n_samples"],
-                })  # fmt: skip
+                info.update(
+                    {
+                        "completeness_rms_mm": _mm(comp["rms_m"]),
+                        "completeness_mean_mm": _mm(comp["mean_m"]),
+                        "completeness_max_mm": _mm(comp["max_m"]),
+                        "completeness_samples": comp["n_samples"],
+                    }
+                )
     if out_ply is not None and mesh is not None:
         d_mm = np.full(len(mesh.vertices), np.nan) if dist_v is None else dist_v * 1e3
         finite = d_mm[np.isfinite(d_mm)]
         top = vmax_mm if vmax_mm is not None else (np.percentile(finite, 95) if finite.size else 1)
         info["colour_vmax_mm"] = float(top)
-        write_ply(out_ply, mesh.vertices, mesh.triangles, mesh.normals,
-                  colours=value_colours(d_mm, 0.0, float(top)))  # fmt: skip
-    info.update({
-        "mesh_vertices": None if mesh is None else int(len(mesh.vertices)),
-        "depth_h5": str(depth_h5), "mesh_ply": None if mesh_ply is None else str(mesh_ply),
-        "gt_ply": None if gt_ply is None else str(gt_ply),
-         "dilate_px": int(dilate_px),
-        "completeness_max_samples": int(completeness_samples),
-        "units": "mm; hausdorff_* = reconstruction -> seen GT (accuracy), "
-                 "completeness_* = seen GT -> reconstruction; outside_share = share of the "
-                 "mesh vertices the reference camera sees that lie off the seen GT",
-        "seconds": time.perf_counter() - t0,
-    })  # fmt: skip
+        write_ply(
+            out_ply,
+            mesh.vertices,
+            mesh.triangles,
+            mesh.normals,
+            colours=value_colours(d_mm, 0.0, float(top)),
+        )
+    info.update(
+        {
+            "mesh_vertices": None if mesh is None else int(len(mesh.vertices)),
+            "depth_h5": str(depth_h5),
+            "mesh_ply": None if mesh_ply is None else str(mesh_ply),
+            "gt_ply": None if gt_ply is None else str(gt_ply),
+            "dilate_px": int(dilate_px),
+            "completeness_max_samples": int(completeness_samples),
+            "units": "mm; hausdorff_* = reconstruction -> seen GT (accuracy), "
+            "completeness_* = seen GT -> reconstruction; outside_share = share of the "
+            "mesh vertices the reference camera sees that lie off the seen GT",
+            "seconds": time.perf_counter() - t0,
+        }
+    )
     write_json(out_json, info)
     return info
 

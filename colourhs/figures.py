@@ -127,8 +127,9 @@ def mu_maps_figure(
     cols = 2
     rows = int(np.ceil(len(keys) / cols))
     h, w = next(iter(maps.values())).shape
-    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.4 * rows * h / w + 0.4),
-                             squeeze=False)  # fmt: skip
+    fig, axes = plt.subplots(
+        rows, cols, figsize=(4.2 * cols, 3.4 * rows * h / w + 0.4), squeeze=False
+    )
     for ax in axes.ravel():
         ax.set_axis_off()
     for ax, key in zip(axes.ravel(), keys, strict=False):
@@ -336,10 +337,11 @@ def render_grid_figure(
     cell_w = 3.0
     bar_w = 1.1 if colourbar else 0.0
     fig, axes = plt.subplots(
-        nr, nc, figsize=(cell_w * nc + 0.2 + bar_w,
-                         (cell_w * h / w + 0.35) * nr + (0.4 if title else 0.0)),
+        nr,
+        nc,
+        figsize=(cell_w * nc + 0.2 + bar_w, (cell_w * h / w + 0.35) * nr + (0.4 if title else 0.0)),
         squeeze=False,
-    )  # fmt: skip
+    )
     for r, row in enumerate(cells):
         for c in range(nc):
             ax = axes[r, c]
@@ -413,9 +415,12 @@ def shared_scale_images(
 
 
 def error_maps_figure(
-    errors: Mapping[str, np.ndarray], path: str | Path, title: str, unit: str = "mm",
+    errors: Mapping[str, np.ndarray],
+    path: str | Path,
+    title: str,
+    unit: str = "mm",
     vmax: float | None = None,
-) -> Path:  # fmt: skip
+) -> Path:
     """Every variant's error map side by side on one colour scale, with its colour bar.
 
     ``errors``: label -> (H, W) error in ``unit``, NaN where none; ``vmax``: top of
@@ -423,8 +428,9 @@ def error_maps_figure(
     """
     images, top = shared_scale_images(errors, vmax)
     ncols = len(images) if len(images) <= 4 else 3
-    return render_grid_figure(images, path, title, ncols=ncols,
-                              colourbar=("inferno", 0.0, top, f"error ({unit})"))  # fmt: skip
+    return render_grid_figure(
+        images, path, title, ncols=ncols, colourbar=("inferno", 0.0, top, f"error ({unit})")
+    )
 
 
 def write_animation(images: list[np.ndarray], path: str | Path, fps: float = 8) -> Path:
@@ -463,9 +469,13 @@ def write_animation(images: list[np.ndarray], path: str | Path, fps: float = 8) 
     path = Path(path)
     with atomic_output(path) as tmp:
         pil[0].save(
-            tmp, format="GIF", save_all=True, append_images=pil[1:],
-            duration=max(1, round(1000.0 / fps)), loop=0,
-        )  # fmt: skip
+            tmp,
+            format="GIF",
+            save_all=True,
+            append_images=pil[1:],
+            duration=max(1, round(1000.0 / fps)),
+            loop=0,
+        )
     return path
 
 
@@ -528,8 +538,9 @@ def scene_figures(
                 dz_mm[variant], dn_deg[variant] = np.abs(dz) * 1e3, dn
     if dz_mm:
         written.append(error_maps_figure(dz_mm, out / "depth_error.png", "|depth error|"))
-        written.append(error_maps_figure(dn_deg, out / "normal_error.png", "normal error",
-                                         unit="deg"))  # fmt: skip
+        written.append(
+            error_maps_figure(dn_deg, out / "normal_error.png", "normal error", unit="deg")
+        )
 
     def render(ply):
         v, t, _ = load_mesh(ply)
@@ -562,10 +573,19 @@ def scene_figures(
             meshes_mm[variant] = (v, t, d)
         top = _median_p95([d for _, _, d in meshes_mm.values()])
         tiles = {
-            variant: shaded_render(v, t, cam.K, cam.R, cam.t, cam.width, cam.height,
-                                   vertex_rgb=value_colours(d, 0.0, top), dist=cam.dist)
+            variant: shaded_render(
+                v,
+                t,
+                cam.K,
+                cam.R,
+                cam.t,
+                cam.width,
+                cam.height,
+                vertex_rgb=value_colours(d, 0.0, top),
+                dist=cam.dist,
+            )
             for variant, (v, t, d) in meshes_mm.items()
-        }  # fmt: skip
+        }
         title = "Hausdorff distance to the ground truth (grey: not evaluated)"
         ncols = 3 if len(tiles) > 4 else None
         bar = ("viridis", 0.0, top, "distance (mm)")

@@ -297,8 +297,12 @@ def visual_hull(
     if depth is not None:
         from colourhs.depthfile import write_depth
 
-        attrs = {"method": "visual_hull", "params": depth.info, "silhouettes": source,
-                 "inputs_sha256": sha256_files(files)}  # fmt: skip
+        attrs = {
+            "method": "visual_hull",
+            "params": depth.info,
+            "silhouettes": source,
+            "inputs_sha256": sha256_files(files),
+        }
         write_depth(out_depth_h5, depth, ref, attrs)
     info["seconds"] = perf_counter() - t0
     return info

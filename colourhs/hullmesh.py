@@ -183,8 +183,10 @@ def hull_depth_range(
     lo = float(near[hit].min()) - margin_m
     hi = float(far[hit].max()) + margin_m
     if not 0 < lo < hi:
-        raise ValueError(f"visual hull depth range ({lo:.3f}, {hi:.3f}) m is not in front "
-                         f"of camera {camera.name}")  # fmt: skip
+        raise ValueError(
+            f"visual hull depth range ({lo:.3f}, {hi:.3f}) m is not in front "
+            f"of camera {camera.name}"
+        )
     return lo, hi
 
 

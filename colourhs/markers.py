@@ -398,10 +398,13 @@ def board_pose_from_corners(
         if name not in rig.camera_names:
             raise ValueError(f"detections name camera {name!r}, not in rig {rig.camera_names}")
     per_cam = [
-        {int(m): np.asarray(c, float).reshape(4, 2) for m, c in detections.get(cam.name, {}).items()
-         if int(m) in board.markers}
+        {
+            int(m): np.asarray(c, float).reshape(4, 2)
+            for m, c in detections.get(cam.name, {}).items()
+            if int(m) in board.markers
+        }
         for cam in rig.cameras
-    ]  # fmt: skip
+    ]
     seen_by = {m: sum(m in d for d in per_cam) for m in board.markers}
     tri_ids = [m for m, n in seen_by.items() if n >= 2]
     if not tri_ids:
@@ -472,12 +475,18 @@ def csv_columns(cameras: tuple[str, ...] | list[str]) -> list[str]:
         "pose",
         *(f"markers_{c}" for c in cameras),
         "n_markers",
-        "point_x", "point_y", "point_z",
-        "normal_x", "normal_y", "normal_z",
+        "point_x",
+        "point_y",
+        "point_z",
+        "normal_x",
+        "normal_y",
+        "normal_z",
         *(f"R{i}{j}" for i in range(3) for j in range(3)),
-        "t_x", "t_y", "t_z",
+        "t_x",
+        "t_y",
+        "t_z",
         "rms_px",
-    ]  # fmt: skip
+    ]
 
 
 def marker_poses(

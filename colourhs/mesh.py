@@ -343,8 +343,9 @@ def frame_mesh(
         )
         n_hull = int(is_hull.sum())
     voxel = poisson_voxel(all_points, poisson_depth)
-    mesh = poisson_mesh(all_points, all_normals, poisson_depth, density_quantile,
-                        n_threads=n_threads)  # fmt: skip
+    mesh = poisson_mesh(
+        all_points, all_normals, poisson_depth, density_quantile, n_threads=n_threads
+    )
     crop = max(CROP_SPACINGS * spacing, CROP_VOXELS * voxel) if crop_dist_m is None else crop_dist_m
     mesh = crop_to_data(mesh, points, crop)
     if len(mesh.triangles) == 0:

@@ -273,8 +273,15 @@ def calibrate(rig: Rig, views: list[PoseView], **params) -> dict:
     grids, shading, offs = solve_mu_grids(
         pairs, grid, bases, opts["smoothness"], opts["coupling"], opts["shading_prior"]
     )
-    out = {"maps": {}, "grids": {}, "calibrated": {}, "offsets": {}, "counts": {},
-           "residual_rms": {}, "shading": {}}  # fmt: skip
+    out = {
+        "maps": {},
+        "grids": {},
+        "calibrated": {},
+        "offsets": {},
+        "counts": {},
+        "residual_rms": {},
+        "shading": {},
+    }
     for p, (ka, kb, s) in enumerate(pairs):
         name = f"{ka[0]}/{COLOURS[ka[1]]}~{kb[0]}/{COLOURS[kb[1]]}"
         out["offsets"][name] = offs[p]

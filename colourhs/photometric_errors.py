@@ -97,7 +97,11 @@ def pair_ratio_errors(
         for method, e in (("calibrated", est - true), ("no calibration", -true)):
             rms = float(np.sqrt(np.mean((e - e.mean()) ** 2))) if ok.any() else float("nan")
             rows.append(
-                {"pair": f"{ka}~{kb}", "method": method, "rms_log_error": rms,
-                 "points": int(ok.sum())}
-            )  # fmt: skip
+                {
+                    "pair": f"{ka}~{kb}",
+                    "method": method,
+                    "rms_log_error": rms,
+                    "points": int(ok.sum()),
+                }
+            )
     return pd.DataFrame(rows)

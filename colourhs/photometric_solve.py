@@ -97,9 +97,11 @@ def _second_difference_operator(grid: Grid) -> sp.csr_matrix:
     ny, nx = grid.shape
     idx = np.arange(grid.size).reshape(ny, nx)
     triples = np.concatenate(
-        [np.stack([idx[:, :-2].ravel(), idx[:, 1:-1].ravel(), idx[:, 2:].ravel()], 1),
-         np.stack([idx[:-2].ravel(), idx[1:-1].ravel(), idx[2:].ravel()], 1)]
-    )  # fmt: skip
+        [
+            np.stack([idx[:, :-2].ravel(), idx[:, 1:-1].ravel(), idx[:, 2:].ravel()], 1),
+            np.stack([idx[:-2].ravel(), idx[1:-1].ravel(), idx[2:].ravel()], 1),
+        ]
+    )
     m = len(triples)
     rows = np.repeat(np.arange(m), 3)
     vals = np.tile([1.0, -2.0, 1.0], m)
@@ -111,9 +113,11 @@ def _difference_operator(grid: Grid) -> sp.csr_matrix:
     ny, nx = grid.shape
     idx = np.arange(grid.size).reshape(ny, nx)
     pairs = np.concatenate(
-        [np.stack([idx[:, :-1].ravel(), idx[:, 1:].ravel()], 1),
-         np.stack([idx[:-1].ravel(), idx[1:].ravel()], 1)]
-    )  # fmt: skip
+        [
+            np.stack([idx[:, :-1].ravel(), idx[:, 1:].ravel()], 1),
+            np.stack([idx[:-1].ravel(), idx[1:].ravel()], 1),
+        ]
+    )
     m = len(pairs)
     rows = np.repeat(np.arange(m), 2)
     vals = np.tile([1.0, -1.0], m)
@@ -248,8 +252,9 @@ def solve_mu_grids(
     for k in keys:
         node = col[k] + n // 2
         gauge.append(node)
-    pin = sp.csr_matrix((np.full(len(gauge), float(max(m_map.values()))), (gauge, gauge)),
-                        shape=(total, total))  # fmt: skip
+    pin = sp.csr_matrix(
+        (np.full(len(gauge), float(max(m_map.values()))), (gauge, gauge)), shape=(total, total)
+    )
     lam = spsolve((normal + pin).tocsc(), rhs)
     grids = {k: lam[col[k] : col[k] + n].reshape(grid.shape) for k in keys}
     offsets = {}

@@ -83,9 +83,13 @@ def surface_points(
 
 
 def render_depth_normals(
-    vertices: np.ndarray, triangles: np.ndarray, normals: np.ndarray, camera: Camera,
-    width: int, height: int,
-) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    normals: np.ndarray,
+    camera: Camera,
+    width: int,
+    height: int,
+) -> tuple[np.ndarray, np.ndarray]:
     """Ground truth in a camera: z-depth (H, W) in metres and world unit normals (H, W, 3).
 
     Ray casts the mesh from every pixel centre; NaN where a ray misses.

@@ -64,11 +64,14 @@ def shaded_render(
     vertices = np.asarray(vertices, dtype=np.float64)
     triangles = np.asarray(triangles, dtype=np.int64)
     camera = Camera(
-        name="render", K=np.asarray(K, float),
+        name="render",
+        K=np.asarray(K, float),
         dist=np.zeros(5) if dist is None else np.asarray(dist, float),
-        R=np.asarray(R, float), t=np.asarray(t, float).reshape(3),
-        light_colour="red", light_offset=np.zeros(3),
-    )  # fmt: skip
+        R=np.asarray(R, float),
+        t=np.asarray(t, float).reshape(3),
+        light_colour="red",
+        light_offset=np.zeros(3),
+    )
     normals = vertex_normals(vertices, triangles)
     scene, hit, points, n = _cast_pixels(vertices, triangles, normals, camera, width, height)
     ray = points - camera.centre

@@ -194,8 +194,14 @@ COLUMN_LEGEND = {
     "coverage": "share of the ground truth's pixels that have a depth, mean over frames",
 }
 #: The summary table's metric columns (those present are shown).
-SUMMARY_COLUMNS = ("frames", "hausdorff_rms_mm", "depth_median_mm", "depth_rms_mm",
-                   "normal_median_deg", "coverage")  # fmt: skip
+SUMMARY_COLUMNS = (
+    "frames",
+    "hausdorff_rms_mm",
+    "depth_median_mm",
+    "depth_rms_mm",
+    "normal_median_deg",
+    "coverage",
+)
 
 
 def _image_src(path: Path, out_dir: Path, embed: bool) -> str:
@@ -231,9 +237,13 @@ def _check_figures(paths: Iterable[str | Path] | str | Path, what: str) -> list[
 def _table(df: pd.DataFrame, css_class: str) -> str:
     """``DataFrame.to_html`` with escaping, empty NaN cells and :func:`format_number`."""
     return df.to_html(
-        classes=css_class, index=False, na_rep="", float_format=format_number,
-        escape=True, border=0,
-    )  # fmt: skip
+        classes=css_class,
+        index=False,
+        na_rep="",
+        float_format=format_number,
+        escape=True,
+        border=0,
+    )
 
 
 def with_paper_columns(table: pd.DataFrame) -> tuple[pd.DataFrame, bool]:
@@ -242,15 +252,18 @@ def with_paper_columns(table: pd.DataFrame) -> tuple[pd.DataFrame, bool]:
     (:data:`PAPER_REFERENCE`; empty where the paper gives no number). Also returns
     whether any such column was added."""
     t = table.copy()
-    t.insert(t.columns.get_loc("variant") + 1, "paper name",
-             t["variant"].map(VARIANT_LABELS).fillna(""))  # fmt: skip
+    t.insert(
+        t.columns.get_loc("variant") + 1, "paper name", t["variant"].map(VARIANT_LABELS).fillna("")
+    )
     scenes = set(t["scene"]) if "scene" in t.columns else set()
     refs = {s: PAPER_REFERENCE[s] for s in scenes if s in PAPER_REFERENCE}
     ref_cols = sorted({c for r in refs.values() for per in r.values() for c in per})
     for c in ref_cols:
         col = f"paper {c}"
-        t[col] = [refs.get(s, {}).get(v, {}).get(c, np.nan)
-                  for s, v in zip(t["scene"], t["variant"], strict=True)]  # fmt: skip
+        t[col] = [
+            refs.get(s, {}).get(v, {}).get(c, np.nan)
+            for s, v in zip(t["scene"], t["variant"], strict=True)
+        ]
         t[col] = t[col].astype(float)
         if c in t.columns:  # right after our column
             cols = list(t.columns)
@@ -304,10 +317,19 @@ def _frames_note(metrics: pd.DataFrame, scene: str, figures: Sequence[Path]) -> 
 def _file_links(results_dir, scene: str, out_dir: Path) -> dict:
     files = result_files(results_dir, scene)
     return {
-        v: {k: [{"href": Path(os.path.relpath(p.resolve(), out_dir.resolve())).as_posix(),
-                 "label": p.stem} for p in ps] for k, ps in kinds.items() if ps}
+        v: {
+            k: [
+                {
+                    "href": Path(os.path.relpath(p.resolve(), out_dir.resolve())).as_posix(),
+                    "label": p.stem,
+                }
+                for p in ps
+            ]
+            for k, ps in kinds.items()
+            if ps
+        }
         for v, kinds in files.items()
-    }  # fmt: skip
+    }
 
 
 def _template():
@@ -315,8 +337,11 @@ def _template():
 
     env = jinja2.Environment(
         loader=jinja2.PackageLoader("colourhs", "templates"),
-        autoescape=True, undefined=jinja2.StrictUndefined, trim_blocks=True, lstrip_blocks=True,
-    )  # fmt: skip
+        autoescape=True,
+        undefined=jinja2.StrictUndefined,
+        trim_blocks=True,
+        lstrip_blocks=True,
+    )
     return env.get_template("report.html")
 
 
@@ -414,12 +439,18 @@ def build_report(
     sections = []
     for scene in scenes:
         arranged = arrange_figures(figs.get(scene, []))
-        s = {"name": scene, "description": descriptions.get(scene, ""), "table": "",
-             "frames_note": _frames_note(metrics, scene, figs.get(scene, [])),
-             "plot": frame_error_svg(metrics, scene), "plot_caption":
-             "Median depth error per frame and variant (depth_median_mm, mm).",
-             **{k: [_figure(p, out_dir, embed_images, "wide" if k == "wide" else "")
-                    for p in ps] for k, ps in arranged.items()}}  # fmt: skip
+        s = {
+            "name": scene,
+            "description": descriptions.get(scene, ""),
+            "table": "",
+            "frames_note": _frames_note(metrics, scene, figs.get(scene, [])),
+            "plot": frame_error_svg(metrics, scene),
+            "plot_caption": "Median depth error per frame and variant (depth_median_mm, mm).",
+            **{
+                k: [_figure(p, out_dir, embed_images, "wide" if k == "wide" else "") for p in ps]
+                for k, ps in arranged.items()
+            },
+        }
         rows = summary[summary["scene"] == scene]
         if len(rows):
             t, _ = with_paper_columns(rows)
@@ -435,23 +466,30 @@ def build_report(
     env["platform"] = platform.platform()
     env["python executable"] = sys.executable
     env["CPU count"] = os.cpu_count() or "unknown"
-    header = {"dataset": dataset_name,
-              "generated": datetime.now(UTC).strftime("%Y-%m-%d %H:%M:%S UTC")}  # fmt: skip
+    header = {
+        "dataset": dataset_name,
+        "generated": datetime.now(UTC).strftime("%Y-%m-%d %H:%M:%S UTC"),
+    }
     header.update({str(k): v for k, v in (extra or {}).items()})
     page = _template().render(
-        name=dataset_name, header=header,
+        name=dataset_name,
+        header=header,
         reproduce=provenance.get("workflow command")
         or f"colourhs run DATASET_DIR --name {dataset_name}",
-        summary_table=_table(top, "summary") if len(top) else "", has_paper=has_paper,
+        summary_table=_table(top, "summary") if len(top) else "",
+        has_paper=has_paper,
         legend={c: COLUMN_LEGEND[c] for c in key if c in COLUMN_LEGEND}
         | ({"paper …": "the paper's number (see below)"} if has_paper else {}),
         paper_source=PAPER_REFERENCE_SOURCE,
-        calibration=[_figure(p, out_dir, embed_images) for p in calib], scenes=sections,
+        calibration=[_figure(p, out_dir, embed_images) for p in calib],
+        scenes=sections,
         timing_table=_table(bench, "bench") if not bench.empty else "",
-        provenance=provenance, rig=rig_summary(dataset) if dataset is not None else {},
-        env=env, config_resolved=config_resolved,
+        provenance=provenance,
+        rig=rig_summary(dataset) if dataset is not None else {},
+        env=env,
+        config_resolved=config_resolved,
         config_yaml=yaml.safe_dump(_plain(config), sort_keys=False, allow_unicode=True),
-    )  # fmt: skip
+    )
     with atomic_output(out) as tmp:
         tmp.write_text(page, encoding="utf-8")
     return out

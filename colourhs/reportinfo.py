@@ -62,8 +62,11 @@ def git_provenance(project_dir: str | Path) -> dict[str, str]:
     def git(*args: str) -> str:
         return subprocess.run(
             ["git", "-C", str(project_dir), *args],
-            capture_output=True, text=True, check=True, timeout=30,
-        ).stdout  # fmt: skip
+            capture_output=True,
+            text=True,
+            check=True,
+            timeout=30,
+        ).stdout
 
     try:
         commit = git("rev-parse", "HEAD").strip()
@@ -154,8 +157,11 @@ def scene_descriptions(dataset) -> dict[str, str]:
     out = {}
     for name, s in dataset.scenes.items():
         kind = f"dynamic, {len(s.frames)} frames" if s.dynamic else "static"
-        facts = [kind, f"chromatic object {s.chromatic}" if s.chromatic else "white surface",
-                 "ground truth" if s.has_gt else "no ground truth"]  # fmt: skip
+        facts = [
+            kind,
+            f"chromatic object {s.chromatic}" if s.chromatic else "white surface",
+            "ground truth" if s.has_gt else "no ground truth",
+        ]
         text = s.description.strip()
         out[name] = (f"{text} ({'; '.join(facts)})" if text else "; ".join(facts)).strip()
     return out
@@ -170,8 +176,11 @@ def result_files(results_dir: str | Path, scene: str) -> dict[str, dict[str, lis
     root = Path(results_dir) / scene
     if not root.is_dir():
         return {}
-    kinds = {"mesh": ("mesh", ".ply"), "error-coloured mesh": ("eval", ".ply"),
-             "depth": ("depth", ".h5")}  # fmt: skip
+    kinds = {
+        "mesh": ("mesh", ".ply"),
+        "error-coloured mesh": ("eval", ".ply"),
+        "depth": ("depth", ".h5"),
+    }
     names = sorted(p.name for p in root.iterdir() if p.is_dir())
     order = [v for v in VARIANT_ORDER if v in names] + [v for v in names if v not in VARIANT_ORDER]
     out = {}
@@ -193,8 +202,9 @@ def arrange_figures(paths: Sequence[Path]) -> dict[str, list[Path]]:
     """Split a scene's figures into ``wide`` (:data:`WIDE_FIGURES`, in that order),
     ``errors`` (per-variant ``*_error`` maps) and ``thumbs`` (the rest); the latter
     two grouped by kind (the name after the variant), variants in the paper's order."""
-    wide = sorted((p for p in paths if p.stem in WIDE_FIGURES),
-                  key=lambda p: WIDE_FIGURES.index(p.stem))  # fmt: skip
+    wide = sorted(
+        (p for p in paths if p.stem in WIDE_FIGURES), key=lambda p: WIDE_FIGURES.index(p.stem)
+    )
     rest = [p for p in paths if p.stem not in WIDE_FIGURES]
 
     def key(p):

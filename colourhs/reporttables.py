@@ -42,9 +42,13 @@ __all__ = [
 KEY_COLUMNS = ("scene", "frame", "variant")
 #: The contract's metric columns of ``metrics.csv``, in order.
 METRIC_COLUMNS = (
-    "hausdorff_rms_mm", "hausdorff_mean_mm", "hausdorff_max_mm",
-    "depth_median_mm", "depth_rms_mm", "normal_median_deg",
-)  # fmt: skip
+    "hausdorff_rms_mm",
+    "hausdorff_mean_mm",
+    "hausdorff_max_mm",
+    "depth_median_mm",
+    "depth_rms_mm",
+    "normal_median_deg",
+)
 #: Every column ``metrics.csv`` must have (results contract, version 1).
 REQUIRED_COLUMNS = KEY_COLUMNS + METRIC_COLUMNS
 
@@ -62,9 +66,17 @@ AGGREGATION = {
 
 #: Columns of a Snakemake benchmark TSV file.
 BENCHMARK_COLUMNS = (
-    "s", "h:m:s", "max_rss", "max_vms", "max_uss", "max_pss", "io_in", "io_out",
-    "mean_load", "cpu_time",
-)  # fmt: skip
+    "s",
+    "h:m:s",
+    "max_rss",
+    "max_vms",
+    "max_uss",
+    "max_pss",
+    "io_in",
+    "io_out",
+    "mean_load",
+    "cpu_time",
+)
 
 
 # --------------------------------------------------------------------------- numbers

@@ -12,15 +12,31 @@ from __future__ import annotations
 #: applied, and the paper's name. In the paper's order.
 VARIANTS = {
     "vh": {"method": "vh", "photometric": False, "chromaticity": False, "label": "VH"},
-    "ml_full": {"method": "ml", "photometric": True, "chromaticity": True,
-                "label": "ML_HS_wPh&ChromCalib"},
-    "bayes_nocalib": {"method": "bayes", "photometric": False, "chromaticity": False,
-                      "label": "BayesianHS_w/oCalib"},
-    "bayes_ph": {"method": "bayes", "photometric": True, "chromaticity": False,
-                 "label": "BayesianHS_wPhCalib"},
-    "bayes_full": {"method": "bayes", "photometric": True, "chromaticity": True,
-                   "label": "BayesianHS_wPh&ChromCalib"},
-}  # fmt: skip
+    "ml_full": {
+        "method": "ml",
+        "photometric": True,
+        "chromaticity": True,
+        "label": "ML_HS_wPh&ChromCalib",
+    },
+    "bayes_nocalib": {
+        "method": "bayes",
+        "photometric": False,
+        "chromaticity": False,
+        "label": "BayesianHS_w/oCalib",
+    },
+    "bayes_ph": {
+        "method": "bayes",
+        "photometric": True,
+        "chromaticity": False,
+        "label": "BayesianHS_wPhCalib",
+    },
+    "bayes_full": {
+        "method": "bayes",
+        "photometric": True,
+        "chromaticity": True,
+        "label": "BayesianHS_wPh&ChromCalib",
+    },
+}
 
 #: The variant ids in the paper's order.
 VARIANT_ORDER = tuple(VARIANTS)

@@ -51,5 +51,7 @@ def plane_calibrated(tmp_path_factory):
     photometric_maps(
         data, root / "marker_poses.csv", root / "photometric.h5", root / "crosstalk.json"
     )
-    return data, {"crosstalk_json": root / "crosstalk.json",
-                  "photometric_h5": root / "photometric.h5"}  # fmt: skip
+    return data, {
+        "crosstalk_json": root / "crosstalk.json",
+        "photometric_h5": root / "photometric.h5",
+    }

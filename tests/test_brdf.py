@@ -343,12 +343,20 @@ def test_evaluate_materials_errors_and_empty():
 BAND_MATERIALS = [
     Material(kd=0.7),  # today's separable mode ("albedo" tint)
     Material(kd=1.0, specular="ggx", ks=1.0, roughness=0.2, f0=0.045, tint="white"),
-    Material(kd=0.05, specular="ggx", ks=1.0, roughness=0.15, tint="fresnel",
-             f0_rgb=(1.0, 0.71, 0.29)),
+    Material(
+        kd=0.05, specular="ggx", ks=1.0, roughness=0.15, tint="fresnel", f0_rgb=(1.0, 0.71, 0.29)
+    ),
     Material(kd=1.0, diffuse="oren_nayar", sigma=0.4),
-    Material(kd=1.0, diffuse="oren_nayar", sigma=0.3, specular="blinn_phong", ks=0.2,
-             shininess=20.0, tint="white"),
-]  # fmt: skip
+    Material(
+        kd=1.0,
+        diffuse="oren_nayar",
+        sigma=0.3,
+        specular="blinn_phong",
+        ks=0.2,
+        shininess=20.0,
+        tint="white",
+    ),
+]
 
 
 def test_new_models_are_reciprocal_to_the_bit():

@@ -101,9 +101,21 @@ def test_workflow_lint_is_clean(tmp_path):
     snakefile = str(PROJECT_ROOT / "Snakefile")
     config = str(PROJECT_ROOT / "config.yaml")
     done = subprocess.run(
-        [sys.executable, "-m", "snakemake", "--lint", "--snakefile", snakefile,
-         "--directory", str(tmp_path), "--configfile", config], capture_output=True, text=True,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "snakemake",
+            "--lint",
+            "--snakefile",
+            snakefile,
+            "--directory",
+            str(tmp_path),
+            "--configfile",
+            config,
+        ],
+        capture_output=True,
+        text=True,
+    )
     assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
     assert "Lints for" not in done.stdout + done.stderr
 
@@ -116,11 +128,23 @@ def test_missing_dataset_stops_the_run_before_any_job(tmp_path):
     cfg.write_text(yaml.safe_dump(config))
     work = tmp_path / "work"
     done = subprocess.run(
-        [sys.executable, "-m", "snakemake", "--cores", "1", "--snakefile",
-         str(PROJECT_ROOT / "Snakefile"), "--directory", str(work), "--configfile",
-         str(PROJECT_ROOT / "config.yaml"), str(cfg)],
-        capture_output=True, text=True,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "snakemake",
+            "--cores",
+            "1",
+            "--snakefile",
+            str(PROJECT_ROOT / "Snakefile"),
+            "--directory",
+            str(work),
+            "--configfile",
+            str(PROJECT_ROOT / "config.yaml"),
+            str(cfg),
+        ],
+        capture_output=True,
+        text=True,
+    )
     out = done.stdout + done.stderr
     assert done.returncode != 0
     assert "nowhere" in out and "dataset folder not found" in out, out[-2000:]
@@ -133,10 +157,23 @@ def test_invalid_config_names_the_key(tmp_path):
     bad = tmp_path / "bad.yaml"
     bad.write_text(yaml.safe_dump(config))
     done = subprocess.run(
-        [sys.executable, "-m", "snakemake", "-n", "--cores", "1", "--snakefile",
-         str(PROJECT_ROOT / "Snakefile"), "--directory", str(tmp_path), "--configfile", str(bad)],
-        capture_output=True, text=True,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "snakemake",
+            "-n",
+            "--cores",
+            "1",
+            "--snakefile",
+            str(PROJECT_ROOT / "Snakefile"),
+            "--directory",
+            str(tmp_path),
+            "--configfile",
+            str(bad),
+        ],
+        capture_output=True,
+        text=True,
+    )
     assert done.returncode != 0
     assert "huge" in done.stdout + done.stderr
     assert "preset" in done.stdout + done.stderr
@@ -155,23 +192,35 @@ def _one_line(capsys) -> str:
 
 
 USER_ERRORS = {  # argv after DATASET -> what the one line must say
-    "scene": (["reconstruct", "{d}", "nosuch", "000000", "{o}/x.h5"],
-              ["unknown scene 'nosuch'", "statue", "plane"]),
-    "frame": (["reconstruct", "{d}", "statue", "7", "{o}/x.h5"],
-              ["unknown frame of scene 'statue' '7'", "000000"]),
-    "camera": (["reconstruct", "{d}", "statue", "000000", "{o}/x.h5", "--reference", "cam9"],
-               ["no camera 'cam9'", "cam1"]),
-    "file": (["reconstruct", "{d}", "statue", "000000", "{o}/x.h5", "--photometric", "{o}/no.h5"],
-             ["--photometric", "no.h5: no such file"]),
+    "scene": (
+        ["reconstruct", "{d}", "nosuch", "000000", "{o}/x.h5"],
+        ["unknown scene 'nosuch'", "statue", "plane"],
+    ),
+    "frame": (
+        ["reconstruct", "{d}", "statue", "7", "{o}/x.h5"],
+        ["unknown frame of scene 'statue' '7'", "000000"],
+    ),
+    "camera": (
+        ["reconstruct", "{d}", "statue", "000000", "{o}/x.h5", "--reference", "cam9"],
+        ["no camera 'cam9'", "cam1"],
+    ),
+    "file": (
+        ["reconstruct", "{d}", "statue", "000000", "{o}/x.h5", "--photometric", "{o}/no.h5"],
+        ["--photometric", "no.h5: no such file"],
+    ),
     "hull scene": (["hull", "{d}", "nosuch", "000000", "{o}/h.ply"], ["unknown scene 'nosuch'"]),
     "object": (["chromaticity", "{d}", "nosuch", "{o}/c.h5"], ["nosuch", "toy"]),
     "dataset": (["markers", "{o}/nowhere", "{o}/p.csv"], ["dataset", "nowhere: no such file"]),
     "preset": (["synth", "{o}/s", "--preset", "huge"], ["unknown preset 'huge'", "demo"]),
-    "variant": (["run", "{d}", "--directory", "{o}", "--variants", "vh,foo"],
-                ["unknown variant(s) 'foo'", "bayes_full"]),
-    "run scene": (["run", "{d}", "--directory", "{o}", "--scenes", "statue,nosuch"],
-                  ["unknown scene(s) 'nosuch'", "plane"]),
-}  # fmt: skip
+    "variant": (
+        ["run", "{d}", "--directory", "{o}", "--variants", "vh,foo"],
+        ["unknown variant(s) 'foo'", "bayes_full"],
+    ),
+    "run scene": (
+        ["run", "{d}", "--directory", "{o}", "--scenes", "statue,nosuch"],
+        ["unknown scene(s) 'nosuch'", "plane"],
+    ),
+}
 
 
 @pytest.mark.parametrize("case", USER_ERRORS, ids=list(USER_ERRORS))

@@ -42,8 +42,9 @@ def true_mixing(dataset: Path) -> dict[str, np.ndarray]:
     out = {}
     for cam in model["cameras"]:
         X = np.array(cam["crosstalk"], float)
-        xy = normalised_coordinates(pixel_grid(W, H).reshape(-1, 2), np.array(cam["K"]),
-                                    np.array(cam["dist"]))  # fmt: skip
+        xy = normalised_coordinates(
+            pixel_grid(W, H).reshape(-1, 2), np.array(cam["K"]), np.array(cam["dist"])
+        )
         r2 = np.sum((xy[:, None] - np.array(cam["vignetting_centre"])) ** 2, -1)
         r2 /= cam["corner_radius"] ** 2
         sens = np.array(cam["gains"]) * np.clip(1 - np.array(cam["vignetting"]) * r2, 0.05, None)
@@ -56,15 +57,18 @@ def filter_truth(dataset: Path) -> dict[str, np.ndarray]:
     """The same for the chromatic light's filters (chromatic_crosstalk)."""
     model = json.loads((dataset / "gt" / "rig_model.json").read_text())
     led = true_mixing(dataset)
-    return {c["name"]: led[c["name"]] * (np.array(c["chromatic_crosstalk"]) /
-                                         np.array(c["crosstalk"]))
-            for c in model["cameras"]}  # fmt: skip
+    return {
+        c["name"]: led[c["name"]] * (np.array(c["chromatic_crosstalk"]) / np.array(c["crosstalk"]))
+        for c in model["cameras"]
+    }
 
 
 def led_factor_truth(dataset: Path) -> dict[str, np.ndarray]:
     model = json.loads((dataset / "gt" / "rig_model.json").read_text())
-    return {c["name"]: np.array(c["crosstalk"]) / np.array(c["chromatic_crosstalk"])
-            for c in model["cameras"]}  # fmt: skip
+    return {
+        c["name"]: np.array(c["crosstalk"]) / np.array(c["chromatic_crosstalk"])
+        for c in model["cameras"]
+    }
 
 
 def max_rms(mixing: dict, truth: dict) -> dict[str, tuple[float, float]]:
@@ -82,8 +86,16 @@ def _render(root: Path, preset: str, seed: int, poses: bool = True, **kw) -> Pat
     from colourhs.markers import marker_poses
     from colourhs.synth.dataset import synthesise
 
-    data = synthesise(root / "data", preset, seed=seed, parts=("photometric", "chromatic"),
-                      scenes=(), progress=False, workers=2, **kw)  # fmt: skip
+    data = synthesise(
+        root / "data",
+        preset,
+        seed=seed,
+        parts=("photometric", "chromatic"),
+        scenes=(),
+        progress=False,
+        workers=2,
+        **kw,
+    )
     if poses:
         marker_poses(data, root / "marker_poses.csv")
     return data
@@ -97,8 +109,7 @@ def _grid(W, H):
 def _vignetting_mixing(W, H, X, k=(0.12, 0.145, 0.10), centre=((0, 0), (6, -4), (-5, 3))):
     """A field X[c, b] s_c(u) / s_b(u), per-channel radial falloff (colour shading ~5 %)."""
     uv = _grid(W, H)
-    r2 = [np.sum((uv - [W / 2 + cx, H / 2 + cy]) ** 2, -1) / (W**2 + H**2) * 4
-          for cx, cy in centre]  # fmt: skip
+    r2 = [np.sum((uv - [W / 2 + cx, H / 2 + cy]) ** 2, -1) / (W**2 + H**2) * 4 for cx, cy in centre]
     s = np.stack([1 - kc * r for kc, r in zip(k, r2, strict=True)], axis=-1)
     return X[None, None] * s[..., :, None] / s[..., None, :]
 
@@ -257,11 +268,18 @@ def _true_pose_problem(data: Path):
     gt = json.loads((data / "gt" / "board_poses.json").read_text())
     shots = []
     for pose in ds.poses:
-        imgs = {c: read_image(ds.photometric_image(pose, c), ds.rig.image)
-                for c in ds.rig.camera_names}  # fmt: skip
-        shots.append(BoardShot(pose, np.array(gt[pose]["R"]), np.array(gt[pose]["t"]),
-                               {c: v[0] for c, v in imgs.items()},
-                               {c: v[1] for c, v in imgs.items()}))  # fmt: skip
+        imgs = {
+            c: read_image(ds.photometric_image(pose, c), ds.rig.image) for c in ds.rig.camera_names
+        }
+        shots.append(
+            BoardShot(
+                pose,
+                np.array(gt[pose]["R"]),
+                np.array(gt[pose]["t"]),
+                {c: v[0] for c, v in imgs.items()},
+                {c: v[1] for c, v in imgs.items()},
+            )
+        )
     return ds.rig, shots, fields
 
 
@@ -323,10 +341,13 @@ def offset_random_tiny(tmp_path_factory):
 
     def moved(*args, **kwargs):
         d = draw(*args, **kwargs)
-        cams = [replace(c, light_offset=np.array(o)) for c, o in zip(d.rig.cameras, offsets,
-                                                                     strict=True)]  # fmt: skip
-        lights = [replace(li, position=c.light_centre)
-                  for li, c in zip(d.rig.lights, cams, strict=True)]  # fmt: skip
+        cams = [
+            replace(c, light_offset=np.array(o))
+            for c, o in zip(d.rig.cameras, offsets, strict=True)
+        ]
+        lights = [
+            replace(li, position=c.light_centre) for li, c in zip(d.rig.lights, cams, strict=True)
+        ]
         return replace(d, rig=replace(d.rig, cameras=tuple(cams), lights=tuple(lights)))
 
     root = tmp_path_factory.mktemp("xt-offset")

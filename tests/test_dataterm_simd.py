@@ -26,8 +26,13 @@ def _data_term(root):
     """Cost and normals of the tiny statue, chromaticity, mu maps and masks on:
     every pixel, 48 hypotheses over the working range."""
     root = Path(root)
-    fr = load_frame(root, "statue", "000000", photometric_h5=root / "gt" / "photometric.h5",
-                    chromaticity_h5=root / "scenes/statue/gt/chromaticity.h5")  # fmt: skip
+    fr = load_frame(
+        root,
+        "statue",
+        "000000",
+        photometric_h5=root / "gt" / "photometric.h5",
+        chromaticity_h5=root / "scenes/statue/gt/chromaticity.h5",
+    )
     rig, ref = fr.rig, fr.rig.cameras[0]
     rays = reference_rays(ref, rig.image.width, rig.image.height)
     zc = working_depth(rig, ref)
@@ -105,5 +110,6 @@ def test_a_failing_intrinsic_falls_back_with_a_warning(monkeypatch):
 
 if __name__ == "__main__":
     cost, normals = _data_term(sys.argv[1])
-    np.savez(sys.argv[2], cost=cost, normals=normals, simd=simd.SIMD,
-             kernel=_kernel.py_func.__qualname__)  # fmt: skip
+    np.savez(
+        sys.argv[2], cost=cost, normals=normals, simd=simd.SIMD, kernel=_kernel.py_func.__qualname__
+    )

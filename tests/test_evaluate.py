@@ -98,8 +98,9 @@ def test_hausdorff_both_directions():
 
 def _depth_map(tmp_path, name, depth, normal, camera):
     finite = np.isfinite(depth)
-    result = DepthResult(depth.astype(np.float32), normal.astype(np.float32),
-                         finite.astype(np.float32), finite, {})  # fmt: skip
+    result = DepthResult(
+        depth.astype(np.float32), normal.astype(np.float32), finite.astype(np.float32), finite, {}
+    )
     path = tmp_path / f"{name}.h5"
     write_depth(path, result, camera, {"method": "test"})
     return path
@@ -165,8 +166,16 @@ def test_evaluate_frame_and_metrics_table(tmp_path):
     gd, gnorm = render_depth_normals(gv, gt, gn, cam, W, H)
     h5 = _depth_map(tmp_path, "depth", gd, gnorm, cam)
     out_json, out_ply = tmp_path / "m" / "sphere_a.json", tmp_path / "m" / "sphere_a.ply"
-    info = evaluate_frame(h5, mesh_ply, gt_ply, out_json, out_ply,
-                          scene="sphere", frame="000001", variant="bayes_full")  # fmt: skip
+    info = evaluate_frame(
+        h5,
+        mesh_ply,
+        gt_ply,
+        out_json,
+        out_ply,
+        scene="sphere",
+        frame="000001",
+        variant="bayes_full",
+    )
     assert json.loads(out_json.read_text()) == pytest.approx(info)
     assert info["hausdorff_mean_mm"] == pytest.approx(1.0, abs=0.02)
     assert info["hausdorff_rms_mm"] == pytest.approx(1.0, abs=0.02)
@@ -180,22 +189,41 @@ def test_evaluate_frame_and_metrics_table(tmp_path):
     coloured = o3d.io.read_triangle_mesh(str(out_ply))
     assert coloured.has_vertex_colors()
     # The same frame without ground truth: the metrics are empty.
-    empty = evaluate_frame(h5, mesh_ply, None, tmp_path / "m" / "sphere_b.json",
-                           scene="sphere", frame="000001", variant="bayes_nocalib")  # fmt: skip
+    empty = evaluate_frame(
+        h5,
+        mesh_ply,
+        None,
+        tmp_path / "m" / "sphere_b.json",
+        scene="sphere",
+        frame="000001",
+        variant="bayes_nocalib",
+    )
     assert empty["hausdorff_rms_mm"] is None and empty["depth_median_mm"] is None
     # Invented surface: the same sphere plus a small one beside it (radius 2 cm, 7
     # pixels off the true silhouette), in view but off the ground truth: outside_share
     # counts it, the accuracy does not change.
     assert info["outside_share"] < 0.01
     bv, bt, bn = sphere(0.02, 60)
-    both = write_ply(tmp_path / "both.ply", np.vstack([mv, bv + [0.14, 0.0, 0.0]]),
-                     np.vstack([mt, bt + len(mv)]), np.vstack([mn, bn]))  # fmt: skip
-    extra = evaluate_frame(h5, both, gt_ply, tmp_path / "extra.json",
-                           scene="sphere", frame="000001", variant="ml_full")  # fmt: skip
+    both = write_ply(
+        tmp_path / "both.ply",
+        np.vstack([mv, bv + [0.14, 0.0, 0.0]]),
+        np.vstack([mt, bt + len(mv)]),
+        np.vstack([mn, bn]),
+    )
+    extra = evaluate_frame(
+        h5, both, gt_ply, tmp_path / "extra.json", scene="sphere", frame="000001", variant="ml_full"
+    )
     assert 0.45 < extra["outside_share"] < 0.6  # measured 0.518
     assert extra["hausdorff_rms_mm"] == pytest.approx(info["hausdorff_rms_mm"], abs=0.01)
-    evaluate_frame(h5, mesh_ply, gt_ply, tmp_path / "m" / "aaa.json",
-                   scene="another", frame="000000", variant="ml_full")  # fmt: skip
+    evaluate_frame(
+        h5,
+        mesh_ply,
+        gt_ply,
+        tmp_path / "m" / "aaa.json",
+        scene="another",
+        frame="000000",
+        variant="ml_full",
+    )
     csv = tmp_path / "reports" / "metrics.csv"
     table = metrics_table(sorted((tmp_path / "m").glob("*.json")), csv)
     read = pd.read_csv(csv, dtype={"frame": str})

@@ -20,8 +20,15 @@ from colourhs.reconstruct.frame import load_frame, reconstruct
 from colourhs.synth.dataset import PRESETS, synthesise
 from colourhs.synth.rig import Nuisances
 
-EXACT = replace(PRESETS["random-tiny"], name="exact", width=320, height=240, supersample=2,
-                n_poses=3, sheet_frames=1)  # fmt: skip
+EXACT = replace(
+    PRESETS["random-tiny"],
+    name="exact",
+    width=320,
+    height=240,
+    supersample=2,
+    n_poses=3,
+    sheet_frames=1,
+)
 SEEDS = (1, 2, 3, 4, 5)
 #: Seed 5's rig has lenses beyond the others' (issue 12, one camera model end to
 #: end): a skew of up to 1 % of f and 12 distortion coefficients (rational k4-k6,
@@ -36,9 +43,17 @@ def exact_rigs(tmp_path_factory):
     for seed in SEEDS:
         root = tmp_path_factory.mktemp(f"exact{seed}") / "d"
         preset = replace(EXACT, random_ranges="random-tiny-lens") if seed == LENS_SEED else EXACT
-        synthesise(root, preset, seed=seed, nuisances=Nuisances().without("noise", "crosstalk"),
-                   exact=True, parts=("photometric", "scenes"), scenes=("plane", "sheet"),
-                   progress=False, workers=2)  # fmt: skip
+        synthesise(
+            root,
+            preset,
+            seed=seed,
+            nuisances=Nuisances().without("noise", "crosstalk"),
+            exact=True,
+            parts=("photometric", "scenes"),
+            scenes=("plane", "sheet"),
+            progress=False,
+            workers=2,
+        )
         out[seed] = root
     cams = load_frame(out[LENS_SEED], "plane", "000000").rig.cameras
     assert all(len(c.dist) == 12 and abs(c.K[0, 1]) > 0 for c in cams)
@@ -103,8 +118,9 @@ def _term_pair(root, scene, chroma=False):
 
     gt = root / "gt" / "photometric.h5"
     ch = root / "scenes" / scene / "gt" / "chromaticity.h5" if chroma else None
-    fr = load_frame(root, scene, "000000", photometric_h5=gt if gt.exists() else None,
-                    chromaticity_h5=ch)  # fmt: skip
+    fr = load_frame(
+        root, scene, "000000", photometric_h5=gt if gt.exists() else None, chromaticity_h5=ch
+    )
     rig, ref = fr.rig, fr.rig.cameras[0]
     rays = reference_rays(ref, rig.image.width, rig.image.height)
     pix = np.flatnonzero(fr.silhouettes[0].ravel())[::7][:2000]
@@ -124,8 +140,10 @@ def test_compiled_data_term_equals_the_numpy_reference(exact_rigs, tiny_dataset)
     exact to float32 below 0.6 only, by design); validity differs on 0.5 % of
     the lens rig's hypotheses (footprints that touch an unusable pixel with a
     weight rounding makes 0 or not) and 2.4 % of the toy's."""
-    for root, scene, chroma, share in ((exact_rigs[LENS_SEED], "plane", False, 0.006),
-                                       (tiny_dataset, "toy", True, 0.03)):  # fmt: skip
+    for root, scene, chroma, share in (
+        (exact_rigs[LENS_SEED], "plane", False, 0.006),
+        (tiny_dataset, "toy", True, 0.03),
+    ):
         (c1, n1), (c2, n2) = _term_pair(root, scene, chroma)
         v1, v2 = c1 < 1, c2 < 1
         assert v1.sum() > 5000 and np.mean(v1 != v2) * v1.size / v1.sum() < share

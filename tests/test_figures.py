@@ -203,8 +203,13 @@ def test_scene_figures_share_one_scale(tmp_path):
     depths, meshes, coloured = {}, {}, {}
     for variant, dz_mm, top in (("vh", 3.0, 8.0), ("bayes_full", 1.0, 2.0)):
         ok = np.isfinite(gd)
-        res = DepthResult((gd + dz_mm / 1e3).astype(np.float32), gn.astype(np.float32),
-                          ok.astype(np.float32), ok, {})  # fmt: skip
+        res = DepthResult(
+            (gd + dz_mm / 1e3).astype(np.float32),
+            gn.astype(np.float32),
+            ok.astype(np.float32),
+            ok,
+            {},
+        )
         depths[variant] = tmp_path / f"{variant}.h5"
         write_depth(depths[variant], res, cam, {"method": "test"})
         meshes[variant] = gt
@@ -213,9 +218,16 @@ def test_scene_figures_share_one_scale(tmp_path):
         coloured[variant].with_suffix(".json").write_text(json.dumps({"colour_vmax_mm": top}))
     written = scene_figures(tmp_path / "figs", depths, meshes, gt, coloured=coloured)
     names = sorted(p.name for p in written)
-    assert names == ["bayes_full_depth.png", "bayes_full_normal.png", "depth_error.png",
-                     "figure7.png", "hausdorff.png", "normal_error.png", "vh_depth.png",
-                     "vh_normal.png"]  # fmt: skip
+    assert names == [
+        "bayes_full_depth.png",
+        "bayes_full_normal.png",
+        "depth_error.png",
+        "figure7.png",
+        "hausdorff.png",
+        "normal_error.png",
+        "vh_depth.png",
+        "vh_normal.png",
+    ]
     # one scale, 0 to 2 mm (the median of the variants' 3 and 1 mm): the centre of vh's
     # panel has the top colour (3 mm, saturated), bayes_full's half of it (1 mm), in both
     # figures (each PLY's own scale had 3/8 and 1/2 of its top: vh the darker one)

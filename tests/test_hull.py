@@ -200,8 +200,9 @@ def test_hull_depth_range_holds_the_sphere_and_little_more(ring):
     # No wider than the 12-camera hull's overshoot (a few voxels) plus the margins.
     assert near > D_CAM - R_SPHERE - 0.003 - 4 * VOXEL
     assert far < D_CAM + R_SPHERE + 0.003 + 4 * VOXEL
-    away = Camera("away", cam.K, cam.dist, cam.R, cam.t + np.array([0.0, 0.0, -2.0]), "red",
-                  np.zeros(3))  # fmt: skip
+    away = Camera(
+        "away", cam.K, cam.dist, cam.R, cam.t + np.array([0.0, 0.0, -2.0]), "red", np.zeros(3)
+    )
     with pytest.raises(ValueError, match="not seen by camera away"):
         hull_depth_range(v, t, away, SIZE, SIZE)
 

@@ -41,8 +41,9 @@ def make_camera(dist=(0.0, 0.0, 0.0, 0.0, 0.0), centre=(0.02, -0.01, -0.8)) -> C
 def write_depth_file(path, camera, depth, normal, attrs=None):
     """A results-contract depth file through the pipeline's own writer."""
     finite = np.isfinite(depth)
-    result = DepthResult(depth.astype(np.float32), normal.astype(np.float32),
-                         finite.astype(np.float32), finite, {})  # fmt: skip
+    result = DepthResult(
+        depth.astype(np.float32), normal.astype(np.float32), finite.astype(np.float32), finite, {}
+    )
     write_depth(path, result, camera, attrs or {"method": "test"})
     return path
 
@@ -130,8 +131,9 @@ def test_add_hull_points_only_away_from_the_data():
     assert np.allclose(n[is_hull], hull_n[d_all > radius])
     assert cKDTree(points).query(p[is_hull])[0].min() > radius
     # A box keeps only the hull inside it.
-    _, _, in_box = add_hull_points(points, normals, hull_v, hull_n, radius,
-                                   box=(np.full(3, -1.0), np.array([1.0, 1.0, 0.0])))  # fmt: skip
+    _, _, in_box = add_hull_points(
+        points, normals, hull_v, hull_n, radius, box=(np.full(3, -1.0), np.array([1.0, 1.0, 0.0]))
+    )
     assert 0 < in_box.sum() < is_hull.sum()
 
 
@@ -186,8 +188,12 @@ def test_frame_mesh_writes_a_sphere_ply_and_the_hull_helps(tmp_path):
     h5 = write_depth_file(tmp_path / "sphere.h5", cam, z, ((X - centre) / r).reshape(H, W, 3))
     ball = o3d.geometry.TriangleMesh.create_sphere(1.03 * r, 30)
     ball.compute_vertex_normals()
-    hull = write_ply(tmp_path / "hull.ply", np.asarray(ball.vertices), np.asarray(ball.triangles),
-                     np.asarray(ball.vertex_normals))  # fmt: skip
+    hull = write_ply(
+        tmp_path / "hull.ply",
+        np.asarray(ball.vertices),
+        np.asarray(ball.triangles),
+        np.asarray(ball.vertex_normals),
+    )
     points, _ = oriented_points(read_depth(h5))
     errors = {}
     for hull_ply in (None, hull):

@@ -80,8 +80,9 @@ def test_invalid_hypotheses_are_marked(tiny_dataset, calib):
     prepared = prepare_images(fr.images, fr.saturated, pairs, fr.mu, None, fr.silhouettes)
     rays = reference_rays(ref, 160, 120)
     # Far behind the working volume: outside every silhouette, and past the image edges.
-    cost, normals = data_term(rays[:200], ref.centre, np.array([3.0, 50.0]), rig.cameras,
-                              prepared, pairs)  # fmt: skip
+    cost, normals = data_term(
+        rays[:200], ref.centre, np.array([3.0, 50.0]), rig.cameras, prepared, pairs
+    )
     assert np.all(cost == INVALID_COST) and np.all(normals == 0)
 
 
@@ -140,8 +141,9 @@ def test_depth_range_from_the_visual_hull(tiny_dataset, calib, tmp_path):
     empty = tmp_path / "empty.ply"
     empty.write_text("ply\nformat ascii 1.0\nelement vertex 0\nelement face 0\nend_header\n")
     with pytest.raises(Exception, match="empty.ply"):
-        reconstruct_frame(tiny_dataset, "statue", "000000", tmp_path / "x.h5", "bayes",
-                          hull_ply=empty, **kw)  # fmt: skip
+        reconstruct_frame(
+            tiny_dataset, "statue", "000000", tmp_path / "x.h5", "bayes", hull_ply=empty, **kw
+        )
     assert not (tmp_path / "x.h5").exists()
 
 

@@ -424,11 +424,21 @@ def _fake_dataset(root: Path):
 
     cams = tuple(NS(name=f"cam{i}", light_colour=c) for i, c in enumerate(("red", "green", "blue")))
     scenes = {
-        "plane": NS(frames=("000000",), dynamic=False, chromatic=None, has_gt=True,
-                    description="held-out <board> pose"),
-        "sheet": NS(frames=tuple(f"{i:06d}" for i in range(4)), dynamic=True,
-                    chromatic="slinky", has_gt=False, description=""),
-    }  # fmt: skip
+        "plane": NS(
+            frames=("000000",),
+            dynamic=False,
+            chromatic=None,
+            has_gt=True,
+            description="held-out <board> pose",
+        ),
+        "sheet": NS(
+            frames=tuple(f"{i:06d}" for i in range(4)),
+            dynamic=True,
+            chromatic="slinky",
+            has_gt=False,
+            description="",
+        ),
+    }
     rig = NS(cameras=cams, image=NS(width=640, height=480, bit_depth=16))
     return NS(root=root, rig=rig, poses=("p0", "p1"), chromatic_objects=("slinky",), scenes=scenes)
 
@@ -444,23 +454,41 @@ def test_report_layout_provenance_and_links(tmp_path, metrics_csv, images):
         ("vh", "mesh", "000000.ply"),
     ]:
         (results / "plane" / v / kind).mkdir(parents=True, exist_ok=True)
-        (results / "plane" / v / kind / name).write_text("x")  # fmt: skip
+        (results / "plane" / v / kind / name).write_text("x")
     figs = images["plane"][0].parent
     for stem in ("figure7", "vh_depth_error", "vh_depth", "bayes_ph_depth"):
         assert cv2.imwrite(str(figs / f"{stem}.png"), np.zeros((4, 4, 3), np.uint8))
     out = build_report(
-        tmp_path / "reports" / "demo" / "index.html", "demo", metrics_csv, [],
-        {"plane": [figs / f for f in ("vh_depth.png", "figure7.png", "bayes_ph_depth.png",
-                                      "vh_depth_error.png")]},
-        [], {}, dataset=_fake_dataset(tmp_path / "data"), results_dir=results,
-    )  # fmt: skip
+        tmp_path / "reports" / "demo" / "index.html",
+        "demo",
+        metrics_csv,
+        [],
+        {
+            "plane": [
+                figs / f
+                for f in ("vh_depth.png", "figure7.png", "bayes_ph_depth.png", "vh_depth_error.png")
+            ]
+        },
+        [],
+        {},
+        dataset=_fake_dataset(tmp_path / "data"),
+        results_dir=results,
+    )
     text = out.read_text(encoding="utf-8")
     tables = _tables(text)
     # the summary (first section) with the key columns and the paper's number
     (summary,) = tables["summary"]
-    assert summary[0] == ["scene", "variant", "frames", "hausdorff_rms_mm",
-                          "paper hausdorff_rms_mm", "depth_median_mm", "depth_rms_mm",
-                          "normal_median_deg", "coverage"]  # fmt: skip
+    assert summary[0] == [
+        "scene",
+        "variant",
+        "frames",
+        "hausdorff_rms_mm",
+        "paper hausdorff_rms_mm",
+        "depth_median_mm",
+        "depth_rms_mm",
+        "normal_median_deg",
+        "coverage",
+    ]
     assert len(summary) == 1 + 6 and summary[3][:5] == ["plane", "bayes_ph", "2", "2.50", "2.00"]
     assert text.index('id="summary"') < text.index('id="scene-plane"')
     assert "<dt>hausdorff_rms_mm</dt><dd>accuracy: RMS distance" in text
@@ -484,7 +512,7 @@ def test_report_layout_provenance_and_links(tmp_path, metrics_csv, images):
         "bayes_ph/depth/000000.h5",
         "vh/mesh/000000.ply",
     ):
-        assert f'href="../../results/demo/plane/{rel}"' in text  # fmt: skip
+        assert f'href="../../results/demo/plane/{rel}"' in text
     assert "Result files (4)" in text
     # provenance: this checkout's commit
     prov = {r[0]: r[1] for r in tables["provenance"][0]}
@@ -507,10 +535,14 @@ def test_sequence_plot_and_frame_note(tmp_path, metrics_csv, images):
 
 def test_git_provenance_and_resolve_config(tmp_path):
     assert git_provenance(tmp_path) == {"git commit": "not a git checkout"}
-    config = {"reconstruction": {"params": {"alpha": 2.0}, "variants": None},
-              "calibration": {"photometric": {"step_px": None, "coupling": 0.5}},
-              "datasets": {"a": {"path": "x", "calibration": {"photometric": {"step_px": 9}}},
-                           "b": {"path": "y"}}}  # fmt: skip
+    config = {
+        "reconstruction": {"params": {"alpha": 2.0}, "variants": None},
+        "calibration": {"photometric": {"step_px": None, "coupling": 0.5}},
+        "datasets": {
+            "a": {"path": "x", "calibration": {"photometric": {"step_px": 9}}},
+            "b": {"path": "y"},
+        },
+    }
     r = resolve_config(config, {"alpha": 1.0, "tau": 3}, {"step_px": 4, "coupling": 0.1})
     assert r["reconstruction"] == {"params": {"alpha": 2.0, "tau": 3}, "variants": None}
     assert r["calibration"]["photometric"] == {"step_px": 4, "coupling": 0.5}
@@ -523,8 +555,16 @@ def test_git_provenance_and_resolve_config(tmp_path):
 def test_arrange_figures_and_template_is_package_data():
     from importlib.resources import files
 
-    names = ["bayes_ph_normal.png", "hausdorff.png", "vh_normal_error.png", "animation.gif",
-             "vh_depth.png", "figure7.png", "bayes_ph_depth.png", "vh_depth_error.png"]  # fmt: skip
+    names = [
+        "bayes_ph_normal.png",
+        "hausdorff.png",
+        "vh_normal_error.png",
+        "animation.gif",
+        "vh_depth.png",
+        "figure7.png",
+        "bayes_ph_depth.png",
+        "vh_depth_error.png",
+    ]
     a = arrange_figures([Path(n) for n in names])
     assert [p.name for p in a["wide"]] == ["figure7.png", "hausdorff.png"]
     assert [p.name for p in a["errors"]] == ["vh_depth_error.png", "vh_normal_error.png"]

@@ -35,9 +35,16 @@ pytestmark = pytest.mark.skipif(
 WIDTH, HEIGHT = 1400, 900
 # colourhs.evaluate's extra columns (not imported: it loads open3d, 7 s here)
 EXTRA_COLUMNS = (
-    "hausdorff_median_mm", "completeness_rms_mm", "completeness_mean_mm", "completeness_max_mm",
-    "depth_p95_mm", "coverage", "hausdorff_samples", "completeness_samples", "outside_share",
-)  # fmt: skip
+    "hausdorff_median_mm",
+    "completeness_rms_mm",
+    "completeness_mean_mm",
+    "completeness_max_mm",
+    "depth_p95_mm",
+    "coverage",
+    "hausdorff_samples",
+    "completeness_samples",
+    "outside_share",
+)
 
 # Written into the page on load: overflow, the images' state, the page height, the
 # summary table's scroll and client widths, the displayed width of Figure 7.
@@ -102,17 +109,31 @@ def _make_report(root: Path, n_scenes: int, n_frames: int) -> Path:
     long_value = "/a/very/long/path/without/any/spaces/" * 8  # must wrap, not overflow
     config = {"datasets": {"demo": {"path": long_value}}, "reconstruction": {"params": {}}}
     return build_report(
-        root / "reports" / "demo" / "index.html", "demo", metrics,
-        sorted(calib.iterdir()), figures, [], config, extra={"note": long_value},
-    )  # fmt: skip
+        root / "reports" / "demo" / "index.html",
+        "demo",
+        metrics,
+        sorted(calib.iterdir()),
+        figures,
+        [],
+        config,
+        extra={"note": long_value},
+    )
 
 
 def _start(page: Path, screenshot: Path | None = None) -> subprocess.Popen:
     """Load ``page`` (a copy with :data:`MEASURE` added, beside it) in headless Chromium."""
     probe = page.with_name("_measure.html")
     probe.write_text(page.read_text(encoding="utf-8").replace("</body>", MEASURE + "</body>"))
-    cmd = [CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
-           f"--window-size={WIDTH},{HEIGHT}", "--dump-dom", probe.as_uri()]  # fmt: skip
+    cmd = [
+        CHROMIUM,
+        "--headless",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--hide-scrollbars",
+        f"--window-size={WIDTH},{HEIGHT}",
+        "--dump-dom",
+        probe.as_uri(),
+    ]
     if screenshot is not None:
         cmd.insert(-2, f"--screenshot={screenshot}")
     return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -127,9 +148,11 @@ def _measurements(run: subprocess.Popen) -> dict:
 
 
 def test_report_fits_1400px_and_stays_short(tmp_path):
-    runs = [_start(_make_report(tmp_path / "s2f1", 2, 1), tmp_path / "report.png"),
-            _start(_make_report(tmp_path / "s6f1", 6, 1)),
-            _start(_make_report(tmp_path / "s2f30", 2, 30))]  # fmt: skip
+    runs = [
+        _start(_make_report(tmp_path / "s2f1", 2, 1), tmp_path / "report.png"),
+        _start(_make_report(tmp_path / "s6f1", 6, 1)),
+        _start(_make_report(tmp_path / "s2f30", 2, 30)),
+    ]
     small, many, long = map(_measurements, runs)
     for m in (small, many, long):
         assert m["scrollWidth"] <= WIDTH, m["wide"]  # measured 1400: nothing wider

@@ -150,7 +150,7 @@ def test_numbers_are_finite() -> None:
         ),
         (
             lambda d: d["chromatic_light"].update(position="above"),
-            'chromatic_light.position must be a list of 3 numbers (m): the light\'s world '
+            "chromatic_light.position must be a list of 3 numbers (m): the light's world "
             'position, got "above"',
         ),
         # Several problems: the shallowest is reported (units, not K).
@@ -159,9 +159,16 @@ def test_numbers_are_finite() -> None:
             "missing required key units",
         ),
     ],
-    ids=["format-int", "height-negative", "offset-2", "size-zero", "marker-id-empty",
-         "position-text", "shallowest-first"],
-)  # fmt: skip
+    ids=[
+        "format-int",
+        "height-negative",
+        "offset-2",
+        "size-zero",
+        "marker-id-empty",
+        "position-text",
+        "shallowest-first",
+    ],
+)
 def test_schema_messages(edit, message: str) -> None:
     data = contract_example()
     edit(data)

@@ -47,9 +47,19 @@ pytestmark = pytest.mark.skipif(_why_not() is not None, reason=_why_not() or "")
 
 
 def _snakemake(directory, run_yaml, *extra):
-    cmd = [sys.executable, "-m", "snakemake", "--snakefile", str(PROJECT_ROOT / "Snakefile"),
-           "--directory", str(directory), *extra,
-           "--configfile", str(PROJECT_ROOT / "config.yaml"), str(run_yaml)]  # fmt: skip
+    cmd = [
+        sys.executable,
+        "-m",
+        "snakemake",
+        "--snakefile",
+        str(PROJECT_ROOT / "Snakefile"),
+        "--directory",
+        str(directory),
+        *extra,
+        "--configfile",
+        str(PROJECT_ROOT / "config.yaml"),
+        str(run_yaml),
+    ]
     return subprocess.run(cmd, capture_output=True, text=True, timeout=1800)
 
 
@@ -59,27 +69,47 @@ def test_tiny_preset_through_slurm_equals_the_local_run(tmp_path):
         pytest.skip(f"SLURM could not start here: {started.stderr.strip()[-300:]}")
     data = synthesise(tmp_path / "tiny", "tiny", progress=False)
     run_yaml = tmp_path / "run.yaml"
-    run_yaml.write_text(yaml.safe_dump({
-        "datasets": {"tiny": {"path": str(data)}}, "only": ["tiny"],
-        "reconstruction": {"variants": ["vh", "bayes_ph"], "scenes": ["statue"]},
-    }))  # fmt: skip
+    run_yaml.write_text(
+        yaml.safe_dump(
+            {
+                "datasets": {"tiny": {"path": str(data)}},
+                "only": ["tiny"],
+                "reconstruction": {"variants": ["vh", "bayes_ph"], "scenes": ["statue"]},
+            }
+        )
+    )
     on_slurm = _snakemake(
-        tmp_path / "slurm", run_yaml, "--profile", str(PROJECT_ROOT / "profiles" / "slurm"),
-        "--default-resources", "slurm_account=colourhs", "slurm_partition=local", "runtime=30",
-        "mem_mb=4000", "--slurm-init-seconds-before-status-checks", "5",
-    )  # fmt: skip
+        tmp_path / "slurm",
+        run_yaml,
+        "--profile",
+        str(PROJECT_ROOT / "profiles" / "slurm"),
+        "--default-resources",
+        "slurm_account=colourhs",
+        "slurm_partition=local",
+        "runtime=30",
+        "mem_mb=4000",
+        "--slurm-init-seconds-before-status-checks",
+        "5",
+    )
     assert on_slurm.returncode == 0, on_slurm.stderr[-3000:]
     local = _snakemake(tmp_path / "local", run_yaml, "--cores", "2")
     assert local.returncode == 0, local.stderr[-3000:]
 
     # Every job but the final `all` went to SLURM, and SLURM's accounting saw it complete.
     log = on_slurm.stdout + on_slurm.stderr
-    ids = [line.split("SLURM jobid ")[1].split()[0] for line in log.splitlines()
-           if "has been submitted with SLURM jobid" in line]  # fmt: skip
+    ids = [
+        line.split("SLURM jobid ")[1].split()[0]
+        for line in log.splitlines()
+        if "has been submitted with SLURM jobid" in line
+    ]
     jobs = log.count("localrule ") + len(ids)
     assert len(ids) >= 15 and len(ids) == jobs - 1, log[-2000:]
-    sacct = subprocess.run(["sacct", "-X", "-n", "-P", "-o", "JobID,State", "-j", ",".join(ids)],
-                           capture_output=True, text=True, check=True).stdout  # fmt: skip
+    sacct = subprocess.run(
+        ["sacct", "-X", "-n", "-P", "-o", "JobID,State", "-j", ",".join(ids)],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
     states = dict(line.split("|") for line in sacct.split())
     assert set(states) == set(ids) and set(states.values()) == {"COMPLETED"}
 

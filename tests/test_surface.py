@@ -68,8 +68,9 @@ def plane_sides(tiny_dataset, tmp_path_factory):
     root = tiny_dataset
     xt = tmp_path_factory.mktemp("sides") / "crosstalk.json"
     calibrate_crosstalk(root, xt)
-    fr = load_frame(root, "plane", "000000", photometric_h5=root / "gt" / "photometric.h5",
-                    crosstalk_json=xt)  # fmt: skip
+    fr = load_frame(
+        root, "plane", "000000", photometric_h5=root / "gt" / "photometric.h5", crosstalk_json=xt
+    )
     ref = fr.rig.cameras[0]
     W, H = fr.rig.image.width, fr.rig.image.height
     v, t, n = load_mesh(root / "scenes" / "plane" / "gt" / "000000.ply")
@@ -99,14 +100,16 @@ def test_jacobian_predicts_the_residuals(plane_sides):
     11 %)."""
     fr, ref, rays, gd, _, mask, sides = plane_sides
     W = fr.rig.image.width
-    graph = SurfaceGraph(mask, (fr.rig.image.height, W), np.nan_to_num(gd),
-                         np.nan_to_num(gd) / ref.K[0, 0])  # fmt: skip
+    graph = SurfaceGraph(
+        mask, (fr.rig.image.height, W), np.nan_to_num(gd), np.nan_to_num(gd) / ref.K[0, 0]
+    )
     z = gd[graph.pix]
     R = rays[graph.pix]
     J, r, info = hs_residuals(z, graph, R, sides, ref.centre)
     dz = 2e-4 * np.sin(graph.cols / 7.0) * np.cos(graph.rows / 5.0)
-    _, r2, _ = hs_residuals(z + dz, graph, R, sides, ref.centre, weights=info["weights"],
-                            scale=info["scale"])  # fmt: skip
+    _, r2, _ = hs_residuals(
+        z + dz, graph, R, sides, ref.centre, weights=info["weights"], scale=info["scale"]
+    )
     keep = (r != 0) & (r2 != 0)
     change, pred = (r2 - r)[keep], (J @ dz)[keep]
     assert np.linalg.norm(change - pred) < 0.04 * np.linalg.norm(change)

@@ -30,9 +30,15 @@ CLEAN = Nuisances().without("noise", "crosstalk")
 
 def _draw(seed, nuisances=Nuisances(), exact=False):  # noqa: B008 (frozen dataclass)
     return rr.draw_random(
-        seed, TINY.width, TINY.height, nuisances, rr.TINY_RANGES,
-        sheet_frames=TINY.sheet_frames, statue_level=TINY.statue_level, exact=exact,
-    )  # fmt: skip
+        seed,
+        TINY.width,
+        TINY.height,
+        nuisances,
+        rr.TINY_RANGES,
+        sheet_frames=TINY.sheet_frames,
+        statue_level=TINY.statue_level,
+        exact=exact,
+    )
 
 
 def _encoding(seed):
@@ -169,8 +175,10 @@ def test_draw_does_not_depend_on_the_nuisance_switches(seed):
             np.testing.assert_array_equal(R0, R1)
             np.testing.assert_array_equal(t0, t1)
         assert (base.bit_depth, base.black_level, base.mask_mode) == (
-            other.bit_depth, other.black_level, other.mask_mode
-        )  # fmt: skip
+            other.bit_depth,
+            other.black_level,
+            other.mask_mode,
+        )
         assert json.dumps(base.description["scenes"]) == json.dumps(other.description["scenes"])
         for name in ("statue", "toy", "white"):
             g0, g1 = base.builders[name](), other.builders[name]()
@@ -348,8 +356,9 @@ def test_white_specular_breaks_separable_chromaticity():
     old = Material(kd=1.0, specular="ggx", ks=1.0, roughness=0.3, f0=0.04)
     sep = old.evaluate_bands(n, l, v, p)
     assert sep[0] / sep[1] == pytest.approx(p[0] / p[1], rel=1e-12)
-    gold = Material(kd=0.05, specular="ggx", ks=1.0, roughness=0.2, tint="fresnel",
-                    f0_rgb=rr.METALS["gold"])  # fmt: skip
+    gold = Material(
+        kd=0.05, specular="ggx", ks=1.0, roughness=0.2, tint="fresnel", f0_rgb=rr.METALS["gold"]
+    )
     g = gold.evaluate_bands(n, l, v, np.full(3, 0.9))
     assert g[0] > g[1] > g[2]  # gold: red > green > blue highlight
 
@@ -391,9 +400,16 @@ def test_hs_constraint_holds_at_ground_truth(tmp_path, seed):
     5e-5, sheet 8e-5..1.4e-4; at 640x480 plane 4e-5, sheet 5e-5 (seed 1).
     """
     root = synthesise(
-        tmp_path / "d", CHECK, seed=seed, nuisances=CLEAN, exact=True,
-        parts=("scenes",), scenes=("plane", "sheet"), progress=False, workers=2,
-    )  # fmt: skip
+        tmp_path / "d",
+        CHECK,
+        seed=seed,
+        nuisances=CLEAN,
+        exact=True,
+        parts=("scenes",),
+        scenes=("plane", "sheet"),
+        progress=False,
+        workers=2,
+    )
     for scene in ("plane", "sheet"):
         r, n = _residuals(root, scene)
         assert n > 5000, scene

@@ -48,33 +48,44 @@ def plan(data) -> WorkflowPlan:
 def test_schema_defaults_and_the_calibration_layers(data):
     config = {
         "datasets": {
-            "d": {"path": str(data), "calibration": {"unmix_crosstalk": False,
-                                                     "photometric": {"smoothness": 0.001}}},
+            "d": {
+                "path": str(data),
+                "calibration": {"unmix_crosstalk": False, "photometric": {"smoothness": 0.001}},
+            },
             "s": {"synth": {"preset": "tiny"}},
         },
         "calibration": {"photometric": {"coupling": 0.2}},
-    }  # fmt: skip
+    }
     plan = plan_of(config)
     assert config["reconstruction"] == {
-        "variants": None, "scenes": None, "depth_from_hull": False, "params": {}
-    }  # fmt: skip
+        "variants": None,
+        "scenes": None,
+        "depth_from_hull": False,
+        "params": {},
+    }
     assert config["surfaces"] == {"hull": {}, "mesh": {}, "mesh_with_hull": False}
     assert config["evaluation"] == {} and config["datasets"]["s"]["synth"]["seed"] == 0
     # The dataset's own calibration overrides only what it names (no defaults of its own).
     assert set(config["datasets"]["d"]["calibration"]) == {"unmix_crosstalk", "photometric"}
     photometric = {"coupling": 0.2, "smoothness": 0.001}
     assert plan.calibration("d") == {
-        "unmix_crosstalk": False, "chromaticity": {}, "photometric": photometric
-    }  # fmt: skip
+        "unmix_crosstalk": False,
+        "chromaticity": {},
+        "photometric": photometric,
+    }
     assert plan.calibration("s") == {
-        "unmix_crosstalk": True, "chromaticity": {}, "photometric": {"coupling": 0.2}
-    }  # fmt: skip
+        "unmix_crosstalk": True,
+        "chromaticity": {},
+        "photometric": {"coupling": 0.2},
+    }
     assert plan.photometric_options("d", "") == "--coupling 0.2 --smoothness 0.001"
     assert plan.photometric_options("s", "a b.json") == "--crosstalk 'a b.json' --coupling 0.2"
     assert plan.calibration_targets("d") == [
-        "results/d/calib/marker_poses.csv", "results/d/calib/photometric.h5",
-        "results/d/calib/noise.json", "results/d/calib/chromaticity/slinky.h5",
-    ]  # fmt: skip
+        "results/d/calib/marker_poses.csv",
+        "results/d/calib/photometric.h5",
+        "results/d/calib/noise.json",
+        "results/d/calib/chromaticity/slinky.h5",
+    ]
 
 
 def test_inputs_are_the_files_of_the_capture_format(plan, data):
@@ -106,16 +117,21 @@ def test_inputs_are_the_files_of_the_capture_format(plan, data):
 
 
 def test_variants_targets_and_options(data):
-    plan = plan_of({
-        "datasets": {"d": {"path": str(data)}},
-        "reconstruction": {"variants": ["vh", "bayes_full"], "params": {"n_labels": 7}},
-        "surfaces": {"mesh_with_hull": False},
-    })  # fmt: skip
+    plan = plan_of(
+        {
+            "datasets": {"d": {"path": str(data)}},
+            "reconstruction": {"variants": ["vh", "bayes_full"], "params": {"n_labels": 7}},
+            "surfaces": {"mesh_with_hull": False},
+        }
+    )
     assert plan.reconstruction_targets("d") == [
-        "results/d/toy/vh/depth/000000.h5", "results/d/toy/bayes_full/depth/000000.h5",
-        "results/d/wave/vh/depth/000000.h5", "results/d/wave/vh/depth/000001.h5",
-        "results/d/wave/bayes_full/depth/000000.h5", "results/d/wave/bayes_full/depth/000001.h5",
-    ]  # fmt: skip
+        "results/d/toy/vh/depth/000000.h5",
+        "results/d/toy/bayes_full/depth/000000.h5",
+        "results/d/wave/vh/depth/000000.h5",
+        "results/d/wave/vh/depth/000001.h5",
+        "results/d/wave/bayes_full/depth/000000.h5",
+        "results/d/wave/bayes_full/depth/000001.h5",
+    ]
     assert len(plan.evaluation_targets("d")) == 6
     assert plan.reconstruct_options("d", "toy", "bayes_full") == (
         "--method bayes --noise results/d/calib/noise.json --photometric "
@@ -139,11 +155,13 @@ def test_variants_targets_and_options(data):
         "bayes_full=results/d/toy/bayes_full/eval/000000.ply"
     )
     assert plan.figure_inputs("d", "wave")["animation"] == [
-        "results/d/wave/bayes_full/mesh/000000.ply", "results/d/wave/bayes_full/mesh/000001.ply"
-    ]  # fmt: skip
+        "results/d/wave/bayes_full/mesh/000000.ply",
+        "results/d/wave/bayes_full/mesh/000001.ply",
+    ]
     assert plan.report_inputs("d")["calibration"] == [
-        "results/d/calib/photometric.png", "results/d/calib/chromaticity/slinky.png"
-    ]  # fmt: skip
+        "results/d/calib/photometric.png",
+        "results/d/calib/chromaticity/slinky.png",
+    ]
 
 
 def test_a_synthetic_dataset_waits_for_its_checkpoint(data, tmp_path, monkeypatch):

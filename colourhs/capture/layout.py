@@ -261,8 +261,13 @@ def validate(dataset: str | Path, summary_json: str | Path | None = None) -> dic
     CaptureFormatError naming the first offending file.
     """
     ds = open_dataset(dataset)
-    masks = {ds.mask_image(s, f, c) for s, sc in ds.scenes.items() if sc.has_masks
-             for f in sc.frames for c in ds.rig.camera_names}  # fmt: skip
+    masks = {
+        ds.mask_image(s, f, c)
+        for s, sc in ds.scenes.items()
+        if sc.has_masks
+        for f in sc.frames
+        for c in ds.rig.camera_names
+    }
     n_pixels = n_saturated = 0
     paths = all_images(ds)
     for path in paths:
@@ -275,8 +280,11 @@ def validate(dataset: str | Path, summary_json: str | Path | None = None) -> dic
     summary = {
         "dataset": str(Path(dataset).resolve()),
         "format": FORMAT,
-        "image": {"width": ds.rig.image.width, "height": ds.rig.image.height,
-                  "bit_depth": ds.rig.image.bit_depth},
+        "image": {
+            "width": ds.rig.image.width,
+            "height": ds.rig.image.height,
+            "bit_depth": ds.rig.image.bit_depth,
+        },
         "cameras": {c.name: c.light_colour for c in ds.rig.cameras},
         "reciprocal_pairs": [
             [p.cam_a, COLOURS[p.channel_a], p.cam_b, COLOURS[p.channel_b]]
@@ -284,12 +292,19 @@ def validate(dataset: str | Path, summary_json: str | Path | None = None) -> dic
         ],
         "poses": list(ds.poses),
         "chromatic_objects": list(ds.chromatic_objects),
-        "scenes": {n: {"frames": len(s.frames), "dynamic": s.dynamic, "chromatic": s.chromatic,
-                       "masks": s.has_masks, "ground_truth": s.has_gt}
-                   for n, s in sorted(ds.scenes.items())},
+        "scenes": {
+            n: {
+                "frames": len(s.frames),
+                "dynamic": s.dynamic,
+                "chromatic": s.chromatic,
+                "masks": s.has_masks,
+                "ground_truth": s.has_gt,
+            }
+            for n, s in sorted(ds.scenes.items())
+        },
         "images": len(paths),
         "saturated_fraction": n_saturated / max(n_pixels, 1),
-    }  # fmt: skip
+    }
     if summary_json is not None:
         from colourhs.io import write_json
 

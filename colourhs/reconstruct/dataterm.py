@@ -144,9 +144,24 @@ def _footprint(u, v, Ww, Hh):
 @nb.njit(parallel=True, cache=True, fastmath=True)
 @cache_tagged
 def _kernel(
-    rays, c_ref, depths, Ks, dists, Ps, lights, S, ns, slots, use_p, pair_cams, ref, others,
-    nthreads, cost, normals,
-):  # fmt: skip
+    rays,
+    c_ref,
+    depths,
+    Ks,
+    dists,
+    Ps,
+    lights,
+    S,
+    ns,
+    slots,
+    use_p,
+    pair_cams,
+    ref,
+    others,
+    nthreads,
+    cost,
+    normals,
+):
     """Pixels over prange; per pixel, four passes over the hypotheses: project
     into every camera (OpenCV model), with the bilinear weights and the
     light fall-offs; sample all packed slots of each footprint (4 at a time,
@@ -190,15 +205,22 @@ def _kernel(
                 x = Ps[ref, 0, 3] + Ps[ref, 0, 0] * X0 + Ps[ref, 0, 1] * X1 + Ps[ref, 0, 2] * X2
                 y = Ps[ref, 1, 3] + Ps[ref, 1, 0] * X0 + Ps[ref, 1, 1] * X1 + Ps[ref, 1, 2] * X2
                 h = Ps[ref, 2, 3] + Ps[ref, 2, 0] * X0 + Ps[ref, 2, 1] * X1 + Ps[ref, 2, 2] * X2
-                u, v = _to_pixel(x / h, y / h, Ks[ref, 0, 0], Ks[ref, 0, 1], Ks[ref, 0, 2],
-                                 Ks[ref, 1, 1], Ks[ref, 1, 2], dists[ref])  # fmt: skip
+                u, v = _to_pixel(
+                    x / h,
+                    y / h,
+                    Ks[ref, 0, 0],
+                    Ks[ref, 0, 1],
+                    Ks[ref, 0, 2],
+                    Ks[ref, 1, 1],
+                    Ks[ref, 1, 2],
+                    dists[ref],
+                )
                 u = np.round(u) if abs(u - np.round(u)) < 1e-6 else u
                 v = np.round(v) if abs(v - np.round(v)) < 1e-6 else v
                 inside, u0, v0, w00, w01, w10, w11 = _footprint(u, v, Ww, Hh)
                 at = int(ref * plane + v0 * row + u0 * nv)
                 for g in range(0, nv, LANES):
-                    bilinear4(Sf, at + g, nv, row, w00, w01, w10, w11,
-                               smp, (ref * nv + g) * Kn, Kn)  # fmt: skip
+                    bilinear4(Sf, at + g, nv, row, w00, w01, w10, w11, smp, (ref * nv + g) * Kn, Kn)
                 for g in range(nv):
                     val = smp[ref, g, 0]
                     for k in range(1, Kn):
@@ -241,8 +263,7 @@ def _kernel(
                     h = max(A2 + z * B2, 1e-12)  # finite even behind the camera (then invalid)
                     fall[c, k] = _falloff(l0 - z * r0, l1 - z * r1, l2 - z * r2)
                     ih = 1.0 / h
-                    u, v = _to_pixel((A0 + z * B0) * ih, (A1 + z * B1) * ih, fx, sk, cx, fy, cy,
-                                     dc)  # fmt: skip
+                    u, v = _to_pixel((A0 + z * B0) * ih, (A1 + z * B1) * ih, fx, sk, cx, fy, cy, dc)
                     inside, u0, v0, w00, w01, w10, w11 = _footprint(u, v, Ww, Hh)
                     ok[k] &= inside & (A2 + z * B2 > 0.0)
                     wts[c, 0, k] = w00
@@ -258,8 +279,19 @@ def _kernel(
                 for k in range(Kn):
                     w00, w01, w10, w11 = wts[c, 0, k], wts[c, 1, k], wts[c, 2, k], wts[c, 3, k]
                     for g in range(0, nv, LANES):
-                        bilinear4(Sf, base[c, k] + g, nv, row, w00, w01, w10, w11,
-                                   smp, (c * nv + g) * Kn + k, Kn)  # fmt: skip
+                        bilinear4(
+                            Sf,
+                            base[c, k] + g,
+                            nv,
+                            row,
+                            w00,
+                            w01,
+                            w10,
+                            w11,
+                            smp,
+                            (c * nv + g) * Kn + k,
+                            Kn,
+                        )
             # 3. The Gram matrix of W, row by row (eq. 5); a hypothesis with a
             # J sample <= 0 (dark, saturated, outside, no p) is invalid.
             for k in range(Kn):
@@ -394,11 +426,24 @@ def prepare_images(
     """
     pair_cams, pair_ch = (np.asarray(a) for a in pairs)
     C, _, H, W = images.shape
-    used = [sorted({int(ch) for (cam, ch) in zip(pair_cams.ravel(), pair_ch.ravel(), strict=True)
-                    if cam == c}) for c in range(C)]  # fmt: skip
+    used = [
+        sorted(
+            {
+                int(ch)
+                for (cam, ch) in zip(pair_cams.ravel(), pair_ch.ravel(), strict=True)
+                if cam == c
+            }
+        )
+        for c in range(C)
+    ]
     ns = max(len(u) for u in used)
-    slots = np.array([[used[cam].index(ch) for cam, ch in zip(pc, pch, strict=True)]
-                      for pc, pch in zip(pair_cams, pair_ch, strict=True)], np.int64)  # fmt: skip
+    slots = np.array(
+        [
+            [used[cam].index(ch) for cam, ch in zip(pc, pch, strict=True)]
+            for pc, pch in zip(pair_cams, pair_ch, strict=True)
+        ],
+        np.int64,
+    )
     nv = LANES * -(-(2 * ns if chroma is not None else ns) // LANES)
     S = np.ones((C, H, W, nv), np.float32)
     unusable = saturated.astype(bool).copy()
@@ -467,11 +512,24 @@ def data_term(
     cost = np.empty((len(rays), len(depths)), np.float32)
     normals = np.empty((len(rays), len(depths), 3), np.float32)
     _kernel(
-        np.ascontiguousarray(rays, np.float64), np.asarray(c_ref, float),
-        np.asarray(depths, np.float64), Ks, dists, Ps, lights,
-        np.ascontiguousarray(prepared.S), ns, prepared.slots, prepared.use_p,
-        np.asarray(pair_cams, np.int64), ref, others, nb.get_num_threads(), cost, normals,
-    )  # fmt: skip
+        np.ascontiguousarray(rays, np.float64),
+        np.asarray(c_ref, float),
+        np.asarray(depths, np.float64),
+        Ks,
+        dists,
+        Ps,
+        lights,
+        np.ascontiguousarray(prepared.S),
+        ns,
+        prepared.slots,
+        prepared.use_p,
+        np.asarray(pair_cams, np.int64),
+        ref,
+        others,
+        nb.get_num_threads(),
+        cost,
+        normals,
+    )
     return cost, normals
 
 

@@ -110,9 +110,11 @@ def load_frame(
         maps = read_mu_maps(photometric_h5)
         names = rig.camera_names
         mu = np.stack(
-            [[maps[f"{names[a]}/{COLOURS[ca]}"], maps[f"{names[b]}/{COLOURS[cb]}"]]
-             for (a, b), (ca, cb) in zip(pair_cams, pair_ch, strict=True)]
-        ).astype(np.float32)  # fmt: skip
+            [
+                [maps[f"{names[a]}/{COLOURS[ca]}"], maps[f"{names[b]}/{COLOURS[cb]}"]]
+                for (a, b), (ca, cb) in zip(pair_cams, pair_ch, strict=True)
+            ]
+        ).astype(np.float32)
     chroma = None
     if chromaticity_h5:
         with h5py.File(chromaticity_h5) as f:
@@ -150,8 +152,9 @@ def reference_rays(camera: Camera, width: int, height: int) -> np.ndarray:
 
 def working_depth(rig: Rig, ref: Camera) -> float:
     """z-depth in ``ref`` of the fixation point (:func:`colourhs.geometry.fixation_point`)."""
-    x = fixation_point([np.asarray(c.R, float)[2] for c in rig.cameras],
-                       [c.centre for c in rig.cameras])  # fmt: skip
+    x = fixation_point(
+        [np.asarray(c.R, float)[2] for c in rig.cameras], [c.centre for c in rig.cameras]
+    )
     return float((np.asarray(ref.R, float) @ x + np.asarray(ref.t, float))[2])
 
 
@@ -303,25 +306,54 @@ def reconstruct(
     evaluate = data_term_evaluator(frame, ref, pairs)
     # float16 normals: half the memory of the volume.
     cost, normals = evaluate(rays[pix], depths, np.float16, progress)
-    info = {"method": method, "reference": ref.name, "n_labels": n_labels,
-            "depth_range_m": [float(depths[0]), float(depths[-1])], "alpha": alpha, "tau": tau,
-            "pixels": int(len(pix))}  # fmt: skip
+    info = {
+        "method": method,
+        "reference": ref.name,
+        "n_labels": n_labels,
+        "depth_range_m": [float(depths[0]), float(depths[-1])],
+        "alpha": alpha,
+        "tau": tau,
+        "pixels": int(len(pix)),
+    }
     shape = (H, W)
     if method == "ml":
         z, nrm, ok, conf = _ml_solution(frame, cost, depths, pix, rays, ref, pairs, shape, max_cost)
     else:
-        labels, frac, normals = _bayes_labelling(cost / cost_scale, normals, pix, rays, depths,
-                                                 shape, alpha, tau, info,
-                                                 INVALID_COST / cost_scale)  # fmt: skip
-        z, nrm, ok, conf = _labelled_surface(cost, normals, labels, frac, depths, pix, shape,
-                                             max_cost)  # fmt: skip
+        labels, frac, normals = _bayes_labelling(
+            cost / cost_scale,
+            normals,
+            pix,
+            rays,
+            depths,
+            shape,
+            alpha,
+            tau,
+            info,
+            INVALID_COST / cost_scale,
+        )
+        z, nrm, ok, conf = _labelled_surface(
+            cost, normals, labels, frac, depths, pix, shape, max_cost
+        )
         del normals
         if refine and ok.sum() > 10:
             min_px = int(0.002 * H * W if min_component is None else min_component)
             # Wrong labels (a few labels off or worse) must not move the surface.
             anchor = 2.0 * float(depths[1] - depths[0]) / float(np.median(depths))
-            z, nrm, ok = initial_surface(z, nrm, ok, rays, pix, shape, evaluate, data_weight,
-                                         edge_m, refine_passes, link_m, min_px, anchor)  # fmt: skip
+            z, nrm, ok = initial_surface(
+                z,
+                nrm,
+                ok,
+                rays,
+                pix,
+                shape,
+                evaluate,
+                data_weight,
+                edge_m,
+                refine_passes,
+                link_m,
+                min_px,
+                anchor,
+            )
             z, nrm, ok, weights, info["surface"] = _consistent_surface(
                 frame, z, ok, rays, ref, pairs, surface_iterations, spline_px
             )
@@ -377,8 +409,9 @@ def data_term_evaluator(frame: Frame, ref: Camera, pairs):
         normals = np.empty((len(pixel_rays), len(hypotheses), 3), normal_dtype)
         chunks = range(0, len(pixel_rays), CHUNK)
         for s in tqdm(chunks, desc="data term", unit="chunk", disable=not bar, leave=False):
-            c, n = data_term(pixel_rays[s : s + CHUNK], ref.centre, hypotheses, cameras,
-                             prepared, pairs)  # fmt: skip
+            c, n = data_term(
+                pixel_rays[s : s + CHUNK], ref.centre, hypotheses, cameras, prepared, pairs
+            )
             cost[s : s + len(c)] = c
             normals[s : s + len(c)] = n
         return cost, normals
@@ -462,13 +495,24 @@ def _bayes_labelling(cost, normals, pix, rays, depths, shape, alpha, tau, info, 
     box_n[local] = normals
     box_rays = rays.reshape(H, W, 3)[r0:r1, c0:c1]
     lab, S = sgm_depth_normal(
-        box_cost.reshape(h, w, n_labels), box_n.reshape(h, w, n_labels, 3),
-        box_rays.astype(np.float32), depths.astype(np.float32), alpha, tau,
-    )  # fmt: skip
+        box_cost.reshape(h, w, n_labels),
+        box_n.reshape(h, w, n_labels, 3),
+        box_rays.astype(np.float32),
+        depths.astype(np.float32),
+        alpha,
+        tau,
+    )
     info["energy"] = float(
-        labelling_energy(lab, box_cost.reshape(h, w, n_labels),
-                         box_n.reshape(h, w, n_labels, 3), box_rays, depths, alpha, tau)
-    )  # fmt: skip
+        labelling_energy(
+            lab,
+            box_cost.reshape(h, w, n_labels),
+            box_n.reshape(h, w, n_labels, 3),
+            box_rays,
+            depths,
+            alpha,
+            tau,
+        )
+    )
     info["mrf_box"] = [int(r0), int(r1), int(c0), int(c1)]
     labels = lab.ravel()[local]
     frac = _subpixel(S.reshape(h * w, n_labels)[local], labels)
@@ -484,8 +528,9 @@ def _consistent_surface(frame, z, ok, rays, ref, pairs, iterations, spline_px):
     sides = helmholtz_sides(frame, frame.variance, pairs)
     footprint = np.abs(z) / float(ref.K[0, 0])
     fill = object_mask(frame, frame.rig.camera_names.index(ref.name)).ravel()
-    zr, nr, sinfo = refine_surface(z, ok, rays, ref.centre, (H, W), sides, footprint,
-                                   spline_px, iterations, fill=fill)  # fmt: skip
+    zr, nr, sinfo = refine_surface(
+        z, ok, rays, ref.centre, (H, W), sides, footprint, spline_px, iterations, fill=fill
+    )
     ok = (ok | sinfo["filled"]) & np.isfinite(zr) & sinfo["valid"]
     z = np.where(ok, zr, np.nan)
     nrm = np.where(ok[:, None], nr, np.nan)
@@ -500,17 +545,33 @@ def _consistent_surface(frame, z, ok, rays, ref, pairs, iterations, spline_px):
 
 
 def reconstruct_frame(
-    dataset_dir, scene, frame, out_h5, method="bayes", crosstalk_json=None,
-    photometric_h5=None, chromaticity_h5=None, hull_ply=None, noise_json=None, **params,
-) -> DepthResult:  # fmt: skip
+    dataset_dir,
+    scene,
+    frame,
+    out_h5,
+    method="bayes",
+    crosstalk_json=None,
+    photometric_h5=None,
+    chromaticity_h5=None,
+    hull_ply=None,
+    noise_json=None,
+    **params,
+) -> DepthResult:
     """Load, reconstruct and write one frame (the Snakemake rule's function).
 
     With ``hull_ply`` (the frame's visual hull, ``colourhs hull``) the depth
     hypotheses span the hull's depth range in the reference camera
     (:func:`colourhs.hull.hull_depth_range`) instead of the working range.
     """
-    fr = load_frame(dataset_dir, scene, frame, crosstalk_json, photometric_h5, chromaticity_h5,
-                    noise_json=noise_json)  # fmt: skip
+    fr = load_frame(
+        dataset_dir,
+        scene,
+        frame,
+        crosstalk_json,
+        photometric_h5,
+        chromaticity_h5,
+        noise_json=noise_json,
+    )
     if hull_ply is not None:
         from colourhs.hull import hull_depth_range
         from colourhs.ply import load_mesh
@@ -518,15 +579,20 @@ def reconstruct_frame(
         vertices, triangles, _ = load_mesh(hull_ply)
         ref = fr.rig.camera(params.get("reference") or fr.rig.camera_names[0])
         try:
-            span = hull_depth_range(vertices, triangles, ref, fr.rig.image.width,
-                                    fr.rig.image.height)  # fmt: skip
+            span = hull_depth_range(
+                vertices, triangles, ref, fr.rig.image.width, fr.rig.image.height
+            )
         except ValueError as err:
             raise ValueError(f"{hull_ply}: {err}") from None
         params = {**params, "depth_range": span}
     result = reconstruct(fr, method, **params)
     ref = fr.rig.camera(result.info["reference"])
-    calib = {"crosstalk": crosstalk_json, "photometric": photometric_h5,
-             "chromaticity": chromaticity_h5, "noise": noise_json}  # fmt: skip
+    calib = {
+        "crosstalk": crosstalk_json,
+        "photometric": photometric_h5,
+        "chromaticity": chromaticity_h5,
+        "noise": noise_json,
+    }
     attrs = {
         "method": method,
         "params": result.info,

@@ -118,10 +118,12 @@ def refine_depth(
     p, q, target = p[keep], q[keep], target[keep]
     r = len(p)
     A = sp.csr_matrix(
-        (np.concatenate([np.ones(r), -np.ones(r)]),
-         (np.concatenate([np.arange(r)] * 2), np.concatenate([idx[q], idx[p]]))),
+        (
+            np.concatenate([np.ones(r), -np.ones(r)]),
+            (np.concatenate([np.arange(r)] * 2), np.concatenate([idx[q], idx[p]])),
+        ),
         shape=(r, len(pix)),
-    )  # fmt: skip
+    )
     u0 = np.log(np.maximum(z0[pix], 1e-9))
     weight = np.ones(len(pix))
     for _ in range(3 if anchor_scale else 1):
@@ -147,8 +149,21 @@ def large_components(mask: np.ndarray, min_size: int) -> np.ndarray:
     return keep[lab]
 
 
-def initial_surface(z, nrm, ok, rays, pix, shape, evaluate, data_weight, edge_m, passes,
-                    link_m, min_px, anchor_scale):  # fmt: skip
+def initial_surface(
+    z,
+    nrm,
+    ok,
+    rays,
+    pix,
+    shape,
+    evaluate,
+    data_weight,
+    edge_m,
+    passes,
+    link_m,
+    min_px,
+    anchor_scale,
+):
     """A smooth surface from the labelling: the HS normals integrated (:func:`refine_depth`).
 
     Each pass re-evaluates the HS normals at the refined depths; pieces the

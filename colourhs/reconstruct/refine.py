@@ -109,8 +109,9 @@ class _Problem:
         prior energy (n_surfaces,), at Geman-McClure ``scale``; ``info`` from
         :func:`hs_residuals` at ``c`` saves sampling the images again."""
         if info is None:
-            _, rho, _ = hs_residuals(self.B @ c, self.graph, self.R, self.sides, self.c_ref,
-                                     jacobian=False, scale=scale)  # fmt: skip
+            _, rho, _ = hs_residuals(
+                self.B @ c, self.graph, self.R, self.sides, self.c_ref, jacobian=False, scale=scale
+            )
         else:
             rho = robust_energy(info["chi2"], info["valid"], scale)
         prior = self.prior(scale) @ c
@@ -148,8 +149,9 @@ class _Problem:
 
     def scale(self, c) -> float:
         """The Geman-McClure scale of the residuals at ``c`` (see :func:`hs_residuals`)."""
-        return hs_residuals(self.B @ c, self.graph, self.R, self.sides, self.c_ref,
-                            self.robust, jacobian=False)[2]["scale"]  # fmt: skip
+        return hs_residuals(
+            self.B @ c, self.graph, self.R, self.sides, self.c_ref, self.robust, jacobian=False
+        )[2]["scale"]
 
     def lm(self, c, iterations: int, scale=None, lam=LM_START):
         """``iterations`` Levenberg-Marquardt steps, each kept per surface where it
@@ -165,8 +167,9 @@ class _Problem:
         lam = np.full(self.n, float(lam))
         history = []
         for _ in range(iterations):
-            Jz, r, info = hs_residuals(self.B @ c, self.graph, self.R, self.sides, self.c_ref,
-                                       self.robust, scale=scale)  # fmt: skip
+            Jz, r, info = hs_residuals(
+                self.B @ c, self.graph, self.R, self.sides, self.c_ref, self.robust, scale=scale
+            )
             sc = info["scale"]
             s0 = self.state(c, sc, info)
             Dw = self.prior(sc)
@@ -186,8 +189,10 @@ class _Problem:
                 predicted = np.bincount(self.ctrl_surface, -h * (g + 0.5 * (A @ h)), self.n)
                 pending &= predicted > CONVERGED
                 c = np.where(better[self.ctrl_surface], cc, c)
-                s0 = (np.where(better[self.graph.surface], s1[0], s0[0]),
-                      np.where(better, s1[1], s0[1]))  # fmt: skip
+                s0 = (
+                    np.where(better[self.graph.surface], s1[0], s0[0]),
+                    np.where(better, s1[1], s0[1]),
+                )
                 lam = np.where(better, np.maximum(lam * LM_DOWN, LM_MIN), lam)
                 pending &= ~better
                 lam = np.where(pending, lam * LM_UP, lam)

@@ -273,8 +273,11 @@ def hs_residuals(
         level = max(1.0, float(np.median(used)) / (P - 2.0 / 3.0)) if len(used) else 1.0
         scale = level * robust**2 * P
     if not jacobian:
-        return None, robust_energy(chi2, usable, scale), {"valid": usable, "chi2": chi2,
-                                                          "scale": scale}  # fmt: skip
+        return (
+            None,
+            robust_energy(chi2, usable, scale),
+            {"valid": usable, "chi2": chi2, "scale": scale},
+        )
     if weights is None:
         weights = 1.0 / (1.0 + chi2 / scale) ** 2  # rho'(chi2): IRLS
     w = np.ascontiguousarray(weights, float)

@@ -53,9 +53,16 @@ def _board(markers: dict, length: float, size=(0.26, 0.2)) -> dict:
 
 
 DEMO_BOARD = _board(
-    {0: (0.0275, 0.0275), 1: (0.13, 0.0275), 2: (0.2325, 0.0275),
-     3: (0.2325, 0.1725), 4: (0.13, 0.1725), 5: (0.0275, 0.1725)}, 0.035
-)  # fmt: skip
+    {
+        0: (0.0275, 0.0275),
+        1: (0.13, 0.0275),
+        2: (0.2325, 0.0275),
+        3: (0.2325, 0.1725),
+        4: (0.13, 0.1725),
+        5: (0.0275, 0.1725),
+    },
+    0.035,
+)
 TINY_BOARD = _board(
     {0: (0.045, 0.045), 1: (0.215, 0.045), 2: (0.215, 0.155), 3: (0.045, 0.155)}, 0.07
 )
@@ -101,7 +108,7 @@ PRESETS = {
         statue_level=5,
         randomised=True,
         random_ranges="random-tiny",
-    ),  # fmt: skip
+    ),
 }
 
 
@@ -276,15 +283,23 @@ def _scene_of(job: _Job) -> str | None:
 # One description per scene for every preset (true whatever a random draw's
 # materials), so scene.json tells nothing about the preset.
 SCENE_META = {
-    "plane": {"chromatic": None, "dynamic": False,
-              "description": "held-out pose of the white marker board"},
-    "statue": {"chromatic": "statue", "dynamic": False,
-               "description": "white monster head with smooth dirt"},
-    "toy": {"chromatic": "toy", "dynamic": False,
-            "description": "multi-coloured toy dog: pure colours, specular plastic, metal"},
-    "sheet": {"chromatic": None, "dynamic": True,
-              "description": "white sheet folding and doming"},
-}  # fmt: skip
+    "plane": {
+        "chromatic": None,
+        "dynamic": False,
+        "description": "held-out pose of the white marker board",
+    },
+    "statue": {
+        "chromatic": "statue",
+        "dynamic": False,
+        "description": "white monster head with smooth dirt",
+    },
+    "toy": {
+        "chromatic": "toy",
+        "dynamic": False,
+        "description": "multi-coloured toy dog: pure colours, specular plastic, metal",
+    },
+    "sheet": {"chromatic": None, "dynamic": True, "description": "white sheet folding and doming"},
+}
 
 
 def synthesise(
@@ -358,9 +373,14 @@ def synthesise(
         nuis = rig.nuisances
         b = d.builders
         content = Content(
-            b["white"], b["statue"], b["toy"], b["sheet"], d.mask_mode, SCENE_META,
+            b["white"],
+            b["statue"],
+            b["toy"],
+            b["sheet"],
+            d.mask_mode,
+            SCENE_META,
             describe(d),
-        )  # fmt: skip
+        )
     else:
         rng = np.random.default_rng(seed)
         rig = make_rig(p.width, p.height, p.focal_px, rng, nuis)

@@ -121,9 +121,14 @@ def transformed(
 def with_materials(geom: SceneGeometry, materials) -> SceneGeometry:
     """The same geometry and reflectance with another material table (same ids)."""
     return SceneGeometry(
-        geom.name, geom.vertices, geom.triangles, geom.vertex_normals, geom.material_ids,
-        tuple(materials), geom.albedo,
-    )  # fmt: skip
+        geom.name,
+        geom.vertices,
+        geom.triangles,
+        geom.vertex_normals,
+        geom.material_ids,
+        tuple(materials),
+        geom.albedo,
+    )
 
 
 # --------------------------------------------------------------------------- board
@@ -194,14 +199,46 @@ def _icosphere(level: int) -> tuple[np.ndarray, np.ndarray]:
     """Unit icosphere by repeated 4-to-1 subdivision."""
     p = (1 + 5**0.5) / 2
     v = np.array(
-        [[-1, p, 0], [1, p, 0], [-1, -p, 0], [1, -p, 0], [0, -1, p], [0, 1, p],
-         [0, -1, -p], [0, 1, -p], [p, 0, -1], [p, 0, 1], [-p, 0, -1], [-p, 0, 1]], float
-    )  # fmt: skip
+        [
+            [-1, p, 0],
+            [1, p, 0],
+            [-1, -p, 0],
+            [1, -p, 0],
+            [0, -1, p],
+            [0, 1, p],
+            [0, -1, -p],
+            [0, 1, -p],
+            [p, 0, -1],
+            [p, 0, 1],
+            [-p, 0, -1],
+            [-p, 0, 1],
+        ],
+        float,
+    )
     f = np.array(
-        [[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4],
-         [11, 10, 2], [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8],
-         [3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]]
-    )  # fmt: skip
+        [
+            [0, 11, 5],
+            [0, 5, 1],
+            [0, 1, 7],
+            [0, 7, 10],
+            [0, 10, 11],
+            [1, 5, 9],
+            [5, 11, 4],
+            [11, 10, 2],
+            [10, 7, 6],
+            [7, 1, 8],
+            [3, 9, 4],
+            [3, 4, 2],
+            [3, 2, 6],
+            [3, 6, 8],
+            [3, 8, 9],
+            [4, 9, 5],
+            [2, 4, 11],
+            [6, 2, 10],
+            [8, 6, 7],
+            [9, 8, 1],
+        ]
+    )
     v /= np.linalg.norm(v, axis=1, keepdims=True)
     for _ in range(level):
         edges = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
@@ -212,9 +249,11 @@ def _icosphere(level: int) -> tuple[np.ndarray, np.ndarray]:
         v = np.concatenate([v, mid])
         a, b, c = f.T
         f = np.concatenate(
-            [np.stack(x, 1) for x in
-             ([a, m[:, 0], m[:, 2]], [b, m[:, 1], m[:, 0]], [c, m[:, 2], m[:, 1]], m.T)]
-        )  # fmt: skip
+            [
+                np.stack(x, 1)
+                for x in ([a, m[:, 0], m[:, 2]], [b, m[:, 1], m[:, 0]], [c, m[:, 2], m[:, 1]], m.T)
+            ]
+        )
     return v, f.astype(np.int32)
 
 
@@ -295,9 +334,13 @@ def helix_tube(
     phi = np.linspace(0, 2 * np.pi, nu, endpoint=False)
     ang = 2 * np.pi * turns * s
     c = np.stack(
-        [start_x + length * s, centre_yz[0] + coil_radius * np.cos(ang),
-         centre_yz[1] + coil_radius * np.sin(ang)], -1
-    )  # fmt: skip
+        [
+            start_x + length * s,
+            centre_yz[0] + coil_radius * np.cos(ang),
+            centre_yz[1] + coil_radius * np.sin(ang),
+        ],
+        -1,
+    )
     tangent = np.gradient(c, axis=0)
     tangent /= np.linalg.norm(tangent, axis=1, keepdims=True)
     radial = c - np.array([c[0, 0], *centre_yz]) * [0, 1, 1]
