@@ -555,8 +555,11 @@ def scene_figures(
 
         import open3d as o3d
 
+        from colourhs.io import note_read
+
         tiles = {}
         for variant, ply in coloured.items():
+            note_read(ply)
             mesh = o3d.io.read_triangle_mesh(str(ply))
             v, t = np.asarray(mesh.vertices), np.asarray(mesh.triangles)
             rgb = np.asarray(mesh.vertex_colors) if mesh.has_vertex_colors() else None

@@ -7,6 +7,8 @@ rule reconstruct_frame:
         calib=lambda w: variant_calibration(w.name, w.scene, w.variant).values(),
         hull=lambda w: reconstruction_hull(w.name, w.scene, w.frame),
         same=lambda w: same_result(w.name, w.scene, w.variant, w.frame, "depth"),
+        # The scene's scene.json: read (validated) when the dataset is opened.
+        scene=lambda w: _files(w.name, f"scenes/{w.scene}/scene.json"),
     output:
         "results/{name}/{scene}/{variant}/depth/{frame}.h5",
     log:

@@ -6,6 +6,8 @@
 rule visual_hull:
     input:
         lambda w: silhouette_inputs(w.name, w.scene, w.frame),
+        # The scene's scene.json: read (validated) when the dataset is opened.
+        scene=lambda w: _files(w.name, f"scenes/{w.scene}/scene.json"),
     output:
         ply="results/{name}/{scene}/hull/{frame}.ply",
         depth="results/{name}/{scene}/vh/depth/{frame}.h5",
