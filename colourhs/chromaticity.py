@@ -432,7 +432,12 @@ def chromaticity_maps(
     dict of str to ndarray
         Camera name to its map.
     """
-    dataset = dataset_dir if isinstance(dataset_dir, Dataset) else open_dataset(dataset_dir)
+    # The images it decodes are checked as they are read (read_image), not every header.
+    dataset = (
+        dataset_dir
+        if isinstance(dataset_dir, Dataset)
+        else open_dataset(dataset_dir, check_images=False)
+    )
     _check_object(dataset, obj)
     maps, infos = {}, {}
     for camera in dataset.rig.camera_names:

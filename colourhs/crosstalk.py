@@ -183,7 +183,7 @@ def calibrate_crosstalk(
     errors, and those of M) join, with "led_fit" (the fit's diagnostics) at the
     top level.
     """
-    ds = open_dataset(dataset_dir, check_images=False)
+    ds = open_dataset(dataset_dir, check_images=False, scenes=())
     if "white" not in ds.chromatic_objects:
         raise ValueError(f"{ds.root / 'chromatic' / 'white'}: missing (needed for cross-talk)")
     spatial = (poses_csv is not None) if spatial is None else bool(spatial)

@@ -20,7 +20,7 @@ import numpy as np
 
 from colourhs.capture import Camera
 from colourhs.geometry import camera_centre
-from colourhs.io import atomic_output
+from colourhs.io import atomic_output, note_read
 
 __all__ = ["DepthMap", "DepthResult", "read_depth", "write_depth"]
 
@@ -140,6 +140,7 @@ def read_depth(path: str | Path) -> DepthMap:
         wrong, or no pixel has a finite depth ("no reconstructed pixels").
     """
     path = Path(path)
+    note_read(path)
     try:
         f = h5py.File(path, "r")
     except OSError as err:

@@ -559,9 +559,11 @@ def scene_figures(
         import open3d as o3d
 
         from colourhs.colours import colour_values
+        from colourhs.io import note_read
 
         meshes_mm = {}  # variant -> (vertices, triangles, distance per vertex in mm)
         for variant, ply in coloured.items():
+            note_read(ply)
             mesh = o3d.io.read_triangle_mesh(str(ply))
             v, t = np.asarray(mesh.vertices), np.asarray(mesh.triangles)
             meta = Path(ply).with_suffix(".json")

@@ -254,7 +254,7 @@ def visual_hull(
         (naming the frame folder).
     """
     t0 = perf_counter()
-    ds = open_dataset(dataset_dir, check_images=False)
+    ds = open_dataset(dataset_dir, check_images=False, scenes=[scene])
     cams = list(ds.rig.cameras)
     ref = ds.rig.camera(reference) if reference else cams[0]
     sils, files, source = silhouettes_and_sources(ds, scene, frame, threshold)

@@ -1,9 +1,11 @@
-"""Small file helpers shared by the stages: outputs appear whole or not at all."""
+"""Small file helpers shared by the stages: outputs appear whole or not at all, and
+(opt-in, for tests) a record of the files a command reads."""
 
 from __future__ import annotations
 
 import json
 import os
+import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -51,3 +53,49 @@ def copy_output(src: str | Path, out: str | Path) -> Path:
     with atomic_output(out) as tmp:
         shutil.copyfile(src, tmp)
     return Path(out)
+
+
+#: Audit event of a file read in C (h5py, open3d), where Python raises no ``open`` event.
+READ_EVENT = "colourhs.read"
+
+
+def note_read(path: str | Path) -> None:
+    """Announce a read the C libraries do (HDF5, PLY) as audit event ``colourhs.read``.
+
+    Costs a function call when no audit hook is installed (the default); with
+    ``COLOURHS_AUDIT_READS`` set, :func:`record_reads` records it.
+    """
+    sys.audit(READ_EVENT, os.fspath(path))
+
+
+def record_reads(folder: str | Path) -> None:
+    """Record every file this process opens to read, into ``FOLDER/<pid>.json`` at exit.
+
+    Opt-in, for tests (``COLOURHS_AUDIT_READS=FOLDER``, read by ``colourhs.cli.main``):
+    a :func:`sys.addaudithook` hook collects the absolute paths of Python's ``open``
+    events in a mode that reads what the file holds (not ``w``/``w+``/``x``) and of
+    :func:`note_read`'s events; they are written with ``sys.argv``. Python's own
+    imports are recorded too (the reader filters).
+    """
+    reads = set()
+
+    def hook(event, args):
+        if event == "open":
+            path, mode, flags = args
+            if isinstance(mode, str):  # io.open
+                reading = "r" in mode or ("a" in mode and "+" in mode)
+            else:  # os.open: mode None, O_ flags
+                reading = (flags & os.O_ACCMODE) != os.O_WRONLY and not flags & os.O_TRUNC
+            if reading and isinstance(path, (str, bytes, os.PathLike)):
+                reads.add(os.path.abspath(os.fsdecode(path)))
+        elif event == READ_EVENT:
+            reads.add(os.path.abspath(args[0]))
+
+    def write():
+        record = {"argv": sys.argv, "reads": sorted(reads)}
+        Path(folder, f"{os.getpid()}.json").write_text(json.dumps(record))
+
+    import atexit
+
+    atexit.register(write)
+    sys.addaudithook(hook)

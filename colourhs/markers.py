@@ -531,7 +531,7 @@ def marker_poses(
         raise ValueError(f"min_markers must be at least 1, got {min_markers}")
     dataset_dir = Path(dataset_dir)
     out_csv = Path(out_csv)
-    ds = open_dataset(dataset_dir, check_images=False)
+    ds = open_dataset(dataset_dir, check_images=False, scenes=())
     rig = ds.rig
     rows = []
     for pose in ds.poses:

@@ -134,7 +134,7 @@ def calibrate_noise(dataset_dir, out_json=None) -> NoiseModel:
     atomically when ``out_json`` is given. The raw images are used (before
     cross-talk unmixing, which changes the variance by well under 1 %).
     """
-    ds = open_dataset(dataset_dir, check_images=False)
+    ds = open_dataset(dataset_dir, check_images=False, scenes=())
     gains, offsets, out = {}, {}, {"cameras": {}, "units": "full scale; var = gain * i + offset"}
     for cam in ds.rig.camera_names:
         images = [read_image(ds.photometric_image(p, cam), ds.rig.image)[0] for p in ds.poses]

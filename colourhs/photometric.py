@@ -83,7 +83,7 @@ import pandas as pd
 
 from colourhs.capture import COLOURS, Rig, open_dataset, read_image
 from colourhs.crosstalk import load_crosstalk, unmix
-from colourhs.io import atomic_output, sha256_files
+from colourhs.io import atomic_output, note_read, sha256_files
 from colourhs.photometric_errors import board_points, mu_map_errors, pair_ratio_errors
 from colourhs.photometric_kappa import (
     KappaSamples,
@@ -191,7 +191,7 @@ DEFAULTS = {
 
 def load_views(dataset_dir, poses_csv, crosstalk_json=None) -> tuple[Rig, list[PoseView]]:
     """Read every usable board pose (from the marker poses table) and its images."""
-    ds = open_dataset(dataset_dir, check_images=False)
+    ds = open_dataset(dataset_dir, check_images=False, scenes=())
     table = pd.read_csv(poses_csv)
     mixing = load_crosstalk(crosstalk_json) if crosstalk_json else {}
     views = []
@@ -321,7 +321,7 @@ def photometric_maps(
     """
     rig, views = load_views(dataset_dir, poses_csv, crosstalk_json)
     result = calibrate(rig, views, **params)
-    ds = open_dataset(dataset_dir, check_images=False)
+    ds = open_dataset(dataset_dir, check_images=False, scenes=())
     inputs = [ds.photometric_image(v.name, c) for v in views for c in rig.camera_names]
     inputs += [Path(poses_csv)] + ([Path(crosstalk_json)] if crosstalk_json else [])
     with atomic_output(out_h5) as tmp, h5py.File(tmp, "w") as f:
@@ -352,6 +352,7 @@ def photometric_maps(
 
 def read_mu_maps(path: str | Path) -> dict[str, np.ndarray]:
     """``"<camera>/<colour>"`` -> (H, W) mu from a photometric.h5 (ours or ground truth)."""
+    note_read(path)
     with h5py.File(path) as f:
         return {
             f"{cam}/{colour}": f[cam][colour][()]

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from colourhs.capture import CaptureFormatError
-from colourhs.io import atomic_output
+from colourhs.io import atomic_output, note_read
 
 
 def write_ply(
@@ -76,6 +76,7 @@ def load_mesh(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Vertices (V, 3), triangles (T, 3) and unit vertex normals (V, 3) of a PLY mesh."""
     import open3d as o3d
 
+    note_read(path)
     mesh = o3d.io.read_triangle_mesh(str(path))
     if len(mesh.triangles) == 0:
         raise CaptureFormatError(path, "not a triangle mesh (no faces read)")

@@ -101,7 +101,7 @@ def silhouettes(
         A mask or image is missing or malformed, or a silhouette has no object
         pixel (the error names the mask, or the image that was thresholded).
     """
-    ds = open_dataset(dataset_dir, check_images=False)
+    ds = open_dataset(dataset_dir, check_images=False, scenes=[scene])
     return silhouettes_and_sources(ds, scene, frame, threshold)[0]
 
 

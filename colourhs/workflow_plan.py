@@ -238,17 +238,26 @@ class WorkflowPlan:
                 out += _paths(masks)
         return out
 
+    @staticmethod
+    def _scene_files(ds, scene: str) -> list[str]:
+        """rig.json and the scene's scene.json when it has one."""
+        meta = Path(ds.root) / "scenes" / scene / "scene.json"
+        return [str(ds.rig.path)] + ([str(meta)] if meta.exists() else [])
+
     def silhouette_inputs(self, name: str, scene: str, frame: str) -> list[str]:
-        """rig.json and a frame's masks; the frame's images when the scene has no masks."""
+        """rig.json, the scene's scene.json (read when the dataset is opened) and a
+        frame's masks; the frame's images when the scene has no masks."""
         ds = self.layout(name)
         image = ds.mask_image if ds.scene(scene).has_masks else ds.frame_image
-        return [str(ds.rig.path)] + _paths(image(scene, frame, c) for c in ds.rig.camera_names)
+        cams = ds.rig.camera_names
+        return self._scene_files(ds, scene) + _paths(image(scene, frame, c) for c in cams)
 
     def frame_inputs(self, name: str, scene: str, frame: str) -> list[str]:
-        """rig.json, a frame's images and its silhouettes (when the scene has masks)."""
+        """rig.json, the scene's scene.json (read when the dataset is opened), a
+        frame's images and its silhouettes (when the scene has masks)."""
         ds = self.layout(name)
         cams = ds.rig.camera_names
-        out = [str(ds.rig.path)] + _paths(ds.frame_image(scene, frame, c) for c in cams)
+        out = self._scene_files(ds, scene) + _paths(ds.frame_image(scene, frame, c) for c in cams)
         if ds.scene(scene).has_masks:
             out += _paths(ds.mask_image(scene, frame, c) for c in cams)
         return out

@@ -348,6 +348,20 @@ def test_scenes_folder_is_optional(root: Path) -> None:
     assert open_dataset(root).scenes == {}
 
 
+def test_open_dataset_reads_only_the_named_scenes(root: Path) -> None:
+    """A stage opens the scenes it uses (issue 12: its rule declares what it reads):
+    another scene's files are not read, a malformed one included."""
+    (root / "scenes" / "toy" / "scene.json").write_text("{not json")
+    (root / "scenes" / "toy" / "frames" / "000000" / "cam1.png").unlink()
+    data = open_dataset(root, scenes=["wave"])
+    assert list(data.scenes) == ["wave"] and data.scenes["wave"].frames == ("000000", "000001")
+    assert open_dataset(root, scenes=()).scenes == {}
+    with pytest.raises(KeyError, match="unknown scene 'nosuch'; known: toy, wave"):
+        open_dataset(root, scenes=["nosuch"])
+    with pytest.raises(CaptureFormatError, match="scene.json"):
+        open_dataset(root)
+
+
 def test_eight_bit_dataset(tmp_path: Path) -> None:
     root = make_dataset(tmp_path / "d8", bit_depth=8)
     data = open_dataset(root)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import subprocess
 import sys
@@ -11,6 +12,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 import yaml
+from read_audit import ENV, audit
 
 from colourhs.cli import PROJECT_ROOT, main
 
@@ -53,8 +55,16 @@ def test_run_does_the_whole_job_through_snakemake(tiny_dataset, tmp_path):
     """
     cmd = [sys.executable, "-m", "colourhs", "run", str(tiny_dataset), "--name", "t"]
     cmd += ["--cores", "2", "--directory", str(tmp_path), "--variants", ",".join(VARIANTS)]
-    done = subprocess.run(cmd, capture_output=True, text=True)
+    reads = tmp_path / "reads"  # what each job reads (issue 12, tests/read_audit.py)
+    reads.mkdir()
+    env = dict(os.environ, **{ENV: str(reads)})
+    done = subprocess.run(cmd, capture_output=True, text=True, env=env)
     assert done.returncode == 0, done.stderr[-2000:]
+    # Every job read only its declared inputs: 86 jobs, more than test_workflow's run
+    # (bayes_full reading a chromaticity map, or copying bayes_ph; statue and toy).
+    configs = [PROJECT_ROOT / "config.yaml", tmp_path / "results" / "t" / "run-config.yaml"]
+    n_jobs, problems = audit(reads, tmp_path, tiny_dataset, configs)
+    assert n_jobs == 86 and not problems, "\n".join(sorted(problems))
     summary = json.loads((tmp_path / "results" / "t" / "capture" / "summary.json").read_text())
     # 7 poses x 3 cameras + 3 chromatic objects x 3 colours x 3 + 6 frames x 3 + 18 masks.
     assert summary["images"] == 21 + 27 + 18 + 18

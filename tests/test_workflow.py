@@ -1,7 +1,8 @@
 """Caching and incremental reruns of the Snakemake workflow (its public API and CLI).
 
 One real run of the whole workflow on a copy of the tiny dataset (variants vh and
-bayes_ph, scenes plane and sheet), then, in file order: what a second run would do,
+bayes_ph, scenes plane and sheet), then, in file order: that every job read only its
+declared inputs (tests/read_audit.py), what a second run would do,
 what replacing one board image / one frame image / one reconstruction parameter
 would rerun (dry runs, the change undone afterwards), and a failing stage and its
 resumed run (real runs).
@@ -9,8 +10,6 @@ resumed run (real runs).
 
 from __future__ import annotations
 
-import contextlib
-import io
 import os
 import re
 import shutil
@@ -23,8 +22,8 @@ from pathlib import Path
 import cv2
 import pytest
 import yaml
+from read_audit import ENV, audit, summary
 from snakemake.api import SnakemakeApi
-from snakemake.settings.enums import Quietness
 from snakemake.settings.types import (
     ConfigSettings,
     DAGSettings,
@@ -86,23 +85,9 @@ class Plan:
 
 def planned_jobs(workdir: Path, configfiles) -> Plan:
     """The jobs Snakemake would run now (the `all` target left out), from its public
-    summary (``DAGApi.summary``, the `--summary` table): every output file with its
-    rule, log file and plan ("update pending" or "no update"); one log file per job
-    tells the jobs apart."""
-    text = io.StringIO()
-    with (
-        contextlib.redirect_stdout(text),
-        SnakemakeApi(OutputSettings(quiet={Quietness.ALL})) as api,
-    ):
-        api.workflow(
-            resource_settings=ResourceSettings(cores=2),
-            config_settings=ConfigSettings(configfiles=[Path(p) for p in configfiles]),
-            snakefile=SNAKEFILE,
-            workdir=workdir,
-        ).dag(DAGSettings()).summary()
-    lines = text.getvalue().splitlines()
-    header = lines.index(next(x for x in lines if x.startswith("output_file\t")))
-    rows = [x.split("\t") for x in lines[header + 1 :] if x.count("\t") >= 5]
+    summary: every output file with its rule, log file and plan ("update pending" or
+    "no update"); one log file per job tells the jobs apart."""
+    rows = summary(workdir, configfiles)
     pending = [(r[2], r[0], r[3]) for r in rows if r[-1] == "update pending" and r[2] != "all"]
     outputs = frozenset((rule, path) for rule, path, _ in pending)
     jobs = {(rule, log) for rule, _, log in pending}
@@ -228,6 +213,7 @@ class Run:
     data: Path
     configfiles: list[Path]
     first: dict[str, int]  # snapshot after the first run
+    reads: Path  # what each job of the first run read (colourhs.io.record_reads)
 
 
 @pytest.fixture(scope="module")
@@ -243,10 +229,18 @@ def run(tiny_dataset, tmp_path_factory) -> Run:
     (workdir / "run-config.yaml").write_text(yaml.safe_dump(config))
     # As `colourhs run`: the project's config.yaml, then the run's.
     configfiles = [PROJECT_ROOT / "config.yaml", workdir / "run-config.yaml"]
-    ok, _, updated = _snakemake(workdir, configfiles)
+    # Every job records the files it reads (read_audit; the jobs inherit the
+    # environment): test_every_job_reads_only_its_declared_inputs.
+    reads = root / "reads"
+    reads.mkdir()
+    os.environ[ENV] = str(reads)
+    try:
+        ok, _, updated = _snakemake(workdir, configfiles)
+    finally:
+        del os.environ[ENV]
     assert ok, "the first run of the workflow failed"
     assert f"reports/{NAME}/index.html" in updated
-    return Run(workdir, data, configfiles, snapshot(workdir))
+    return Run(workdir, data, configfiles, snapshot(workdir), reads)
 
 
 # --------------------------------------------------------------------------- tests
@@ -268,6 +262,14 @@ def test_first_run_made_every_output(run):
         assert any(p.startswith(f"reports/{NAME}/figures/{scene}/") for p in files)
     assert {p for p in files if p.startswith(f"results/{NAME}/calib/chromaticity/")}
     assert not [p for p in files if ".tmp" in Path(p).name]
+
+
+def test_every_job_reads_only_its_declared_inputs(run):
+    """Issue 12 (tests/read_audit.py): every job of the first run read, under the
+    dataset and the run's folder, only its inputs, outputs and log."""
+    n_jobs, problems = audit(run.reads, run.workdir, run.data, run.configfiles)
+    assert n_jobs == 36  # 37 but `all`
+    assert not problems, "\n".join(sorted(problems))
 
 
 def test_second_run_does_nothing(run):

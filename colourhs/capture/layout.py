@@ -11,11 +11,12 @@ Re-exported by :mod:`colourhs.capture`.
 from __future__ import annotations
 
 import re
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
 from colourhs.capture.base import _NAME, COLOURS, FORMAT, CaptureFormatError
-from colourhs.capture.dataset import Dataset, Scene
+from colourhs.capture.dataset import Dataset, Scene, _known
 from colourhs.capture.jsonvalues import _as_object, _as_str, _read_json, _show
 from colourhs.capture.png import (
     _check_image_header,
@@ -30,7 +31,9 @@ _FRAME = re.compile(r"[0-9]{6}")
 _STATIC_FRAME = "000000"
 
 
-def open_dataset(root: str | Path, check_images: bool = True) -> Dataset:
+def open_dataset(
+    root: str | Path, check_images: bool = True, scenes: Iterable[str] | None = None
+) -> Dataset:
     """Validate a whole dataset folder and describe its contents.
 
     Parameters
@@ -40,6 +43,10 @@ def open_dataset(root: str | Path, check_images: bool = True) -> Dataset:
     check_images : bool
         Also check every listed PNG's header: valid PNG, channels, bit depth and size.
         Only headers are read (pixel data is decoded by :func:`read_image`).
+    scenes : iterable of str, optional
+        Read only these scenes' folders and scene.json (each must exist; an empty
+        one reads none), so that a stage reads no file of the scenes it does not
+        use (the workflow's rules declare what they read); default every scene.
 
     Returns
     -------
@@ -60,7 +67,7 @@ def open_dataset(root: str | Path, check_images: bool = True) -> Dataset:
     rig = load_rig(root / "rig.json")
     poses, pose_images = _find_poses(root / "photometric", rig.camera_names)
     objects, chromatic_images = _find_chromatic(root / "chromatic", rig.camera_names)
-    scenes, frame_images, masks = _find_scenes(root / "scenes", rig.camera_names, objects)
+    scenes, frame_images, masks = _find_scenes(root / "scenes", rig.camera_names, objects, scenes)
     if check_images:
         for image in (*pose_images, *chromatic_images, *frame_images):
             _check_image_header(image, _read_png_header(image, "image file"), rig.image)
@@ -128,14 +135,23 @@ def _find_chromatic(folder: Path, cameras: tuple[str, ...]) -> tuple[tuple[str, 
 
 
 def _find_scenes(
-    folder: Path, cameras: tuple[str, ...], objects: tuple[str, ...]
+    folder: Path,
+    cameras: tuple[str, ...],
+    objects: tuple[str, ...],
+    wanted: Iterable[str] | None = None,
 ) -> tuple[dict[str, Scene], list[Path], list[Path]]:
     scenes: dict[str, Scene] = {}
     images: list[Path] = []
     masks: list[Path] = []
-    if not folder.is_dir():
+    wanted = None if wanted is None else tuple(wanted)
+    if not folder.is_dir() or wanted == ():
         return scenes, images, masks
-    for scene_dir in _subfolders(folder):
+    folders = _subfolders(folder)
+    if wanted is not None:
+        for name in wanted:
+            _known(name, tuple(f.name for f in folders), "scene")
+        folders = [f for f in folders if f.name in wanted]
+    for scene_dir in folders:
         scene, scene_images, scene_masks = _find_scene(scene_dir, cameras, objects)
         scenes[scene.name] = scene
         images += scene_images

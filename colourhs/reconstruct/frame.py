@@ -36,7 +36,7 @@ from colourhs.capture import (
 from colourhs.crosstalk import load_crosstalk, unmix
 from colourhs.depthfile import DepthResult, write_depth
 from colourhs.geometry import fixation_point, normalised_coordinates, pixel_grid
-from colourhs.io import sha256_files
+from colourhs.io import note_read, sha256_files
 from colourhs.noise import NoiseModel, estimate_noise, load_noise
 from colourhs.reconstruct.dataterm import INVALID_COST, data_term, pair_arrays, prepare_images
 from colourhs.reconstruct.integrate import initial_surface
@@ -89,7 +89,7 @@ def load_frame(
     noise variance; without it the noise model is estimated from the frame's
     own images (:func:`colourhs.noise.estimate_noise`).
     """
-    ds = open_dataset(dataset_dir, check_images=False)
+    ds = open_dataset(dataset_dir, check_images=False, scenes=[scene])
     rig = ds.rig
     mixing = load_crosstalk(crosstalk_json) if crosstalk_json else {}
     imgs, sats, sils, inputs = [], [], [], []
@@ -117,6 +117,7 @@ def load_frame(
         ).astype(np.float32)
     chroma = None
     if chromaticity_h5:
+        note_read(chromaticity_h5)
         with h5py.File(chromaticity_h5) as f:
             chroma = np.stack([f[cam][()].transpose(2, 0, 1) for cam in rig.camera_names])
     for extra in (crosstalk_json, photometric_h5, chromaticity_h5, noise_json):

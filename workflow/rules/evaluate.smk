@@ -9,6 +9,11 @@ rule evaluate_frame:
         mesh="results/{name}/{scene}/{variant}/mesh/{frame}.ply",
         gt=lambda w: gt_mesh(w.name, w.scene, w.frame),
         same=lambda w: same_result(w.name, w.scene, w.variant, w.frame, "eval"),
+        # The equal result's error-coloured mesh, copied with its metrics JSON.
+        same_ply=lambda w: [
+            str(Path(p).with_suffix(".ply"))
+            for p in same_result(w.name, w.scene, w.variant, w.frame, "eval")
+        ],
     output:
         json="results/{name}/{scene}/{variant}/eval/{frame}.json",
         ply="results/{name}/{scene}/{variant}/eval/{frame}.ply",

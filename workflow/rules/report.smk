@@ -21,6 +21,11 @@ rule effective_config:
 rule scene_figures:
     input:
         unpack(lambda w: figure_inputs(w.name, w.scene)),
+        # The metrics JSON beside each error-coloured mesh (its colour scale's top).
+        scale=lambda w: [
+            str(Path(p).with_suffix(".json"))
+            for p in figure_inputs(w.name, w.scene)["coloured"]
+        ],
     output:
         report(
             directory("reports/{name}/figures/{scene}"),
