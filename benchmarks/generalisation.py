@@ -143,8 +143,8 @@ def calibration_errors(data: Path, files: dict) -> dict:
 def evaluate_variant(data, scene, frames, variant, files, chromatic, work) -> dict:
     """Depth maps of one scene x variant over its frames, pooled against the ground truth."""
     from colourhs.capture import load_rig
+    from colourhs.deptherrors import depth_errors, depth_summary
     from colourhs.depthfile import read_depth
-    from colourhs.evaluate import depth_errors, depth_summary
     from colourhs.hull import visual_hull
     from colourhs.ply import load_mesh
     from colourhs.reconstruct.frame import reconstruct_frame

@@ -21,8 +21,8 @@ import numpy as np
 import pandas as pd
 
 from colourhs.capture import load_rig
+from colourhs.deptherrors import depth_errors, depth_summary
 from colourhs.depthfile import read_depth
-from colourhs.evaluate import depth_errors, depth_summary
 from colourhs.ply import load_mesh
 
 HERE = Path(__file__).parent

@@ -517,8 +517,8 @@ def scene_figures(
     -------
     The PNG/GIF files written.
     """
+    from colourhs.deptherrors import depth_errors
     from colourhs.depthfile import read_depth
-    from colourhs.evaluate import depth_errors
     from colourhs.ply import load_mesh
 
     out = Path(out_dir)

@@ -17,28 +17,19 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from pathlib import Path
-
-import h5py
 import numpy as np
 from tqdm import tqdm
 
 from colourhs.capture import (
-    COLOURS,
     LIT_THRESHOLD,
     Camera,
     Rig,
-    open_dataset,
-    read_image,
-    read_mask,
 )
-from colourhs.crosstalk import load_crosstalk, unmix
 from colourhs.depthfile import DepthResult, write_depth
 from colourhs.geometry import fixation_point, normalised_coordinates, pixel_grid
-from colourhs.io import note_read, sha256_files
-from colourhs.noise import NoiseModel, estimate_noise, load_noise
+from colourhs.io import sha256_files
 from colourhs.reconstruct.dataterm import INVALID_COST, data_term, pair_arrays, prepare_images
+from colourhs.reconstruct.inputs import Frame, load_frame
 from colourhs.reconstruct.integrate import initial_surface
 
 METHODS = ("ml", "bayes")
@@ -57,92 +48,6 @@ unchanged or better within 0.1 mm (seeds 0-1), the demo within 0.02 mm.
 A scene beyond it is reconstructed only where the hull gives the range
 (``depth_from_hull``) or ``depth_range`` is given.
 """
-
-
-@dataclass
-class Frame:
-    """Everything the data term needs of one frame (arrays in camera order)."""
-
-    rig: Rig
-    images: np.ndarray  # (C, 3, H, W) float32, unmixed when calibrated
-    saturated: np.ndarray  # (C, H, W) bool
-    silhouettes: np.ndarray | None  # (C, H, W) bool
-    mu: np.ndarray | None  # (P, 2, H, W) float32
-    chroma: np.ndarray | None  # (C, 3, H, W) float32
-    variance: np.ndarray | None = None  # (C, 3, H, W) noise variance of ``images``
-    inputs: list = field(default_factory=list)  # files read, for provenance
-
-
-def load_frame(
-    dataset_dir,
-    scene: str,
-    frame: str,
-    crosstalk_json=None,
-    photometric_h5=None,
-    chromaticity_h5=None,
-    use_masks: bool = True,
-    noise_json=None,
-) -> Frame:
-    """Read a frame's images and the calibrations that apply to it.
-
-    ``noise_json`` (:func:`colourhs.noise.calibrate_noise`) gives the images'
-    noise variance; without it the noise model is estimated from the frame's
-    own images (:func:`colourhs.noise.estimate_noise`).
-    """
-    ds = open_dataset(dataset_dir, check_images=False, scenes=[scene])
-    rig = ds.rig
-    mixing = load_crosstalk(crosstalk_json) if crosstalk_json else {}
-    imgs, sats, sils, inputs = [], [], [], []
-    sc = ds.scene(scene)
-    for cam in rig.camera_names:
-        path = ds.frame_image(scene, frame, cam)
-        img, sat = read_image(path, rig.image)
-        imgs.append((unmix(img, mixing[cam]) if cam in mixing else img).transpose(2, 0, 1))
-        sats.append(sat)
-        inputs.append(path)
-        if use_masks and sc.has_masks:
-            sils.append(read_mask(ds.mask_image(scene, frame, cam), rig.image))
-    mu = None
-    pair_cams, pair_ch = pair_arrays(rig)
-    if photometric_h5:
-        from colourhs.photometric import read_mu_maps
-
-        maps = read_mu_maps(photometric_h5)
-        names = rig.camera_names
-        mu = np.stack(
-            [
-                [maps[f"{names[a]}/{COLOURS[ca]}"], maps[f"{names[b]}/{COLOURS[cb]}"]]
-                for (a, b), (ca, cb) in zip(pair_cams, pair_ch, strict=True)
-            ]
-        ).astype(np.float32)
-    chroma = None
-    if chromaticity_h5:
-        note_read(chromaticity_h5)
-        with h5py.File(chromaticity_h5) as f:
-            chroma = np.stack([f[cam][()].transpose(2, 0, 1) for cam in rig.camera_names])
-    for extra in (crosstalk_json, photometric_h5, chromaticity_h5, noise_json):
-        if extra:
-            inputs.append(Path(extra))
-    images = np.stack(imgs).astype(np.float32)
-    model = load_noise(noise_json) if noise_json else None
-    variance = []
-    for c, cam in enumerate(rig.camera_names):
-        rgb = images[c].transpose(1, 2, 0)
-        if model is None:
-            gain, offset = estimate_noise([rgb])
-            variance.append(NoiseModel({cam: gain}, {cam: offset}).variance(cam, rgb))
-        else:
-            variance.append(model.variance(cam, rgb))
-    return Frame(
-        rig,
-        images,
-        np.stack(sats),
-        np.stack(sils) if sils else None,
-        mu,
-        None if chroma is None else chroma.astype(np.float32),
-        np.stack(variance).transpose(0, 3, 1, 2).astype(np.float32),
-        inputs,
-    )
 
 
 def reference_rays(camera: Camera, width: int, height: int) -> np.ndarray:
