@@ -408,8 +408,8 @@ class WorkflowPlan:
         return shlex.join(opts)
 
     def report_inputs(self, name: str) -> dict:
-        """The report's metrics table, recorded config, calibration figures and the
-        selected scenes' figure folders."""
+        """The report's metrics table, recorded config, calibration figures, the
+        selected scenes' figure folders and the dataset's rig.json and scene.json."""
         objects = self.chromatic_objects(name)
         return {
             "metrics": f"reports/{name}/metrics.csv",
@@ -419,7 +419,18 @@ class WorkflowPlan:
                 *[f"results/{name}/calib/chromaticity/{o}.png" for o in objects],
             ],
             "figures": [f"reports/{name}/figures/{s}" for s in self.selected_scenes(name)],
+            # rig.json and every scene.json: the rig and scene summaries.
+            "dataset": self._dataset_files(name),
         }
+
+    def _dataset_files(self, name: str) -> list[str]:
+        """rig.json and the scene.json of every scene (what opening the dataset reads)."""
+        ds = self.layout(name)
+        out = [str(ds.rig.path)]
+        for scene in ds.scenes:
+            meta = Path(ds.root) / "scenes" / scene / "scene.json"
+            out += [str(meta)] if meta.exists() else []
+        return out
 
     def report_targets(self, name: str) -> list[str]:
         """The report, requested once the dataset's scenes are known (after synthesis)."""

@@ -102,14 +102,16 @@ def test_inputs_are_the_files_of_the_capture_format(plan, data):
     ]
     # No chromatic/white when a dataset has none: just rig.json.
     assert plan.chromatic_inputs("d", "nosuch") == [rig]
+    # rig.json, the scene's scene.json (opening the dataset reads it), the masks
+    # or, without masks, the images.
     assert plan.silhouette_inputs("d", "toy", "000000")[1:] == [
-        str(data / f"scenes/toy/masks/000000/cam{i}.png") for i in (1, 2, 3)
-    ]
+        str(data / "scenes/toy/scene.json")
+    ] + [str(data / f"scenes/toy/masks/000000/cam{i}.png") for i in (1, 2, 3)]
     assert plan.silhouette_inputs("d", "wave", "000001")[1:] == [
-        str(data / f"scenes/wave/frames/000001/cam{i}.png") for i in (1, 2, 3)
-    ]
-    assert len(plan.frame_inputs("d", "toy", "000000")) == 7  # rig, 3 images, 3 masks
-    assert len(plan.frame_inputs("d", "wave", "000000")) == 4
+        str(data / "scenes/wave/scene.json")
+    ] + [str(data / f"scenes/wave/frames/000001/cam{i}.png") for i in (1, 2, 3)]
+    assert len(plan.frame_inputs("d", "toy", "000000")) == 8  # rig, scene, 3 images, 3 masks
+    assert len(plan.frame_inputs("d", "wave", "000000")) == 5
     assert plan.gt_mesh("d", "toy", "000000") == [str(data / "scenes/toy/gt/000000.ply")]
     assert plan.gt_mesh("d", "wave", "000000") == []
     with pytest.raises(KeyError, match="000000, 000001"):
