@@ -54,6 +54,7 @@ from colourhs.io import atomic_output, write_json
 from colourhs.mesh import TriMesh
 from colourhs.ply import load_mesh, write_ply
 from colourhs.raycast import raycasting_scene
+from colourhs.reporttables import EXTRA_COLUMNS, REQUIRED_COLUMNS
 
 __all__ = [
     "CONTRACT_COLUMNS",
@@ -68,30 +69,9 @@ __all__ = [
     "visible_vertices",
 ]
 
-#: The results contract's columns of ``reports/NAME/metrics.csv``, in order.
-CONTRACT_COLUMNS = (
-    "scene",
-    "frame",
-    "variant",
-    "hausdorff_rms_mm",
-    "hausdorff_mean_mm",
-    "hausdorff_max_mm",
-    "depth_median_mm",
-    "depth_rms_mm",
-    "normal_median_deg",
-)
-#: Extra metric columns, after the contract's.
-EXTRA_COLUMNS = (
-    "hausdorff_median_mm",
-    "completeness_rms_mm",
-    "completeness_mean_mm",
-    "completeness_max_mm",
-    "depth_p95_mm",
-    "coverage",
-    "hausdorff_samples",
-    "completeness_samples",
-    "outside_share",
-)
+#: The results contract's columns of ``reports/NAME/metrics.csv``, in order
+#: (one definition, :mod:`colourhs.reporttables`, which the report reads).
+CONTRACT_COLUMNS = REQUIRED_COLUMNS
 #: Offset (metres) of a visibility ray's start from the vertex it tests (avoids self-hits).
 VISIBILITY_EPS_M = 1e-4
 

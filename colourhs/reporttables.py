@@ -27,6 +27,7 @@ from colourhs.variants import VARIANT_ORDER
 __all__ = [
     "AGGREGATION",
     "BENCHMARK_COLUMNS",
+    "EXTRA_COLUMNS",
     "KEY_COLUMNS",
     "METRIC_COLUMNS",
     "REQUIRED_COLUMNS",
@@ -51,6 +52,19 @@ METRIC_COLUMNS = (
 )
 #: Every column ``metrics.csv`` must have (results contract, version 1).
 REQUIRED_COLUMNS = KEY_COLUMNS + METRIC_COLUMNS
+#: Extra metric columns that the evaluation writes after the contract's
+#: (:func:`colourhs.evaluate.evaluate_frame`).
+EXTRA_COLUMNS = (
+    "hausdorff_median_mm",
+    "completeness_rms_mm",
+    "completeness_mean_mm",
+    "completeness_max_mm",
+    "depth_p95_mm",
+    "coverage",
+    "hausdorff_samples",
+    "completeness_samples",
+    "outside_share",
+)
 
 #: How a contract metric is aggregated over the frames of one (scene, variant):
 #: "mean", "max", "median", "rms" (``sqrt(mean(x**2))``) or "sum". Other numeric

@@ -24,6 +24,7 @@ import pytest
 from PIL import Image
 
 from colourhs.report import REQUIRED_COLUMNS, build_report
+from colourhs.reporttables import EXTRA_COLUMNS
 from colourhs.variants import VARIANT_ORDER
 
 CHROMIUM = next(
@@ -33,18 +34,6 @@ pytestmark = pytest.mark.skipif(
     CHROMIUM is None, reason="no chromium on PATH (scripts/setup.sh installs Debian's chromium)"
 )
 WIDTH, HEIGHT = 1400, 900
-# colourhs.evaluate's extra columns (not imported: it loads open3d, 7 s here)
-EXTRA_COLUMNS = (
-    "hausdorff_median_mm",
-    "completeness_rms_mm",
-    "completeness_mean_mm",
-    "completeness_max_mm",
-    "depth_p95_mm",
-    "coverage",
-    "hausdorff_samples",
-    "completeness_samples",
-    "outside_share",
-)
 
 # Written into the page on load: overflow, the images' state, the page height, the
 # summary table's scroll and client widths, the displayed width of Figure 7.
