@@ -43,15 +43,18 @@ def test_validate_reports_good_and_bad_datasets(tiny_dataset, tmp_path, capsys):
     assert not (tmp_path / "bad.json").exists()
 
 
-VARIANTS = ("vh", "bayes_nocalib", "bayes_ph", "bayes_full")
+VARIANTS = ("vh", "bayes_ph", "bayes_full")
 
 
 def test_run_does_the_whole_job_through_snakemake(tiny_dataset, tmp_path):
     """`colourhs run` on the tiny preset: every stage, the contract's files, the report.
 
-    Without ml_full, for the suite's 15-minute budget: its six frames, meshes and
-    evaluations are about 40 s of the 251 s this test took with it (full suite
-    967 s on 2 cores); ML HS is tested in test_exact.py and test_reconstruct.py.
+    Without ml_full and bayes_nocalib, for the suite's 15-minute budget: each
+    variant's six frames, meshes and evaluations cost 40-50 s of this test (219 s
+    with four variants on 2 idle cores, full suite 962 s; most of a tiny job is
+    its imports). ML HS is tested in test_exact.py and test_reconstruct.py, the
+    uncalibrated variant and the ablation in test_reconstruct.py
+    (test_calibrations_help), its workflow inputs in test_workflow_plan.py.
     """
     cmd = [sys.executable, "-m", "colourhs", "run", str(tiny_dataset), "--name", "t"]
     cmd += ["--cores", "2", "--directory", str(tmp_path), "--variants", ",".join(VARIANTS)]
@@ -60,11 +63,11 @@ def test_run_does_the_whole_job_through_snakemake(tiny_dataset, tmp_path):
     env = dict(os.environ, **{ENV: str(reads)})
     done = subprocess.run(cmd, capture_output=True, text=True, env=env)
     assert done.returncode == 0, done.stderr[-2000:]
-    # Every job read only its declared inputs: 86 jobs, more than test_workflow's run
+    # Every job read only its declared inputs: 68 jobs, more than test_workflow's run
     # (bayes_full reading a chromaticity map, or copying bayes_ph; statue and toy).
     configs = [PROJECT_ROOT / "config.yaml", tmp_path / "results" / "t" / "run-config.yaml"]
     n_jobs, problems = audit(reads, tmp_path, tiny_dataset, configs)
-    assert n_jobs == 86 and not problems, "\n".join(sorted(problems))
+    assert n_jobs == 68 and not problems, "\n".join(sorted(problems))
     summary = json.loads((tmp_path / "results" / "t" / "capture" / "summary.json").read_text())
     # 7 poses x 3 cameras + 3 chromatic objects x 3 colours x 3 + 6 frames x 3 + 18 masks.
     assert summary["images"] == 21 + 27 + 18 + 18
@@ -74,12 +77,13 @@ def test_run_does_the_whole_job_through_snakemake(tiny_dataset, tmp_path):
     assert set(metrics["variant"]) == set(VARIANTS)
     for scene, frame, variant in metrics[["scene", "frame", "variant"]].itertuples(index=False):
         assert (tmp_path / "results" / "t" / scene / variant / "mesh" / f"{frame}.ply").exists()
-    # Measured on tiny: sheet Hausdorff RMS 0.46 mm with Bayesian HS and photometric
-    # calibration (1.4-2.0 before the continuous consistency refinement).
+    # Measured on tiny: sheet Hausdorff RMS 0.44 mm with Bayesian HS and photometric
+    # calibration (1.4-2.0 before the continuous consistency refinement), 121 mm for
+    # the visual hull.
     sheet = metrics[metrics["scene"] == "sheet"].groupby("variant")["hausdorff_rms_mm"].mean()
     print(sheet.to_dict())
     assert sheet["bayes_ph"] < 0.7
-    assert 5 * sheet["bayes_ph"] < sheet["bayes_nocalib"] < sheet["vh"]
+    assert 100 * sheet["bayes_ph"] < sheet["vh"]
     # Issue 14: bayes_full on the scenes without a chromatic object (plane, sheet)
     # is bayes_ph, computed once and copied; the chromatic ones are computed.
     full = metrics[metrics["variant"] == "bayes_full"].set_index(["scene", "frame"])

@@ -34,6 +34,10 @@ SEEDS = (1, 2, 3, 4, 5)
 #: end): a skew of up to 1 % of f and 12 distortion coefficients (rational k4-k6,
 #: thin prism s1-s4; the ranges ``random-tiny-lens``).
 LENS_SEED = 5
+#: ML HS runs on the plane of three of the rigs (the lens rig, the worst and the
+#: best ML plane of the five measured below), for the suite's 15 minutes: each ML
+#: pass costs about 12 s.
+ML_SEEDS = (1, 3, LENS_SEED)
 
 
 @pytest.fixture(scope="module")
@@ -91,13 +95,15 @@ def test_exact_data_exact_answers(exact_rigs, scene):
       0.05 mm is not reached by ML.
     - Bayesian never worse than ML: every case.
 
-    ML runs on the plane only (the sheet's ML, 0.09-0.27 mm, was measured
-    above, every seed worse than Bayesian): the suite stays under 15 minutes.
+    ML runs on the plane of ``ML_SEEDS`` only (the sheet's ML, 0.09-0.27 mm, was
+    measured above, every seed worse than Bayesian): the suite stays under 15
+    minutes.
     """
     rows = []
     for seed, root in exact_rigs.items():
         bayes = _errors(root, scene, "bayes")
-        ml = _errors(root, scene, "ml") if scene == "plane" else (np.inf, np.inf, 1.0)
+        with_ml = scene == "plane" and seed in ML_SEEDS
+        ml = _errors(root, scene, "ml") if with_ml else (np.inf, np.inf, 1.0)
         print(f"seed {seed} {scene}: bayes {bayes} ml {ml}")
         rows.append(bayes + ml)
     b_mm, b_deg, b_cov, m_mm, m_deg, _ = np.array(rows).T
@@ -106,7 +112,9 @@ def test_exact_data_exact_answers(exact_rigs, scene):
     assert b_mm.max() < 0.04  # measured 0.032 (plane), 0.026 (sheet)
     assert b_deg.max() < 0.1 and b_cov.min() > 0.85  # measured 0.074 deg, 0.89
     if scene == "plane":
-        assert np.median(m_mm) < 0.1 and m_mm.max() < 0.15  # measured 0.066, 0.108
+        m_mm, m_deg = m_mm[np.isfinite(m_mm)], m_deg[np.isfinite(m_deg)]
+        assert len(m_mm) == len(ML_SEEDS)
+        assert np.median(m_mm) < 0.1 and m_mm.max() < 0.15  # measured 0.063, 0.108
         assert m_deg.max() < 0.1  # measured 0.046
 
 

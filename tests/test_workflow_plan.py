@@ -141,6 +141,15 @@ def test_variants_targets_and_options(data):
         "--chromaticity results/d/calib/chromaticity/slinky.h5 --n-labels 7"
     )
     assert plan.reconstruct_options("d", "wave", "vh") == "--method vh --n-labels 7"
+    # The paper's ablation without calibration: the noise model only (the whole-job
+    # test in test_cli.py leaves this variant out for time).
+    assert plan.variant_calibration("d", "toy", "bayes_nocalib") == {
+        "noise": "results/d/calib/noise.json"
+    }
+    assert plan.reconstruct_options("d", "toy", "bayes_nocalib") == (
+        "--method bayes --noise results/d/calib/noise.json --n-labels 7"
+    )
+    assert plan.same_result("d", "toy", "bayes_nocalib", "000000", "depth") == []
     # bayes_full on wave (no chromatic object) is bayes_ph: computed once, copied.
     assert plan.same_result("d", "wave", "bayes_full", "000001", "mesh") == [
         "results/d/wave/bayes_ph/mesh/000001.ply"
