@@ -36,6 +36,7 @@ RECONSTRUCT_PARAMS = {
     "link_m": (float, "tangent-plane distance that links neighbours into one surface, metres"),
     "surface_iterations": (int, "Levenberg-Marquardt steps before and after the depth search"),
     "spline_px": (float, "spline control spacing, pixels (default: 1/80 of the width)"),
+    "blur_px": (float, "blur of the Helmholtz sides, pixels (default: sides.BLUR_PX)"),
 }
 
 #: ``colourhs photometric`` options: name -> (type, help); defaults in

@@ -151,3 +151,24 @@ def test_lm_stops_on_a_converged_surface(plane_sides, monkeypatch):
     c, energy = problem.lm(problem.fit(z[graph.pix]), 4)
     assert len(solves) <= 4 + 2, len(solves)
     assert np.all(np.isfinite(c)) and energy[-1] <= energy[0]
+
+
+def test_blur_of_the_sides_is_a_parameter(plane_sides):
+    """``blur_px`` reaches the sides (reconstruct's and the CLI's option of the same
+    name): 0 keeps the calibrated intensities J = mu i / p and their variances as they
+    are; the default (1 px) smooths J and divides the variance by 4 pi (the kernel's
+    sum of squared weights, 0.0796)."""
+    fr, _, _, _, _, _, sides = plane_sides
+    raw = helmholtz_sides(fr, fr.variance, pair_arrays(fr.rig), blur_px=0)
+    assert not raw.blurred and sides.blurred
+    J0, V0 = raw.maps[0][..., 0], raw.maps[0][..., 1]
+    J1, V1 = sides.maps[0][..., 0], sides.maps[0][..., 1]
+    cam, ch = pair_arrays(fr.rig)[0][0][0], pair_arrays(fr.rig)[1][0][0]
+    i = fr.images[cam, ch].astype(float)
+    ok = np.isfinite(J0)
+    scale = fr.mu[0, 0] / fr.chroma[cam, ch] if fr.chroma is not None else fr.mu[0, 0]
+    assert np.allclose(J0[ok], (i * scale)[ok])
+    both = ok & np.isfinite(J1)
+    assert both.sum() > 1000 and np.abs(J1[both] - J0[both]).max() > 0
+    ratio = np.median(V1[both] / V0[both])
+    assert 0.075 < ratio < 0.085  # measured 0.0796 (the variance is smooth: 1 / (4 pi))

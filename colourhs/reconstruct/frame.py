@@ -147,6 +147,7 @@ def reconstruct(
     link_m: float = 0.002,
     surface_iterations: int = 3,
     spline_px: float | None = None,
+    blur_px: float | None = None,
     progress: bool = False,
 ) -> DepthResult:
     """Reconstruct one frame with ML or Bayesian colour HS.
@@ -185,6 +186,10 @@ def reconstruct(
         Levenberg-Marquardt steps before and after its depth search, and the
         spline control spacing (default 1/80 of the width,
         :func:`colourhs.reconstruct.spline.default_spacing`).
+    blur_px : Gaussian blur of the Helmholtz sides before sampling, pixels
+        (ML HS's continuous step and the refinement; default
+        :data:`colourhs.reconstruct.sides.BLUR_PX`, see
+        :func:`colourhs.reconstruct.sides.side_maps`).
     progress : a progress bar (tqdm, on stderr) over the data term's chunks of
         pixels, the long part of a high-resolution frame.
 
@@ -223,7 +228,9 @@ def reconstruct(
     }
     shape = (H, W)
     if method == "ml":
-        z, nrm, ok, conf = _ml_solution(frame, cost, depths, pix, rays, ref, pairs, shape, max_cost)
+        z, nrm, ok, conf = _ml_solution(
+            frame, cost, depths, pix, rays, ref, pairs, shape, max_cost, blur_px
+        )
     else:
         labels, frac, normals = _bayes_labelling(
             cost / cost_scale,
@@ -261,7 +268,7 @@ def reconstruct(
                 anchor,
             )
             z, nrm, ok, weights, info["surface"] = _consistent_surface(
-                frame, z, ok, rays, ref, pairs, surface_iterations, spline_px
+                frame, z, ok, rays, ref, pairs, surface_iterations, spline_px, blur_px
             )
             conf = np.where(ok, weights, 0.0).astype(np.float32)
         erode_px = max(1, round(W / 320)) if erode_px is None else erode_px
@@ -325,14 +332,14 @@ def data_term_evaluator(frame: Frame, ref: Camera, pairs):
     return evaluate
 
 
-def _ml_solution(frame, cost, depths, pix, rays, ref, pairs, shape, max_cost):
+def _ml_solution(frame, cost, depths, pix, rays, ref, pairs, shape, max_cost, blur_px=None):
     """ML HS (:func:`colourhs.reconstruct.ml.ml_depth`) as (H*W,) depth, (H*W, 3)
     normal, validity and confidence (1 - the best hypothesis' cost)."""
     from colourhs.reconstruct.ml import ml_depth
     from colourhs.reconstruct.sides import helmholtz_sides
 
     H, W = shape
-    sides = helmholtz_sides(frame, frame.variance, pairs)
+    sides = helmholtz_sides(frame, frame.variance, pairs, blur_px=blur_px)
     z_ml, n_ml, good = ml_depth(cost, depths, pix, rays, ref.centre, sides, shape, max_cost)
     z = np.full(H * W, np.nan)
     z[pix] = np.where(good, z_ml, np.nan)
@@ -425,13 +432,13 @@ def _bayes_labelling(cost, normals, pix, rays, depths, shape, alpha, tau, info, 
     return labels, frac, box_n[local]
 
 
-def _consistent_surface(frame, z, ok, rays, ref, pairs, iterations, spline_px):
+def _consistent_surface(frame, z, ok, rays, ref, pairs, iterations, spline_px, blur_px=None):
     """The depth from the agreement of geometry and eq. (5) (see :mod:`.surface`)."""
     from colourhs.reconstruct.refine import refine_surface
     from colourhs.reconstruct.sides import helmholtz_sides
 
     H, W = frame.rig.image.height, frame.rig.image.width
-    sides = helmholtz_sides(frame, frame.variance, pairs)
+    sides = helmholtz_sides(frame, frame.variance, pairs, blur_px=blur_px)
     footprint = np.abs(z) / float(ref.K[0, 0])
     fill = object_mask(frame, frame.rig.camera_names.index(ref.name)).ravel()
     zr, nr, sinfo = refine_surface(

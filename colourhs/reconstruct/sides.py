@@ -91,7 +91,7 @@ def helmholtz_sides(
     variance: np.ndarray,
     pairs,
     min_signal: float = MIN_SIGNAL,
-    blur_px: float = BLUR_PX,
+    blur_px: float | None = None,
 ) -> HelmholtzSides:
     """The sides of every reciprocal pair of a frame (see :class:`HelmholtzSides`).
 
@@ -99,8 +99,10 @@ def helmholtz_sides(
     (C, 3, H, W) the noise variance of its images; ``pairs`` from
     :func:`colourhs.reconstruct.dataterm.pair_arrays`. J is unusable where
     the image is saturated, at or below ``min_signal``, outside the
-    silhouette, or mu or p is not positive, as in the data term.
+    silhouette, or mu or p is not positive, as in the data term. ``blur_px``
+    (default :data:`BLUR_PX`): see :func:`side_maps`.
     """
+    blur_px = BLUR_PX if blur_px is None else float(blur_px)
     pair_cams, pair_ch = pairs
     cams, light, maps = [], [], []
     for p, ((a, b), (ca, cb)) in enumerate(zip(pair_cams, pair_ch, strict=True)):
