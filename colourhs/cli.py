@@ -266,6 +266,14 @@ def build_parser(show_defaults: bool = False) -> argparse.ArgumentParser:
     rp.add_argument("--config", type=Path, default=None, help="the run's configuration (YAML)")
     rp.add_argument("--dataset", type=Path, default=None, help="the dataset (rig, scene.json)")
     rp.add_argument("--results", type=Path, default=None, help="results/NAME: link its files")
+    rp.add_argument(
+        "--calib",
+        type=Path,
+        default=None,
+        help="results/NAME/calib: tables of the calibration's diagnostics (marker "
+        "reprojection RMS, cross-talk matrices, photometric residual; the mu error "
+        "when --dataset has gt/photometric.h5)",
+    )
     rp.add_argument("--embed-images", action="store_true", help="embed images (base64)")
     rp.set_defaults(func=_report)
 
@@ -324,7 +332,7 @@ INPUTS = {
     "mesh": ("depth", "hull", "same_as"),
     "evaluate": ("depth", "mesh", "gt", "same_as"),
     "metrics": ("json",),
-    "report": ("metrics", "calibration", "config", "dataset"),
+    "report": ("metrics", "calibration", "config", "dataset", "calib"),
 }
 
 #: Input files whose contents are checked before a subcommand runs, by kind:
@@ -346,8 +354,8 @@ INPUT_KINDS = {
 SAME_AS_KINDS = {"reconstruct": "hdf5", "evaluate": "json", "mesh": "ply"}
 #: Input arguments that are positional (named without --), per subcommand.
 POSITIONAL = {"dataset", "depth", "mesh", "json", "photometric:poses"}
-#: Inputs that may be folders: the dataset, and report --calibration (a folder of figures).
-FOLDER_INPUTS = ("dataset", "calibration")
+#: Inputs that may be folders: the dataset, report --calibration (figures) and --calib.
+FOLDER_INPUTS = ("dataset", "calibration", "calib")
 
 #: Errors of the user's input (a file, a name, a value), not of the program:
 #: one line on stderr, exit status 1. Anything else is a bug and keeps its traceback.

@@ -349,6 +349,7 @@ def _report(args) -> int:
         dataset=dataset,
         results_dir=args.results,
         config_resolved=True,
+        calibration_dir=args.calib,
     )
     print(f"wrote {args.out}")
     return 0

@@ -35,6 +35,7 @@ import pandas as pd
 import yaml
 
 from colourhs.io import atomic_output
+from colourhs.reportcalib import calibration_diagnostics
 from colourhs.reportinfo import (
     arrange_figures,
     frame_error_svg,
@@ -363,6 +364,7 @@ def build_report(
     results_dir: str | Path | None = None,
     provenance: Mapping | None = None,
     config_resolved: bool = False,
+    calibration_dir: str | Path | None = None,
 ) -> Path:
     """Write the evaluation report ``reports/NAME/index.html`` and return its path.
 
@@ -410,6 +412,11 @@ def build_report(
         :func:`colourhs.reportinfo.git_provenance` and :func:`~colourhs.reportinfo.run_command`).
     config_resolved
         Whether ``config`` has the package's defaults filled in (said on the page).
+    calibration_dir
+        ``results/NAME/calib`` (or None): the calibration's diagnostics tables
+        (:func:`colourhs.reportcalib.calibration_diagnostics`: marker reprojection
+        RMS, cross-talk matrices, photometric residual, mu error against the
+        dataset's ``gt/photometric.h5`` when it has one).
 
     Raises
     ------
@@ -431,6 +438,7 @@ def build_report(
     if provenance is None:
         provenance = {**git_provenance(Path(__file__).parent), **run_command()}
     descriptions = scene_descriptions(dataset) if dataset is not None else {}
+    diagnostics = calibration_diagnostics(calibration_dir, dataset) if calibration_dir else []
 
     scenes = list(dict.fromkeys([*sorted(summary["scene"].unique()), *figs]))
     key = [c for c in SUMMARY_COLUMNS if c in summary.columns]
@@ -482,6 +490,7 @@ def build_report(
         | ({"paper …": "the paper's number (see below)"} if has_paper else {}),
         paper_source=PAPER_REFERENCE_SOURCE,
         calibration=[_figure(p, out_dir, embed_images) for p in calib],
+        diagnostics=[{**d, "table": _table(d["table"], "bench")} for d in diagnostics],
         scenes=sections,
         timing_table=_table(bench, "bench") if not bench.empty else "",
         provenance=provenance,
