@@ -275,6 +275,12 @@ def build_parser(show_defaults: bool = False) -> argparse.ArgumentParser:
         "when --dataset has gt/photometric.h5)",
     )
     rp.add_argument("--embed-images", action="store_true", help="embed images (base64)")
+    rp.add_argument(
+        "--view",
+        action="store_true",
+        help="embed each scene's first-frame error-coloured meshes from --results, "
+        "simplified to 3000 triangles, in an offline 3D viewer",
+    )
     rp.set_defaults(func=_report)
 
     cf = sub.add_parser("config", help="write a run's configuration (JSON text) as YAML")

@@ -350,6 +350,7 @@ def _report(args) -> int:
         results_dir=args.results,
         config_resolved=True,
         calibration_dir=args.calib,
+        views=args.view,
     )
     print(f"wrote {args.out}")
     return 0

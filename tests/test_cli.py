@@ -269,6 +269,10 @@ USER_ERRORS = {  # argv -> what the one line must say
         ["--config", "bad.yaml: not YAML"],
     ),
     "folder json": (["metrics", "{b}", "{o}/m.csv"], ["json", ": a folder, not a file"]),
+    "view": (
+        "report {o}/r.html --name x --metrics {b}/m.csv --view".split(),
+        ["3D views need results_dir (colourhs report --results)"],
+    ),
 }
 
 
