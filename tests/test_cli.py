@@ -345,6 +345,20 @@ def test_every_option_shows_its_default():
     assert len(checked) == 34, checked  # measured: 34 options with a default
 
 
+def test_readme_minimal_rig_is_valid():
+    """The minimal rig.json of the README's "Your own rig" passes the reader's checks."""
+    from colourhs.capture import rig_from_dict
+
+    readme = (PROJECT_ROOT / "README.md").read_text().split("## Your own rig", 1)[1]
+    rig = rig_from_dict(json.loads(readme.split("```json", 1)[1].split("```", 1)[0]))
+    assert rig.camera_names == ("cam1", "cam2", "cam3")
+    assert [p.cam_a + p.cam_b for p in rig.reciprocal_pairs()] == [
+        "cam1cam2",
+        "cam1cam3",
+        "cam2cam3",
+    ]
+
+
 def test_readme_commands_exist():
     readme = (PROJECT_ROOT / "README.md").read_text()
     assert "bash scripts/setup.sh && .venv/bin/snakemake --cores 2" in readme
