@@ -90,7 +90,11 @@ def build_parser(show_defaults: bool = False) -> argparse.ArgumentParser:
     s.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
     s.add_argument("--overwrite", action="store_true", help="replace an existing dataset")
     s.add_argument(
-        "--off", nargs="*", default=[], choices=NUISANCE_SWITCHES, help="nuisances to switch off"
+        "--off",
+        nargs="*",
+        default=[],
+        choices=NUISANCE_SWITCHES,
+        help="nuisances to switch off (default: none, every nuisance on)",
     )
     s.set_defaults(func=_synth)
 
@@ -103,7 +107,10 @@ def build_parser(show_defaults: bool = False) -> argparse.ArgumentParser:
     m.add_argument("dataset", type=Path, help="dataset folder (capture format)")
     m.add_argument("out", type=Path, help="CSV to write (one row per usable board pose)")
     m.add_argument(
-        "--min-markers", type=int, default=3, help="markers seen by >= 2 cameras a pose needs"
+        "--min-markers",
+        type=int,
+        default=3,
+        help="markers seen by >= 2 cameras a pose needs (default 3)",
     )
     m.set_defaults(func=_markers)
 
@@ -259,7 +266,21 @@ def build_parser(show_defaults: bool = False) -> argparse.ArgumentParser:
     rp.add_argument("--config", type=Path, default=None, help="the run's configuration (YAML)")
     rp.add_argument("--dataset", type=Path, default=None, help="the dataset (rig, scene.json)")
     rp.add_argument("--results", type=Path, default=None, help="results/NAME: link its files")
+    rp.add_argument(
+        "--calib",
+        type=Path,
+        default=None,
+        help="results/NAME/calib: tables of the calibration's diagnostics (marker "
+        "reprojection RMS, cross-talk matrices, photometric residual; the mu error "
+        "when --dataset has gt/photometric.h5)",
+    )
     rp.add_argument("--embed-images", action="store_true", help="embed images (base64)")
+    rp.add_argument(
+        "--view",
+        action="store_true",
+        help="embed each scene's first-frame error-coloured meshes from --results, "
+        "simplified to 3000 triangles, in an offline 3D viewer",
+    )
     rp.set_defaults(func=_report)
 
     cf = sub.add_parser("config", help="write a run's configuration (JSON text) as YAML")
@@ -317,21 +338,122 @@ INPUTS = {
     "mesh": ("depth", "hull", "same_as"),
     "evaluate": ("depth", "mesh", "gt", "same_as"),
     "metrics": ("json",),
-    "report": ("metrics", "calibration", "config", "dataset"),
+    "report": ("metrics", "calibration", "config", "dataset", "calib"),
 }
+
+#: Input files whose contents are checked before a subcommand runs, by kind:
+#: ``hdf5`` (an HDF5 file), ``ply`` (starts with a PLY header), ``json`` or ``yaml``
+#: (parses). Folders are refused.
+INPUT_KINDS = {
+    "crosstalk": "json",
+    "noise": "json",
+    "photometric": "hdf5",
+    "chromaticity": "hdf5",
+    "depth": "hdf5",
+    "config": "yaml",
+    "json": "json",
+    "hull": "ply",
+    "mesh": "ply",
+    "gt": "ply",
+}
+#: What --same-as copies: a depth file (reconstruct), a metrics JSON (evaluate), a PLY (mesh).
+SAME_AS_KINDS = {"reconstruct": "hdf5", "evaluate": "json", "mesh": "ply"}
+#: Input arguments that are positional (named without --), per subcommand.
+POSITIONAL = {"dataset", "depth", "mesh", "json", "photometric:poses"}
+#: Inputs that may be folders: the dataset, report --calibration (figures) and --calib.
+FOLDER_INPUTS = ("dataset", "calibration", "calib")
 
 #: Errors of the user's input (a file, a name, a value), not of the program:
 #: one line on stderr, exit status 1. Anything else is a bug and keeps its traceback.
-USER_ERRORS = (ValueError, FileExistsError, FileNotFoundError, UnknownNameError)
+#: OSError: a file that cannot be read or written (a folder, no permission, a full disk).
+USER_ERRORS = (ValueError, OSError, UnknownNameError)
+
+
+def _input_problem(path: Path, kind: str | None, folder_ok: bool) -> str:
+    """What is wrong with input ``path`` ("" when nothing): missing, a folder where a
+    file belongs, or contents that are not ``kind`` (:data:`INPUT_KINDS`)."""
+    if not path.exists():
+        return "no such file or folder"
+    if path.is_dir():
+        return "" if folder_ok else "a folder, not a file"
+    if kind == "hdf5":
+        import h5py
+
+        return "" if h5py.is_hdf5(path) else "not an HDF5 file"
+    if kind == "ply":
+        with open(path, "rb") as f:
+            return "" if f.read(4) in (b"ply\n", b"ply\r") else "not a PLY file"
+    if kind in ("json", "yaml"):
+        import json
+
+        import yaml
+
+        try:
+            text = path.read_text(encoding="utf-8")
+            if kind == "json":
+                json.loads(text)
+            else:
+                yaml.safe_load(text)
+        except (UnicodeDecodeError, ValueError, yaml.YAMLError) as e:
+            return f"not {kind.upper()} ({' '.join(str(e).split())})"
+    return ""
 
 
 def _check_inputs(args) -> None:
+    """Every input path of the subcommand exists, is a file (or an allowed folder)
+    and, for the kinds of :data:`INPUT_KINDS`, reads as one; ValueError otherwise."""
     for name in INPUTS.get(args.command, ()):
         value = getattr(args, name, None)
+        kind = SAME_AS_KINDS.get(args.command) if name == "same_as" else INPUT_KINDS.get(name)
+        positional = name in POSITIONAL or f"{args.command}:{name}" in POSITIONAL
         for path in value if isinstance(value, list) else [value]:
-            if path is not None and not Path(path).exists():
-                option = name if name in ("dataset", "depth", "mesh", "json") else f"--{name}"
-                raise FileNotFoundError(f"{option} {path}: no such file or folder")
+            if path is None:
+                continue
+            problem = _input_problem(Path(path), kind, name in FOLDER_INPUTS)
+            if problem:
+                option = name if positional else "--" + name.replace("_", "-")
+                raise ValueError(f"{option} {path}: {problem}")
+    if args.command == "reconstruct":
+        _check_maps(args)
+
+
+def _check_maps(args) -> None:
+    """reconstruct's --photometric and --chromaticity hold a map of the image size for
+    every Helmholtz camera (``<camera>/<colour>``) or camera (``<camera>``) of the
+    dataset's rig (docs/results-layout.md); ValueError naming what is missing."""
+    if args.photometric is None and args.chromaticity is None:
+        return
+    import h5py
+
+    from colourhs.capture import COLOURS, load_rig
+
+    rig = load_rig(Path(args.dataset) / "rig.json")
+    pairs = rig.reciprocal_pairs()
+    need = {
+        "photometric": [f"{p.cam_a}/{COLOURS[p.channel_a]}" for p in pairs]
+        + [f"{p.cam_b}/{COLOURS[p.channel_b]}" for p in pairs],
+        "chromaticity": list(rig.camera_names),
+    }
+    size = (rig.image.height, rig.image.width)
+    for name, keys in need.items():
+        path = getattr(args, name)
+        if path is None:
+            continue
+        with h5py.File(path, "r") as f:
+            missing = [k for k in keys if not isinstance(f.get(k), h5py.Dataset)]
+            shapes = {k: f[k].shape[:2] for k in keys if k not in missing}
+            holds = ", ".join(sorted(f))
+        if missing:
+            raise ValueError(
+                f"--{name} {path}: no map {', '.join(missing)} of this rig's cameras "
+                f"(the file holds: {holds or 'nothing'})"
+            )
+        wrong = [f"{k} {h}x{w}" for k, (h, w) in shapes.items() if (h, w) != size]
+        if wrong:
+            raise ValueError(
+                f"--{name} {path}: maps of another image size ({', '.join(wrong)} pixels, "
+                f"rig.json says {size[0]}x{size[1]})"
+            )
 
 
 def main(argv: list[str] | None = None) -> int:

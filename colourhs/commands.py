@@ -25,7 +25,10 @@ RECONSTRUCT_PARAMS = {
     "alpha": (float, "weight of the data term in the Bayesian energy"),
     "tau": (float, "truncation of the depth-normal prior, labels"),
     "working_radius": (float, "depth hypotheses: working depth +- this fraction of it"),
-    "working_radius_m": (float, "the same in metres, instead of --working-radius"),
+    "working_radius_m": (
+        float,
+        "the same in metres, instead of --working-radius (default: none, the fraction applies)",
+    ),
     "data_weight": (float, "weight of the labelling in the initial surface"),
     "max_cost": (float, "pixels whose best hypothesis costs more are left out (sigma3/sigma2)"),
     "cost_scale": (float, "typical noise level of sigma3/sigma2 (the data term's unit)"),
@@ -99,9 +102,9 @@ def _run(args) -> int:
         raise FileNotFoundError(f"{dataset / 'rig.json'}: missing (not a capture-format dataset)")
     # Everything the command line names is checked before anything is written.
     reconstruction = {}
-    if args.variants:
+    if args.variants is not None:  # "" too: an empty list is refused
         reconstruction["variants"] = parse_variants(args.variants)
-    if args.scenes:
+    if args.scenes is not None:
         known = tuple(open_dataset(dataset, check_images=False).scenes)
         scenes = [v.strip() for v in args.scenes.split(",") if v.strip()]
         unknown = [v for v in scenes if v not in known]
@@ -347,6 +350,8 @@ def _report(args) -> int:
         dataset=dataset,
         results_dir=args.results,
         config_resolved=True,
+        calibration_dir=args.calib,
+        views=args.view,
     )
     print(f"wrote {args.out}")
     return 0

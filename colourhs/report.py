@@ -35,6 +35,7 @@ import pandas as pd
 import yaml
 
 from colourhs.io import atomic_output
+from colourhs.reportcalib import calibration_diagnostics
 from colourhs.reportinfo import (
     arrange_figures,
     frame_error_svg,
@@ -57,6 +58,7 @@ from colourhs.reporttables import (
     summarise_benchmarks,
     summarise_metrics,
 )
+from colourhs.reportview import scene_views
 from colourhs.variants import VARIANT_LABELS, VARIANT_ORDER
 
 __all__ = [
@@ -363,6 +365,8 @@ def build_report(
     results_dir: str | Path | None = None,
     provenance: Mapping | None = None,
     config_resolved: bool = False,
+    calibration_dir: str | Path | None = None,
+    views: bool = False,
 ) -> Path:
     """Write the evaluation report ``reports/NAME/index.html`` and return its path.
 
@@ -410,6 +414,15 @@ def build_report(
         :func:`colourhs.reportinfo.git_provenance` and :func:`~colourhs.reportinfo.run_command`).
     config_resolved
         Whether ``config`` has the package's defaults filled in (said on the page).
+    calibration_dir
+        ``results/NAME/calib`` (or None): the calibration's diagnostics tables
+        (:func:`colourhs.reportcalib.calibration_diagnostics`: marker reprojection
+        RMS, cross-talk matrices, photometric residual, mu error against the
+        dataset's ``gt/photometric.h5`` when it has one).
+    views
+        Embed each scene's first-frame error-coloured meshes (``results_dir``),
+        simplified, in an offline 3D viewer (:func:`colourhs.reportview.scene_views`),
+        seen first from the dataset's first camera.
 
     Raises
     ------
@@ -421,6 +434,8 @@ def build_report(
     out = Path(out_html)
     out_dir = out.parent
     # read and check every input before anything is written
+    if views and results_dir is None:
+        raise ValueError("the 3D views need results_dir (colourhs report --results): the meshes")
     metrics = read_metrics(metrics_csv)
     summary = summarise_metrics(metrics)
     calib = _check_figures(calibration_pngs, "calibration")
@@ -431,8 +446,10 @@ def build_report(
     if provenance is None:
         provenance = {**git_provenance(Path(__file__).parent), **run_command()}
     descriptions = scene_descriptions(dataset) if dataset is not None else {}
+    diagnostics = calibration_diagnostics(calibration_dir, dataset) if calibration_dir else []
 
     scenes = list(dict.fromkeys([*sorted(summary["scene"].unique()), *figs]))
+    turn = dataset.rig.cameras[0].R if views and dataset is not None else None
     key = [c for c in SUMMARY_COLUMNS if c in summary.columns]
     top, has_paper = with_paper_columns(summary[["scene", "variant", *key]])
     top = top.drop(columns="paper name")  # in each scene's table; the summary stays narrow
@@ -459,6 +476,7 @@ def build_report(
             s["aggregation"] = _aggregation_text(summary)
             s["same_as"] = _same_as_note(metrics, scene)
         s["files"] = _file_links(results_dir, scene, out_dir) if results_dir else {}
+        s["views"] = scene_views(results_dir, scene, rotation=turn) if views else {}
         s["n_files"] = sum(len(ls) for k in s["files"].values() for ls in k.values())
         sections.append(s)
 
@@ -482,6 +500,7 @@ def build_report(
         | ({"paper …": "the paper's number (see below)"} if has_paper else {}),
         paper_source=PAPER_REFERENCE_SOURCE,
         calibration=[_figure(p, out_dir, embed_images) for p in calib],
+        diagnostics=[{**d, "table": _table(d["table"], "bench")} for d in diagnostics],
         scenes=sections,
         timing_table=_table(bench, "bench") if not bench.empty else "",
         provenance=provenance,

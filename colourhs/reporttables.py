@@ -319,12 +319,14 @@ def read_benchmarks(tsv_paths: Iterable[str | Path]) -> pd.DataFrame:
 
 
 def summarise_benchmarks(bench: pd.DataFrame) -> pd.DataFrame:
-    """Per-rule timing from :func:`read_benchmarks`' table, plus an ``all`` row.
+    """Per-rule timing from :func:`read_benchmarks`' table, plus a ``sum of jobs`` row.
 
     Columns ``rule``, ``jobs`` (benchmark files), ``runs`` (rows; more than jobs
     when a rule was benchmarked with repeats), ``total_s`` (sum of ``s``),
     ``mean_s`` (mean of ``s`` per run), ``max_s``, ``cpu_time_s`` (sum) and
-    ``max_rss_mb`` (max of ``max_rss``). Rules in order of decreasing total time.
+    ``max_rss_mb`` (max of ``max_rss``). Rules in order of decreasing total time; the
+    last row, ``sum of jobs``, totals every job (more than the run's elapsed time when
+    jobs ran in parallel).
     """
     cols = ["rule", "jobs", "runs", "total_s", "mean_s", "max_s", "cpu_time_s", "max_rss_mb"]
     if bench.empty:
@@ -348,5 +350,5 @@ def summarise_benchmarks(bench: pd.DataFrame) -> pd.DataFrame:
 
     rows = [one(rule, g) for rule, g in b.groupby("rule", sort=True)]
     rows.sort(key=lambda r: -(r["total_s"] if math.isfinite(r["total_s"]) else -1))
-    rows.append(one("all", b))
+    rows.append(one("sum of jobs", b))  # jobs overlap: more than the run's elapsed time
     return pd.DataFrame(rows, columns=cols)

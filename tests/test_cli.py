@@ -205,21 +205,26 @@ def _one_line(capsys) -> str:
     return err
 
 
-USER_ERRORS = {  # argv after DATASET -> what the one line must say
+def _rec(scene: str, *options: str, frame: str = "000000") -> list[str]:
+    """``colourhs reconstruct`` of the tiny dataset's ``scene`` into the test's folder."""
+    return ["reconstruct", "{d}", scene, frame, "{o}/x.h5", *options]
+
+
+USER_ERRORS = {  # argv -> what the one line must say
     "scene": (
-        ["reconstruct", "{d}", "nosuch", "000000", "{o}/x.h5"],
+        _rec("nosuch"),
         ["unknown scene 'nosuch'", "statue", "plane"],
     ),
     "frame": (
-        ["reconstruct", "{d}", "statue", "7", "{o}/x.h5"],
+        _rec("statue", frame="7"),
         ["unknown frame of scene 'statue' '7'", "000000"],
     ),
     "camera": (
-        ["reconstruct", "{d}", "statue", "000000", "{o}/x.h5", "--reference", "cam9"],
+        _rec("statue", "--reference", "cam9"),
         ["no camera 'cam9'", "cam1"],
     ),
     "file": (
-        ["reconstruct", "{d}", "statue", "000000", "{o}/x.h5", "--photometric", "{o}/no.h5"],
+        _rec("statue", "--photometric", "{o}/no.h5"),
         ["--photometric", "no.h5: no such file"],
     ),
     "hull scene": (["hull", "{d}", "nosuch", "000000", "{o}/h.ply"], ["unknown scene 'nosuch'"]),
@@ -234,16 +239,76 @@ USER_ERRORS = {  # argv after DATASET -> what the one line must say
         ["run", "{d}", "--directory", "{o}", "--scenes", "statue,nosuch"],
         ["unknown scene(s) 'nosuch'", "plane"],
     ),
+    "no variant": (
+        ["run", "{d}", "--directory", "{o}", "--variants", ""],
+        ["unknown variant(s) (none given)", "bayes_full"],
+    ),
+    # unreadable inputs: named with the option and the problem ({b}: bad_inputs)
+    "not hdf5": (
+        _rec("statue", "--photometric", "{b}/bad.h5"),
+        ["--photometric", "bad.h5: not an HDF5 file"],
+    ),
+    "folder": (
+        _rec("statue", "--chromaticity", "{b}"),
+        ["--chromaticity", ": a folder, not a file"],
+    ),
+    "other maps": (
+        _rec("toy", "--chromaticity", "{b}/other.h5"),
+        ["no map cam1, cam2, cam3 of this rig's cameras", "holds: x"],
+    ),
+    "map size": (
+        _rec("toy", "--chromaticity", "{b}/small.h5"),
+        ["another image size (cam1 4x5", "rig.json says 120x160"],
+    ),
+    "not json": (
+        _rec("statue", "--crosstalk", "{b}/bad.json"),
+        ["--crosstalk", "bad.json: not JSON (Expecting"],
+    ),
+    "not ply": (
+        _rec("statue", "--hull", "{b}/bad.ply"),
+        ["--hull", "bad.ply: not a PLY file"],
+    ),
+    "not yaml": (
+        "report {o}/r.html --name x --metrics {b}/m.csv --config {b}/bad.yaml".split(),
+        ["--config", "bad.yaml: not YAML"],
+    ),
+    "folder json": (["metrics", "{b}", "{o}/m.csv"], ["json", ": a folder, not a file"]),
+    "view": (
+        "report {o}/r.html --name x --metrics {b}/m.csv --view".split(),
+        ["3D views need results_dir (colourhs report --results)"],
+    ),
 }
 
 
+@pytest.fixture(scope="module")
+def bad_inputs(tmp_path_factory) -> Path:
+    """Files that are not what their option reads: text for HDF5, JSON, YAML and PLY;
+    HDF5 files without the tiny rig's chromaticity maps or with maps of another size."""
+    import h5py
+    import numpy as np
+
+    root = tmp_path_factory.mktemp("bad")
+    for name in ("bad.h5", "bad.json", "bad.ply", "bad.yaml"):
+        (root / name).write_text("{not: [this kind")
+    (root / "m.csv").write_text("scene,frame,variant\n")
+    with h5py.File(root / "other.h5", "w") as f:
+        f["x"] = np.zeros(3)
+    with h5py.File(root / "small.h5", "w") as f:
+        for cam in ("cam1", "cam2", "cam3"):
+            f[cam] = np.ones((4, 5, 3), np.float32)
+    return root
+
+
 @pytest.mark.parametrize("case", USER_ERRORS, ids=list(USER_ERRORS))
-def test_user_errors_are_one_line_and_write_nothing(case, tiny_dataset, tmp_path, capsys):
+def test_user_errors_are_one_line_and_write_nothing(
+    case, tiny_dataset, bad_inputs, tmp_path, capsys
+):
     """Issue 14: every user error is one line on stderr naming what is wrong and
     what exists, exit status 1, and leaves no output behind (run validates its
-    options before it writes run-config.yaml)."""
+    options before it writes run-config.yaml; input files are checked before a
+    stage starts)."""
     argv, phrases = USER_ERRORS[case]
-    argv = [a.format(d=tiny_dataset, o=tmp_path) for a in argv]
+    argv = [a.format(d=tiny_dataset, o=tmp_path, b=bad_inputs) for a in argv]
     assert main(argv) == 1
     err = _one_line(capsys)
     for phrase in phrases:
@@ -262,6 +327,40 @@ def test_version_and_option_help(capsys):
     with pytest.raises(SystemExit):
         main(["photometric", "--help"])
     assert "(default 0.0001)" in " ".join(capsys.readouterr().out.split())  # smoothness
+
+
+def test_every_option_shows_its_default():
+    """Issue 14: every option with a default, and every tuning option, says it in --help."""
+    import argparse
+
+    from colourhs.cli import build_parser
+
+    parser = build_parser(show_defaults=True)
+    (sub,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    checked = []
+    for command, p in sub.choices.items():
+        for a in p._actions:
+            if not a.option_strings or a.nargs == 0 or a.required:
+                continue  # positionals, flags, --help, required options
+            tuning = a.metavar in ("INT", "FLOAT", "STR")
+            if tuning or a.default not in (None, "", []):
+                checked.append(f"{command} {a.option_strings[0]}")
+                assert "default" in (a.help or ""), (command, a.option_strings, a.help)
+    assert len(checked) == 34, checked  # measured: 34 options with a default
+
+
+def test_readme_minimal_rig_is_valid():
+    """The minimal rig.json of the README's "Your own rig" passes the reader's checks."""
+    from colourhs.capture import rig_from_dict
+
+    readme = (PROJECT_ROOT / "README.md").read_text().split("## Your own rig", 1)[1]
+    rig = rig_from_dict(json.loads(readme.split("```json", 1)[1].split("```", 1)[0]))
+    assert rig.camera_names == ("cam1", "cam2", "cam3")
+    assert [p.cam_a + p.cam_b for p in rig.reciprocal_pairs()] == [
+        "cam1cam2",
+        "cam1cam3",
+        "cam2cam3",
+    ]
 
 
 def test_readme_commands_exist():

@@ -248,13 +248,13 @@ def test_read_and_summarise_benchmarks(benchmarks):
     assert len(b) == 3 and set(b["rule"]) == {"photometric", "reconstruct"}
     assert b["s"].dtype.kind == "f" and b["max_rss"].dtype.kind == "f"
     s = summarise_benchmarks(b).set_index("rule")
-    assert s.index.tolist() == ["reconstruct", "photometric", "all"]  # by total time
+    assert s.index.tolist() == ["reconstruct", "photometric", "sum of jobs"]  # by total time
     assert s.loc["reconstruct", "jobs"] == 2
     assert s.loc["reconstruct", "total_s"] == pytest.approx(10.0)
     assert s.loc["reconstruct", "mean_s"] == pytest.approx(5.0)
     assert s.loc["reconstruct", "max_rss_mb"] == pytest.approx(1302.51)
-    assert s.loc["all", "total_s"] == pytest.approx(16.08)
-    assert s.loc["all", "jobs"] == 3
+    assert s.loc["sum of jobs", "total_s"] == pytest.approx(16.08)
+    assert s.loc["sum of jobs", "jobs"] == 3
     assert read_benchmarks([]).empty and summarise_benchmarks(read_benchmarks([])).empty
 
 
@@ -270,7 +270,8 @@ def test_report_is_self_contained(report, images):
     text = report.read_text(encoding="utf-8")
     assert report.name == "index.html"
     assert 'src="http' not in text and 'href="http' not in text and "<link" not in text
-    assert "<script>" not in text  # the config's string is escaped
+    assert "<script>alert" not in text  # the config's string is escaped
+    assert text.count("<script>") == 1  # the page's own: a #scene-NAME link opens its tab
     assert "&lt;script&gt;" in text and "data/&lt;demo&gt;" in text
     for path in images["calib"] + images["plane"]:
         mime = "image/gif" if path.suffix == ".gif" else "image/png"
@@ -330,7 +331,7 @@ def test_report_timing_and_environment(report):
     assert t["reconstruct"]["mean_s"] == "5.00"
     assert t["reconstruct"]["max_rss_mb"] == "1303"
     assert t["photometric"]["total_s"] == "6.08"
-    assert t["all"]["total_s"] == "16.1"
+    assert t["sum of jobs"]["total_s"] == "16.1"
     env = {r[0]: r[1] for r in tables["env"][0]}
     for key in ("python", "colourhs", "numpy", "scipy", "open3d", "pymeshlab", "opencv"):
         assert env[key]
@@ -412,7 +413,7 @@ def test_folders_config_file_and_find_benchmarks(tmp_path, metrics_csv, images, 
     text = out.read_text(encoding="utf-8")
     assert text.count("data:image/png;base64,") == 6 and text.count("data:image/gif;") == 2
     assert "lambda: 0.25" in text
-    assert _as_dicts(_tables(text)["timing"][0])["all"]["total_s"] == "16.1"
+    assert _as_dicts(_tables(text)["timing"][0])["sum of jobs"]["total_s"] == "16.1"
 
 
 # --------------------------------------------------------------------------- layout and provenance

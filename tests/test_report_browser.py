@@ -19,10 +19,12 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+import open3d as o3d
 import pandas as pd
 import pytest
 from PIL import Image
 
+from colourhs.ply import write_ply
 from colourhs.report import REQUIRED_COLUMNS, build_report
 from colourhs.reporttables import EXTRA_COLUMNS
 from colourhs.variants import VARIANT_ORDER
@@ -34,9 +36,12 @@ pytestmark = pytest.mark.skipif(
     CHROMIUM is None, reason="no chromium on PATH (scripts/setup.sh installs Debian's chromium)"
 )
 WIDTH, HEIGHT = 1400, 900
+_sphere = o3d.geometry.TriangleMesh.create_sphere(0.05, resolution=12)  # 528 triangles
+SPHERE = (np.asarray(_sphere.vertices), np.asarray(_sphere.triangles))
 
 # Written into the page on load: overflow, the images' state, the page height, the
-# summary table's scroll and client widths, the displayed width of Figure 7.
+# summary table's scroll and client widths, the displayed width of Figure 7, the pixels
+# each 3D view's canvas drew (red below 250).
 MEASURE = """<script>addEventListener("load", () => {
   const d = document.documentElement, imgs = [...document.images];
   const f7 = imgs.filter(i => /figure7/.test(i.src)).map(i => i.clientWidth);
@@ -44,10 +49,12 @@ MEASURE = """<script>addEventListener("load", () => {
     !e.parentElement.closest(".scroll, pre") && e.getBoundingClientRect().right > innerWidth)
     .map(e => e.tagName + "." + e.className);
   const summary = document.querySelector("#summary + .scroll");
+  const drawn = [...document.querySelectorAll(".viewer canvas")].map(c => c.getContext("2d")
+    .getImageData(0, 0, c.width, c.height).data.filter((x, i) => i % 4 == 0 && x < 250).length);
   d.dataset.measure = JSON.stringify({scrollWidth: d.scrollWidth, height: d.scrollHeight,
     summary: [summary.scrollWidth, summary.clientWidth],
     images: imgs.length, broken: imgs.filter(i => !i.complete || i.naturalWidth === 0)
-    .map(i => i.getAttribute("src")), figure7: f7, wide: wide});
+    .map(i => i.getAttribute("src")), figure7: f7, wide: wide, drawn: drawn});
 });</script>"""
 
 
@@ -91,6 +98,10 @@ def _make_report(root: Path, n_scenes: int, n_frames: int) -> Path:
             ims = [Image.fromarray(np.full((480, 640, 3), 30 * k, np.uint8)) for k in range(3)]
             ims[0].save(d / "animation.gif", save_all=True, append_images=ims[1:], loop=0)
         figures[s] = d
+        for v in VARIANT_ORDER:  # the error-coloured meshes of the 3D view
+            ply = root / "results" / "demo" / s / v / "eval" / "000000.ply"
+            ply.parent.mkdir(parents=True)
+            write_ply(ply, SPHERE[0], SPHERE[1], colours=np.full(SPHERE[0].shape, 0.5))
     calib = root / "results" / "demo" / "calib"
     calib.mkdir(parents=True)
     _png(calib / "photometric.png", 1080, 720, 100)
@@ -106,6 +117,8 @@ def _make_report(root: Path, n_scenes: int, n_frames: int) -> Path:
         [],
         config,
         extra={"note": long_value},
+        results_dir=root / "results" / "demo",
+        views=True,
     )
 
 
@@ -137,25 +150,35 @@ def _measurements(run: subprocess.Popen) -> dict:
 
 
 def test_report_fits_1400px_and_stays_short(tmp_path):
-    runs = [
-        _start(_make_report(tmp_path / "s2f1", 2, 1), tmp_path / "report.png"),
-        _start(_make_report(tmp_path / "s6f1", 6, 1)),
-        _start(_make_report(tmp_path / "s2f30", 2, 30)),
-    ]
-    small, many, long = map(_measurements, runs)
-    for m in (small, many, long):
-        assert m["scrollWidth"] <= WIDTH, m["wide"]  # measured 1400: nothing wider
-        assert not m["wide"]
-        assert m["broken"] == []  # every <img> loaded
-        assert m["summary"][0] <= m["summary"][1], m["summary"]  # the summary needs no scrolling
-        # Figure 7 full width (the body's 72 em less padding), not a ~100 px tile
-        assert all(1050 <= w <= 1160 for w in m["figure7"]), m["figure7"]
-    assert small["images"] == 2 + 2 * 14 and long["images"] == 2 + 2 * 15  # + animation
+    """No horizontal overflow at 1400 px, every image loaded, and a height that does
+    not grow with scenes (one scene's tab at a time, the summary table scrolls past
+    36 em) nor with frames beyond the per-frame plot and the animation."""
+    sizes = {"s2f1": (2, 1), "s6f1": (6, 1), "s6f30": (6, 30)}
+    runs = {
+        k: _start(_make_report(tmp_path / k, *n), tmp_path / "report.png" if k == "s2f1" else None)
+        for k, n in sizes.items()
+    }
+    m = {k: _measurements(r) for k, r in runs.items()}
+    for k, (n_scenes, n_frames) in sizes.items():
+        assert m[k]["scrollWidth"] <= WIDTH, m[k]["wide"]  # measured 1400: nothing wider
+        assert not m[k]["wide"]
+        assert m[k]["broken"] == []  # every <img> loaded, those of hidden tabs too
+        assert m[k]["images"] == 2 + n_scenes * (14 + (n_frames > 1))  # + animation
+        summary = m[k]["summary"]
+        assert summary[0] <= summary[1], summary  # the summary needs no sideways scrolling
+        # one scene shown: its Figure 7 full width (the body's 72 em less padding), not
+        # a ~100 px tile; the other scenes' are in hidden tabs
+        shown = [w for w in m[k]["figure7"] if w > 0]
+        assert len(shown) == 1 and 1050 <= shown[0] <= 1160, m[k]["figure7"]
+        # every scene's 3D view drew its mesh (hidden tabs' too): a sphere of 0.1 m
+        # filling 0.9 of the 520 px canvas' height, measured 171,372 px of 468,000
+        assert len(m[k]["drawn"]) == n_scenes and min(m[k]["drawn"]) > 150_000, m[k]["drawn"]
     shot = Image.open(tmp_path / "report.png")
     assert shot.size == (WIDTH, HEIGHT)
-    # height: linear in scenes, nearly flat in frames
-    per_scene = (many["height"] - small["height"]) / 4
-    assert 2500 < per_scene < 3500, per_scene  # measured 3059 px
-    assert small["height"] < 9000, small["height"]  # measured 8224 px
-    # 30 frames: a per-frame plot and the animation (measured +1112 px for two scenes)
-    assert 0 < long["height"] - small["height"] < 1500, (long["height"], small["height"])
+    # height, measured 6,330 px (2 scenes), 6,529 (6: the summary table's scroll box
+    # full), 7,085 (6 scenes of 30 frames: + the per-frame plot and the animation); was
+    # 8,224 and 20,460 px for 2 and 6 scenes with every scene on the page
+    h = {k: v["height"] for k, v in m.items()}
+    assert max(h.values()) < 7300, h
+    assert 0 <= h["s6f1"] - h["s2f1"] < 300, h  # scenes: only the summary box's growth
+    assert 0 < h["s6f30"] - h["s6f1"] < 800, h  # frames: the plot and the animation, once

@@ -1,0 +1,59 @@
+"""The report's offline 3D view (colourhs.reportview): packing and simplifying meshes."""
+
+from __future__ import annotations
+
+import base64
+
+import numpy as np
+import open3d as o3d
+import pytest
+
+from colourhs.ply import write_ply
+from colourhs.reportview import mesh_payload, pack_mesh, scene_views
+
+
+def _unpack(p: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """What the page's decode() reads: int16 vertices, uint8 colours, uint32 triangles."""
+    v = np.frombuffer(base64.b64decode(p["v"]), "<i2").reshape(-1, 3)
+    c = np.frombuffer(base64.b64decode(p["c"]), np.uint8).reshape(-1, 3)
+    t = np.frombuffer(base64.b64decode(p["t"]), "<u4").reshape(-1, 3)
+    return v, c, t
+
+
+def test_pack_mesh_round_trip():
+    rng = np.random.default_rng(0)
+    verts = rng.uniform([0.1, -0.2, 0.7], [0.3, 0.0, 0.8], (50, 3))  # metres
+    tris = rng.integers(0, 50, (80, 3))
+    cols = rng.uniform(0, 1, (50, 3))
+    p = pack_mesh(verts, tris, cols)
+    v, c, t = _unpack(p)
+    assert (p["nv"], p["nt"]) == (50, 80) and np.array_equal(t, tris)
+    size = np.ptp(verts, axis=0).max()
+    assert p["size_m"] == pytest.approx(size)
+    centre = (verts.min(axis=0) + verts.max(axis=0)) / 2
+    # quantised to size / 65534: 3 um on a 0.2 m box, at most half a step off
+    assert np.abs(v / 65534 * size + centre - verts).max() <= 0.5 * size / 65534 + 1e-12
+    assert np.abs(v).max() <= 32767 and np.abs(c / 255 - cols).max() <= 0.5 / 255 + 1e-9
+    # a rotation turns the mesh into that camera's axes: x <- world y, y <- world -x
+    R = np.array([[0.0, 1, 0], [-1, 0, 0], [0, 0, 1]])
+    vr, _, _ = _unpack(pack_mesh(verts, tris, cols, rotation=R))
+    assert np.array_equal(vr[:, 0], v[:, 1]) and np.array_equal(vr[:, 1], -v[:, 0])
+
+
+def test_mesh_payload_simplifies_and_keeps_colours(tmp_path):
+    sphere = o3d.geometry.TriangleMesh.create_sphere(0.05, resolution=30)  # 3480 triangles
+    verts, tris = np.asarray(sphere.vertices), np.asarray(sphere.triangles)
+    colours = np.tile([0.2, 0.6, 0.4], (len(verts), 1))
+    for v in ("vh", "bayes_ph"):
+        (tmp_path / "plane" / v / "eval").mkdir(parents=True)
+        write_ply(tmp_path / "plane" / v / "eval" / "000000.ply", verts, tris, colours=colours)
+    full = mesh_payload(tmp_path / "plane" / "vh" / "eval" / "000000.ply", max_triangles=10**6)
+    assert full["nt"] == len(tris) == 3480
+    small = mesh_payload(tmp_path / "plane" / "vh" / "eval" / "000000.ply", max_triangles=1000)
+    assert 900 <= small["nt"] <= 1000  # measured 1000
+    _, c, _ = _unpack(small)
+    assert np.abs(c.astype(int) - [51, 153, 102]).max() <= 1  # colours kept
+    assert small["size_m"] == pytest.approx(0.1, rel=0.02)
+    views = scene_views(tmp_path, "plane", max_triangles=1000)
+    assert list(views) == ["vh", "bayes_ph"]  # the paper's order
+    assert views["bayes_ph"]["nt"] == small["nt"] and scene_views(tmp_path, "none") == {}
