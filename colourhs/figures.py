@@ -114,8 +114,9 @@ def mu_maps_figure(
     """The paper's Figure 3: heat maps of the six Helmholtz cameras' mu maps.
 
     Each map is shown relative to its median over the calibrated region
-    (mu is defined up to one scale per reciprocal pair), with the
-    uncalibrated part greyed out.
+    (mu is defined up to one scale per reciprocal pair), on a diverging
+    colour map centred at 1 with a labelled bar, the uncalibrated part greyed
+    out.
 
     Parameters
     ----------
@@ -136,10 +137,10 @@ def mu_maps_figure(
         m = calibrated[key]
         rel = maps[key] / np.median(maps[key][m]) if m.any() else maps[key]
         shown = np.where(m, rel, np.nan)
-        im = ax.imshow(shown, cmap="turbo", vmin=0.75, vmax=1.25, interpolation="nearest")
+        im = ax.imshow(shown, cmap="RdBu_r", vmin=0.75, vmax=1.25, interpolation="nearest")
         ax.imshow(np.where(m, np.nan, 0.5), cmap="gray", vmin=0, vmax=1, alpha=0.6)
         ax.set_title(f"mu {key} (relative)")
-        fig.colorbar(im, ax=ax, fraction=0.046, pad=0.02)
+        fig.colorbar(im, ax=ax, fraction=0.046, pad=0.02, label="mu / its median", extend="both")
     fig.tight_layout()
     out_png = Path(out_png)
     out_png.parent.mkdir(parents=True, exist_ok=True)

@@ -409,8 +409,20 @@ class WorkflowPlan:
 
     def report_inputs(self, name: str) -> dict:
         """The report's metrics table, recorded config, calibration figures, the
-        selected scenes' figure folders and the dataset's rig.json and scene.json."""
+        selected scenes' figure folders, the dataset's rig.json and scene.json, the
+        calibration files its diagnostics read (:mod:`colourhs.reportcalib`: marker
+        poses, cross-talk, photometric maps, and the dataset's true mu maps where it
+        has them) and each scene's first-frame error-coloured meshes (its 3D view,
+        :mod:`colourhs.reportview`)."""
         objects = self.chromatic_objects(name)
+        calib = [f"results/{name}/calib/marker_poses.csv", f"results/{name}/calib/photometric.h5"]
+        if self.unmix_crosstalk(name):
+            calib.append(f"results/{name}/calib/crosstalk.json")
+        truth = self.layout(name).gt_photometric
+        views = []
+        for scene, meta in self.selected_scenes(name).items():
+            f0 = meta.frames[0]
+            views += [f"results/{name}/{scene}/{v}/eval/{f0}.ply" for v in self.variants()]
         return {
             "metrics": f"reports/{name}/metrics.csv",
             "config": f"results/{name}/config.yaml",
@@ -421,6 +433,8 @@ class WorkflowPlan:
             "figures": [f"reports/{name}/figures/{s}" for s in self.selected_scenes(name)],
             # rig.json and every scene.json: the rig and scene summaries.
             "dataset": self._dataset_files(name),
+            "calib": calib + ([str(truth)] if truth else []),
+            "views": views,
         }
 
     def _dataset_files(self, name: str) -> list[str]:

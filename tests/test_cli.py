@@ -98,6 +98,10 @@ def test_run_does_the_whole_job_through_snakemake(tiny_dataset, tmp_path):
     html = (tmp_path / "reports" / "t" / "index.html").read_text()
     assert "bayes_full" in html and "base64," not in html and 'src="figures/sheet/' in html
     assert "workflow command" in html and "frames per scene" in html  # provenance, rig
+    # The workflow's report has the calibration diagnostics and a 3D view per scene
+    # (colourhs report --calib --view; their files are declared: the read audit above).
+    assert '<div class="diagnostics">' in html and "marker" in html
+    assert html.count('<div class="viewer"') == 4
     assert "<code>bayes_full</code> is <code>bayes_ph</code> on this scene" in html
     assert (tmp_path / "reports" / "t" / "figures" / "sheet" / "animation.gif").exists()
     # A second run does nothing.

@@ -14,6 +14,7 @@ from colourhs.figures import (
     depth_map_figure,
     error_map_figure,
     error_maps_figure,
+    mu_maps_figure,
     normal_map_figure,
     render_grid_figure,
     shaded_render,
@@ -239,3 +240,22 @@ def test_scene_figures_share_one_scale(tmp_path):
         for run, mm in zip(runs, (3.0, 1.0), strict=True):
             want = value_colours(np.array([mm]), 0.0, 2.0, cmap)[0] * 255
             np.testing.assert_allclose(row[run[len(run) // 2]], want, atol=12)  # shaded 0.97
+
+
+def test_mu_maps_diverge_about_one_and_grey_the_uncalibrated_part(tmp_path):
+    """Issue 14: the mu maps on a diverging colour map centred at 1, not a rainbow.
+    Maps ramping from 0.7 to 1.3 of their median across the width show red and blue
+    ends and no green-dominant pixel (a rainbow's middle is green: with "turbo" this
+    test counts 25,071 of them). Measured: 24,814 red, 36,633 blue, 0 green pixels."""
+    rel = np.linspace(0.7, 1.3, W) * np.ones((H, 1))
+    calibrated = np.ones((H, W), bool)
+    calibrated[:, :4] = False  # greyed out
+    maps = {"cam0/red": rel * 3.0, "cam1/green": rel * 0.5}
+    out = mu_maps_figure(maps, {k: calibrated for k in maps}, tmp_path / "mu.png")
+    img = np.asarray(Image.open(out).convert("RGB")).astype(int)
+    r, g, b = img[..., 0], img[..., 1], img[..., 2]
+    red = (r > 150) & (r - b > 80) & (r - g > 80)
+    blue = (b > 100) & (b - r > 60) & (b - g > 20)
+    green = (g - r > 40) & (g - b > 40)
+    assert red.sum() > 15000 and blue.sum() > 15000
+    assert green.sum() == 0

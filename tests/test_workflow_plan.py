@@ -173,6 +173,18 @@ def test_variants_targets_and_options(data):
         "results/d/calib/photometric.png",
         "results/d/calib/chromaticity/slinky.png",
     ]
+    # The report's calibration diagnostics and 3D views read these (issue 14).
+    assert plan.report_inputs("d")["calib"][:3] == [
+        "results/d/calib/marker_poses.csv",
+        "results/d/calib/photometric.h5",
+        "results/d/calib/crosstalk.json",
+    ]
+    assert plan.report_inputs("d")["views"] == [
+        "results/d/toy/vh/eval/000000.ply",
+        "results/d/toy/bayes_full/eval/000000.ply",
+        "results/d/wave/vh/eval/000000.ply",
+        "results/d/wave/bayes_full/eval/000000.ply",
+    ]
 
 
 def test_a_synthetic_dataset_waits_for_its_checkpoint(data, tmp_path, monkeypatch):

@@ -78,4 +78,5 @@ rule report:
         "--metrics {input.metrics:q} --config {input.config:q} "
         "--calibration {input.calibration:q} --figures {params.figures} "
         "--dataset {params.dataset:q} --results results/{wildcards.name} "
+        "--calib results/{wildcards.name}/calib --view "
         "--benchmarks benchmarks/snakemake > {log:q} 2>&1"
