@@ -198,12 +198,31 @@ def _chromaticity(args) -> int:
     return 0
 
 
+def check_reconstruct_params(params: dict) -> None:
+    """Tuning options of ``reconstruct`` against the ranges of the workflow's config
+    schema (``reconstruction.params`` in workflow/schemas/config.schema.yaml, the one
+    place they are written): a ValueError naming the option, before any stage runs."""
+    import jsonschema
+    import yaml
+
+    schema = yaml.safe_load(
+        (PROJECT_ROOT / "workflow" / "schemas" / "config.schema.yaml").read_text()
+    )
+    specs = schema["properties"]["reconstruction"]["properties"]["params"]["properties"]
+    for key, value in params.items():
+        try:
+            jsonschema.validate(value, specs.get(key, {}))
+        except jsonschema.ValidationError as e:
+            raise ValueError(f"--{key.replace('_', '-')} {value}: {e.message}") from None
+
+
 def _reconstruct(args) -> int:
     if args.same_as:
         return _same_as(args.same_as, args.out)
     from colourhs.reconstruct.frame import reconstruct_frame
 
     params = {k: v for k, v in vars(args).items() if k in RECONSTRUCT_PARAMS and v is not None}
+    check_reconstruct_params(params)
     params["progress"] = sys.stderr.isatty()  # a bar at a terminal, none in a rule's log
     result = reconstruct_frame(
         args.dataset,

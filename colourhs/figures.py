@@ -13,6 +13,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from colourhs.animation import write_animation  # noqa: E402
 from colourhs.colours import value_colours  # noqa: E402
 from colourhs.render import BACKGROUND, shaded_render  # noqa: E402
 
@@ -434,52 +435,6 @@ def error_maps_figure(
     )
 
 
-def write_animation(images: list[np.ndarray], path: str | Path, fps: float = 8) -> Path:
-    """An animated GIF (looping) of a dynamic scene's frames.
-
-    Parameters
-    ----------
-    images : list of ndarray of uint8, shape (H, W, 3)
-        The frames, all the same shape.
-    path : str or Path
-        GIF file to write (atomically).
-    fps : float
-        Frames per second.
-
-    Notes
-    -----
-    Pillow merges consecutive identical frames into one longer frame, so the
-    GIF can hold fewer frames than ``images`` (its timing stays right).
-    """
-    from PIL import Image
-
-    from colourhs.io import atomic_output
-
-    if len(images) == 0:
-        raise ValueError("write_animation: no frames")
-    frames = [np.asarray(im) for im in images]
-    shape = frames[0].shape
-    if len(shape) != 3 or shape[2] != 3:
-        raise ValueError(f"write_animation: frames must be (H, W, 3), got {shape}")
-    for i, f in enumerate(frames):
-        if f.shape != shape:
-            raise ValueError(f"write_animation: frame {i} has shape {f.shape}, frame 0 {shape}")
-        if f.dtype != np.uint8:
-            raise ValueError(f"write_animation: frame {i} is {f.dtype}, expected uint8")
-    pil = [Image.fromarray(f, mode="RGB") for f in frames]
-    path = Path(path)
-    with atomic_output(path) as tmp:
-        pil[0].save(
-            tmp,
-            format="GIF",
-            save_all=True,
-            append_images=pil[1:],
-            duration=max(1, round(1000.0 / fps)),
-            loop=0,
-        )
-    return path
-
-
 def scene_figures(
     out_dir: str | Path,
     depths: Mapping[str, str | Path],
@@ -498,7 +453,9 @@ def scene_figures(
     (|depth error|, mm) and ``normal_error.png`` (degrees), every variant's map
     on one colour scale with its colour bar (:func:`error_maps_figure`); with
     ``animation`` (frame -> mesh of a dynamic scene), ``animation.gif`` of the
-    shaded reconstruction over the frames; with ``coloured`` (variant -> mesh
+    shaded reconstruction over the frames, each labelled with the variant, the
+    frame and its place in the sequence (:mod:`colourhs.animation`); with
+    ``coloured`` (variant -> mesh
     coloured by its Hausdorff distance, from :func:`colourhs.evaluate.evaluate_frame`,
     its metrics JSON beside it), ``hausdorff.png``: those meshes rendered, recoloured
     on one scale (viridis, 0 to the median of the variants' 95th percentiles, as
@@ -594,6 +551,12 @@ def scene_figures(
         bar = ("viridis", 0.0, top, "distance (mm)")
         written.append(render_grid_figure(tiles, out / "hausdorff.png", title, ncols, bar))
     if animation:
+        # The animated variant from the results contract's path (<variant>/mesh/<frame>.ply).
+        n = len(animation)
+        labels = [
+            f"{Path(p).parent.parent.name}  frame {f} ({i + 1}/{n})"
+            for i, (f, p) in enumerate(animation.items())
+        ]
         frames = [render(ply) for ply in animation.values()]
-        written.append(write_animation(frames, out / "animation.gif", fps=fps))
+        written.append(write_animation(frames, out / "animation.gif", fps=fps, labels=labels))
     return written

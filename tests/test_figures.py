@@ -140,6 +140,27 @@ def test_animation_frames(tmp_path):
     assert not (tmp_path / "b.gif").exists()
 
 
+def test_animation_frames_carry_their_labels(tmp_path):
+    """Issue 14: each frame says which variant and frame it shows. The label box is
+    drawn into the frame's corner (dark text on a lightened box), the rest of the
+    frame untouched; measured on 240x320 grey frames: 6.4 % of the pixels change, all
+    in the top 21 rows."""
+    frames = [np.full((240, 320, 3), 90, np.uint8) for _ in range(3)]
+    labels = [f"bayes_full  frame 00000{i} ({i + 1}/3)" for i in range(3)]
+    path = write_animation(frames, tmp_path / "a.gif", fps=5, labels=labels)
+    with Image.open(path) as gif:
+        assert gif.n_frames == 3  # equal grey frames stay apart: their labels differ
+        gif.seek(1)
+        img = np.asarray(gif.convert("RGB")).astype(int)
+    changed = np.any(img != 90, axis=2)
+    rows, cols = np.nonzero(changed)
+    assert rows.max() < 25 and cols.max() < 250  # the label box, top left (20, 232)
+    assert 0.05 < changed.mean() < 0.08  # measured 0.064
+    assert img[rows, cols].min() < 60  # dark text on the box
+    with pytest.raises(ValueError, match="labels"):
+        write_animation(frames, tmp_path / "b.gif", labels=labels[:2])
+
+
 def test_render_grid_figure(tmp_path):
     img = np.full((30, 40, 3), 200, np.uint8)
     p1 = render_grid_figure({"vh": img, "bayes_full": img}, tmp_path / "row.png", title="t")

@@ -9,6 +9,8 @@ rule marker_poses:
         "results/{name}/calib/marker_poses.csv",
     log:
         "logs/calib/{name}/marker_poses.log",
+    benchmark:
+        "benchmarks/snakemake/marker_poses/{name}.tsv"
     conda:
         "../envs/colourhs.yaml"
     threads: 1
@@ -29,6 +31,8 @@ rule crosstalk:
         "results/{name}/calib/crosstalk.json",
     log:
         "logs/calib/{name}/crosstalk.log",
+    benchmark:
+        "benchmarks/snakemake/crosstalk/{name}.tsv"
     conda:
         "../envs/colourhs.yaml"
     threads: 1
@@ -48,6 +52,8 @@ rule noise_model:
         "results/{name}/calib/noise.json",
     log:
         "logs/calib/{name}/noise.log",
+    benchmark:
+        "benchmarks/snakemake/noise_model/{name}.tsv"
     conda:
         "../envs/colourhs.yaml"
     threads: 1
@@ -73,7 +79,7 @@ rule photometric_maps:
     log:
         "logs/calib/{name}/photometric.log",
     benchmark:
-        "benchmarks/snakemake/photometric/{name}.tsv"
+        "benchmarks/snakemake/photometric_maps/{name}.tsv"
     conda:
         "../envs/colourhs.yaml"
     threads: 1
@@ -96,6 +102,8 @@ rule chromaticity_map:
         png="results/{name}/calib/chromaticity/{object}.png",
     log:
         "logs/calib/{name}/chromaticity/{object}.log",
+    benchmark:
+        "benchmarks/snakemake/chromaticity_map/{name}/{object}.tsv"
     wildcard_constraints:
         object="[A-Za-z0-9_-]+",
     conda:

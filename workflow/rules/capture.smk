@@ -8,6 +8,8 @@ rule validate_dataset:
         "results/{name}/capture/summary.json",
     log:
         "logs/capture/{name}.log",
+    benchmark:
+        "benchmarks/snakemake/validate_dataset/{name}.tsv"
     conda:
         "../envs/colourhs.yaml"
     threads: 1

@@ -50,6 +50,8 @@ rule metrics_table:
         ),
     log:
         "logs/evaluate/{name}/metrics.log",
+    benchmark:
+        "benchmarks/snakemake/metrics_table/{name}.tsv"
     conda:
         "../envs/colourhs.yaml"
     threads: 1

@@ -12,7 +12,7 @@ rule reconstruct_frame:
     log:
         "logs/reconstruct/{name}/{scene}/{variant}/{frame}.log",
     benchmark:
-        "benchmarks/snakemake/reconstruct/{name}/{scene}/{variant}/{frame}.tsv"
+        "benchmarks/snakemake/reconstruct_frame/{name}/{scene}/{variant}/{frame}.tsv"
     wildcard_constraints:
         variant="ml_full|bayes_nocalib|bayes_ph|bayes_full",
         frame="[0-9]{6}",
