@@ -419,8 +419,9 @@ class WorkflowPlan:
         if self.unmix_crosstalk(name):
             calib.append(f"results/{name}/calib/crosstalk.json")
         truth = self.layout(name).gt_photometric
+        scenes = self.selected_scenes(name)
         views = []
-        for scene, meta in self.selected_scenes(name).items():
+        for scene, meta in scenes.items():
             f0 = meta.frames[0]
             views += [f"results/{name}/{scene}/{v}/eval/{f0}.ply" for v in self.variants()]
         return {
@@ -430,7 +431,7 @@ class WorkflowPlan:
                 f"results/{name}/calib/photometric.png",
                 *[f"results/{name}/calib/chromaticity/{o}.png" for o in objects],
             ],
-            "figures": [f"reports/{name}/figures/{s}" for s in self.selected_scenes(name)],
+            "figures": [f"reports/{name}/figures/{s}" for s in scenes],
             # rig.json and every scene.json: the rig and scene summaries.
             "dataset": self._dataset_files(name),
             "calib": calib + ([str(truth)] if truth else []),

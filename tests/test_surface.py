@@ -159,11 +159,12 @@ def test_blur_of_the_sides_is_a_parameter(plane_sides):
     are; the default (1 px) smooths J and divides the variance by 4 pi (the kernel's
     sum of squared weights, 0.0796)."""
     fr, _, _, _, _, _, sides = plane_sides
-    raw = helmholtz_sides(fr, fr.variance, pair_arrays(fr.rig), blur_px=0)
+    pairs = pair_arrays(fr.rig)
+    raw = helmholtz_sides(fr, fr.variance, pairs, blur_px=0)
     assert not raw.blurred and sides.blurred
     J0, V0 = raw.maps[0][..., 0], raw.maps[0][..., 1]
     J1, V1 = sides.maps[0][..., 0], sides.maps[0][..., 1]
-    cam, ch = pair_arrays(fr.rig)[0][0][0], pair_arrays(fr.rig)[1][0][0]
+    cam, ch = pairs[0][0][0], pairs[1][0][0]
     i = fr.images[cam, ch].astype(float)
     ok = np.isfinite(J0)
     scale = fr.mu[0, 0] / fr.chroma[cam, ch] if fr.chroma is not None else fr.mu[0, 0]
