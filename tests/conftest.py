@@ -18,6 +18,15 @@ def tiny_dataset(tmp_path_factory):
 
 
 @pytest.fixture(scope="session")
+def whole_job(tiny_dataset, tmp_path_factory):
+    """`colourhs run` of every stage on a copy of the tiny dataset, shared by
+    test_cli.py and test_workflow.py (tests/whole_job.py)."""
+    from whole_job import run_whole_job
+
+    return run_whole_job(tiny_dataset, tmp_path_factory.mktemp("workflow"))
+
+
+@pytest.fixture(scope="session")
 def clean_dataset(tmp_path_factory):
     """Demo resolution, noise and cross-talk off: equation (4) with mu and p only."""
     return synthesise(

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import os
 import shutil
 import subprocess
 import sys
@@ -12,7 +11,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 import yaml
-from read_audit import ENV, audit
+from whole_job import VARIANTS, snapshot
 
 from colourhs.cli import PROJECT_ROOT, main
 
@@ -43,40 +42,37 @@ def test_validate_reports_good_and_bad_datasets(tiny_dataset, tmp_path, capsys):
     assert not (tmp_path / "bad.json").exists()
 
 
-VARIANTS = ("vh", "bayes_ph", "bayes_full")
-
-
-def test_run_does_the_whole_job_through_snakemake(tiny_dataset, tmp_path):
+def test_run_does_the_whole_job_through_snakemake(whole_job):
     """`colourhs run` on the tiny preset: every stage, the contract's files, the report.
 
-    Without ml_full and bayes_nocalib, for the suite's 15-minute budget: each
-    variant's six frames, meshes and evaluations cost 40-50 s of this test (219 s
-    with four variants on 2 idle cores, full suite 962 s; most of a tiny job is
-    its imports). ML HS is tested in test_exact.py and test_reconstruct.py, the
-    uncalibrated variant and the ablation in test_reconstruct.py
+    The session's one run (tests/whole_job.py: variants vh, bayes_ph, bayes_full,
+    dataset and run folders with spaces in their paths), shared with
+    test_workflow.py; the checks here, the second run and --report take 5-8 s.
+    Without ml_full and bayes_nocalib, for the suite's 15-minute
+    budget: each variant's six frames, meshes and evaluations cost 40-50 s of the
+    run (219 s with four variants on 2 idle cores, full suite 962 s; most of a tiny
+    job is its imports). ML HS is tested in test_exact.py and test_reconstruct.py,
+    the uncalibrated variant and the ablation in test_reconstruct.py
     (test_calibrations_help), its workflow inputs in test_workflow_plan.py.
     """
-    cmd = [sys.executable, "-m", "colourhs", "run", str(tiny_dataset), "--name", "t"]
-    cmd += ["--cores", "2", "--directory", str(tmp_path), "--variants", ",".join(VARIANTS)]
-    reads = tmp_path / "reads"  # what each job reads (issue 12, tests/read_audit.py)
-    reads.mkdir()
-    env = dict(os.environ, **{ENV: str(reads)})
-    done = subprocess.run(cmd, capture_output=True, text=True, env=env)
+    done, work = whole_job.done, whole_job.workdir
     assert done.returncode == 0, done.stderr[-2000:]
-    # Every job read only its declared inputs: 68 jobs, more than test_workflow's run
-    # (bayes_full reading a chromaticity map, or copying bayes_ph; statue and toy).
-    configs = [PROJECT_ROOT / "config.yaml", tmp_path / "results" / "t" / "run-config.yaml"]
-    n_jobs, problems = audit(reads, tmp_path, tiny_dataset, configs)
+    # Every job read only its declared inputs: 68 jobs = validation, 6 calibrations
+    # (marker poses, cross-talk, noise, photometric, the statue's and the toy's
+    # chromaticity), the recorded config, 6 frames x (hull + bayes_ph + bayes_full
+    # (copied on plane and sheet) + 3 meshes + 3 evaluations), the metrics table,
+    # 4 figure folders and the report.
+    n_jobs, problems = whole_job.audit
     assert n_jobs == 68 and not problems, "\n".join(sorted(problems))
-    summary = json.loads((tmp_path / "results" / "t" / "capture" / "summary.json").read_text())
+    summary = json.loads((work / "results" / "t" / "capture" / "summary.json").read_text())
     # 7 poses x 3 cameras + 3 chromatic objects x 3 colours x 3 + 6 frames x 3 + 18 masks.
     assert summary["images"] == 21 + 27 + 18 + 18
-    metrics = pd.read_csv(tmp_path / "reports" / "t" / "metrics.csv", dtype={"frame": str})
-    # 4 scenes, 6 frames, 4 variants of the paper's ablation.
+    metrics = pd.read_csv(work / "reports" / "t" / "metrics.csv", dtype={"frame": str})
+    # 4 scenes, 6 frames, 3 of the paper's ablation's variants.
     assert len(metrics) == 6 * len(VARIANTS)
     assert set(metrics["variant"]) == set(VARIANTS)
     for scene, frame, variant in metrics[["scene", "frame", "variant"]].itertuples(index=False):
-        assert (tmp_path / "results" / "t" / scene / variant / "mesh" / f"{frame}.ply").exists()
+        assert (work / "results" / "t" / scene / variant / "mesh" / f"{frame}.ply").exists()
     # Measured on tiny: sheet Hausdorff RMS 0.44 mm with Bayesian HS and photometric
     # calibration (1.4-2.0 before the continuous consistency refinement), 121 mm for
     # the visual hull.
@@ -90,12 +86,12 @@ def test_run_does_the_whole_job_through_snakemake(tiny_dataset, tmp_path):
     copied = full["same_as"].fillna("")
     assert set(copied[copied == "bayes_ph"].index.get_level_values(0)) == {"plane", "sheet"}
     assert set(copied[copied == ""].index.get_level_values(0)) == {"statue", "toy"}
-    res = tmp_path / "results" / "t"
+    res = work / "results" / "t"
     for scene, frame in copied[copied == "bayes_ph"].index:
         for kind in (f"depth/{frame}.h5", f"mesh/{frame}.ply"):
             a, b = res / scene / "bayes_full" / kind, res / scene / "bayes_ph" / kind
             assert a.read_bytes() == b.read_bytes()
-    html = (tmp_path / "reports" / "t" / "index.html").read_text()
+    html = (work / "reports" / "t" / "index.html").read_text()
     assert "bayes_full" in html and "base64," not in html and 'src="figures/sheet/' in html
     assert "workflow command" in html and "frames per scene" in html  # provenance, rig
     # The workflow's report has the calibration diagnostics and a 3D view per scene
@@ -103,22 +99,25 @@ def test_run_does_the_whole_job_through_snakemake(tiny_dataset, tmp_path):
     assert '<div class="diagnostics">' in html and "marker" in html
     assert html.count('<div class="viewer"') == 4
     # Every stage's jobs are timed under their rule's name (the report's timing table).
-    bench = tmp_path / "benchmarks" / "snakemake"
+    bench = work / "benchmarks" / "snakemake"
     for rule in ("validate_dataset", "marker_poses", "crosstalk", "noise_model"):
         assert (bench / rule / "t.tsv").exists(), rule
     assert (bench / "reconstruct_frame" / "t" / "sheet" / "bayes_ph" / "000000.tsv").exists()
     assert "<td>reconstruct_frame</td>" in html or ">reconstruct_frame<" in html
     assert "<code>bayes_full</code> is <code>bayes_ph</code> on this scene" in html
-    assert (tmp_path / "reports" / "t" / "figures" / "sheet" / "animation.gif").exists()
+    assert (work / "reports" / "t" / "figures" / "sheet" / "animation.gif").exists()
     # A second run does nothing.
+    cmd = whole_job.cmd
     again = subprocess.run(cmd, capture_output=True, text=True)
     assert again.returncode == 0
     assert "Nothing to be done" in again.stdout + again.stderr
     # Snakemake's own report, with the captions on the key outputs.
-    report = tmp_path / "snakemake_report.html"
+    report = work / "snakemake_report.html"
     done = subprocess.run(cmd + ["--", "--report", str(report)], capture_output=True, text=True)
     assert done.returncode == 0, done.stderr[-2000:]
     assert report.stat().st_size > 10000
+    # Neither wrote an output (test_workflow.py shares the run).
+    assert snapshot(work) == whole_job.first
 
 
 def test_workflow_lint_is_clean(tmp_path):

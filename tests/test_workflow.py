@@ -1,18 +1,21 @@
 """Caching and incremental reruns of the Snakemake workflow (its public API and CLI).
 
-One real run of the whole workflow on a copy of the tiny dataset (variants vh and
-bayes_ph, scenes plane and sheet), then, in file order: that every job read only its
-declared inputs (tests/read_audit.py), what a second run would do,
-what replacing one board image / one frame image / one reconstruction parameter
-would rerun (dry runs, the change undone afterwards), and a failing stage and its
-resumed run (real runs).
+The session's one real run of the whole workflow (conftest's ``whole_job``,
+tests/whole_job.py: `colourhs run` on a copy of the tiny dataset, variants vh,
+bayes_ph and bayes_full, all four scenes, paths with spaces), then, in file order:
+that every job read only its declared inputs (tests/read_audit.py), what a second
+run would do, what replacing one board image / one frame image / one
+reconstruction parameter / one mask would rerun (dry runs, the change undone
+afterwards), and a failing stage and its resumed run (real runs, on a copy of the
+run's folder). The run is shared with test_cli.py: every test leaves it as it
+found it.
 """
 
 from __future__ import annotations
 
 import os
 import re
-import shutil
+import time
 from collections import Counter
 from collections.abc import Iterable
 from contextlib import contextmanager
@@ -22,7 +25,7 @@ from pathlib import Path
 import cv2
 import pytest
 import yaml
-from read_audit import ENV, audit, summary
+from read_audit import summary
 from snakemake.api import SnakemakeApi
 from snakemake.settings.types import (
     ConfigSettings,
@@ -31,17 +34,21 @@ from snakemake.settings.types import (
     OutputSettings,
     ResourceSettings,
 )
+from whole_job import NAME, VARIANTS, WholeJob, copy_run, snapshot
 
-from colourhs.cli import PROJECT_ROOT, SNAKEFILE
+from colourhs.cli import SNAKEFILE
 
-NAME = "t"
-VARIANTS = ("vh", "bayes_ph")
-FRAMES = {"plane": ("000000",), "sheet": ("000000", "000001", "000002")}
-RUN_CONFIG = {
-    "datasets": {NAME: {"path": None}},  # set by the fixture
-    "only": [NAME],
-    "reconstruction": {"variants": list(VARIANTS), "scenes": sorted(FRAMES)},
+# The tiny preset's scenes and frames (sheet: 3 frames, the others one).
+FRAMES = {
+    "plane": ("000000",),
+    "sheet": ("000000", "000001", "000002"),
+    "statue": ("000000",),
+    "toy": ("000000",),
 }
+SCENES = tuple(FRAMES)
+# The Helmholtz-stereo variants of the run (reconstruct_frame jobs); bayes_full on
+# the scenes without a chromatic object (plane, sheet) is bayes_ph's copy.
+HS_VARIANTS = tuple(v for v in VARIANTS if v != "vh")
 
 
 # --------------------------------------------------------------------------- Snakemake API
@@ -129,7 +136,14 @@ def vh_jobs(scene: str, frame: str) -> set[tuple[str, str]]:
 
 
 def all_hs_jobs() -> set[tuple[str, str]]:
-    return {job for scene, frames in FRAMES.items() for f in frames for job in hs_jobs(scene, f)}
+    """Every frame's Helmholtz-stereo jobs, both variants (24 jobs, 48 outputs)."""
+    return {
+        job
+        for scene, frames in FRAMES.items()
+        for f in frames
+        for v in HS_VARIANTS
+        for job in hs_jobs(scene, f, v)
+    }
 
 
 def report_jobs(*scenes: str) -> set[tuple[str, str]]:
@@ -156,16 +170,6 @@ CALIBRATION_RULES = {
 # --------------------------------------------------------------------------- files
 
 
-def snapshot(workdir: Path) -> dict[str, int]:
-    """Relative path -> mtime (ns) of every file under results/ and reports/."""
-    return {
-        str(p.relative_to(workdir)): p.stat().st_mtime_ns
-        for top in ("results", "reports")
-        for p in (workdir / top).rglob("*")
-        if p.is_file()
-    }
-
-
 def changed(before: dict[str, int], after: dict[str, int]) -> set[str]:
     """Files written, removed or created between two snapshots."""
     return {p for p in before.keys() | after.keys() if before.get(p) != after.get(p)}
@@ -179,6 +183,16 @@ def under(paths: Iterable[str], jobs: set[tuple[str, str]]) -> set[str]:
 
 def newest_output(workdir: Path) -> float:
     return max(os.stat(workdir / p).st_mtime for p in snapshot(workdir))
+
+
+def make_newest(path: Path, workdir: Path) -> None:
+    """Date ``path`` 1 s after the newest output (itself too, when it is one) and wait
+    till that time has passed: a job that reads it and finishes within the second
+    would otherwise write an output older than its input, which Snakemake refuses
+    ("clock skew"; measured: bayes_full's copies of a depth file take 0.41-0.45 s)."""
+    stamp = newest_output(workdir) + 1.0
+    os.utime(path, (stamp, stamp))
+    time.sleep(max(0.0, stamp - time.time()))
 
 
 def tweak_png(path: Path) -> None:
@@ -196,8 +210,7 @@ def replaced(path: Path, change, workdir: Path):
     try:
         change(path)
         assert path.read_bytes() != original
-        stamp = newest_output(workdir) + 1.0
-        os.utime(path, (stamp, stamp))
+        make_newest(path, workdir)
         yield path
     finally:
         path.write_bytes(original)
@@ -207,40 +220,13 @@ def replaced(path: Path, change, workdir: Path):
 # --------------------------------------------------------------------------- the run
 
 
-@dataclass
-class Run:
-    workdir: Path
-    data: Path
-    configfiles: list[Path]
-    first: dict[str, int]  # snapshot after the first run
-    reads: Path  # what each job of the first run read (colourhs.io.record_reads)
-
-
 @pytest.fixture(scope="module")
-def run(tiny_dataset, tmp_path_factory) -> Run:
-    """The whole workflow, run once for real on a copy of the tiny dataset."""
-    root = tmp_path_factory.mktemp("workflow")
-    # Spaces in both paths: every rule's shell command must quote them.
-    data = root / "my capture"
-    shutil.copytree(tiny_dataset, data)
-    workdir = root / "my run"
-    workdir.mkdir()
-    config = dict(RUN_CONFIG, datasets={NAME: {"path": str(data)}})
-    (workdir / "run-config.yaml").write_text(yaml.safe_dump(config))
-    # As `colourhs run`: the project's config.yaml, then the run's.
-    configfiles = [PROJECT_ROOT / "config.yaml", workdir / "run-config.yaml"]
-    # Every job records the files it reads (read_audit; the jobs inherit the
-    # environment): test_every_job_reads_only_its_declared_inputs.
-    reads = root / "reads"
-    reads.mkdir()
-    os.environ[ENV] = str(reads)
-    try:
-        ok, _, updated = _snakemake(workdir, configfiles)
-    finally:
-        del os.environ[ENV]
-    assert ok, "the first run of the workflow failed"
-    assert f"reports/{NAME}/index.html" in updated
-    return Run(workdir, data, configfiles, snapshot(workdir), reads)
+def run(whole_job) -> WholeJob:
+    """The session's run of the whole workflow (tests/whole_job.py), succeeded."""
+    done = whole_job.done
+    assert done.returncode == 0, "the run of the workflow failed: " + done.stderr[-2000:]
+    assert f"reports/{NAME}/index.html" in whole_job.first
+    return whole_job
 
 
 # --------------------------------------------------------------------------- tests
@@ -254,21 +240,30 @@ def test_first_run_made_every_output(run):
     }
     expected |= {
         f"results/{NAME}/calib/{f}"
-        for f in ("marker_poses.csv", "photometric.h5", "photometric.png", "crosstalk.json")
+        for f in (
+            "marker_poses.csv",
+            "photometric.h5",
+            "photometric.png",
+            "crosstalk.json",
+            "noise.json",
+            *(f"chromaticity/{obj}.{ext}" for obj in ("statue", "toy") for ext in ("h5", "png")),
+        )
     }
     expected |= {f"results/{NAME}/config.yaml"}
     assert expected <= files, sorted(expected - files)
     for scene in FRAMES:  # directory outputs
         assert any(p.startswith(f"reports/{NAME}/figures/{scene}/") for p in files)
-    assert {p for p in files if p.startswith(f"results/{NAME}/calib/chromaticity/")}
     assert not [p for p in files if ".tmp" in Path(p).name]
 
 
 def test_every_job_reads_only_its_declared_inputs(run):
     """Issue 12 (tests/read_audit.py): every job of the first run read, under the
     dataset and the run's folder, only its inputs, outputs and log."""
-    n_jobs, problems = audit(run.reads, run.workdir, run.data, run.configfiles)
-    assert n_jobs == 36  # 37 but `all`
+    n_jobs, problems = run.audit
+    # 69 but `all`: 8 before the frames (validation, 6 calibrations, the recorded
+    # config), 9 per frame (hull, 2 HS depths, 3 meshes, 3 evaluations) x 6 frames,
+    # then the metrics table, 4 scenes' figures and the report.
+    assert n_jobs == 8 + 9 * 6 + 1 + 4 + 1 == 68
     assert not problems, "\n".join(sorted(problems))
 
 
@@ -290,12 +285,15 @@ def test_board_image_reruns_photometric_maps_and_downstream(run):
         ("photometric_maps", f"{calib}/photometric.png"),
         ("noise_model", f"{calib}/noise.json"),  # estimated from the board images too
         ("crosstalk", f"{calib}/crosstalk.json"),  # its LED factor: from the board poses
-        *all_hs_jobs(),  # bayes_ph reads photometric.h5; vh reads no calibration
-        *report_jobs("plane", "sheet"),
+        # bayes_ph and bayes_full read photometric.h5, noise.json and crosstalk.json
+        # (bayes_full on plane and sheet copies bayes_ph: reruns with it); vh reads
+        # no calibration.
+        *all_hs_jobs(),
+        *report_jobs(*SCENES),
     }
     assert_plan(plan, required, optional=VALIDATION)
-    assert plan.rules["reconstruct_frame"] == 4
-    assert plan.rules["frame_mesh"] == plan.rules["evaluate_frame"] == 4
+    assert plan.rules["reconstruct_frame"] == 6 * 2  # every frame, both HS variants
+    assert plan.rules["frame_mesh"] == plan.rules["evaluate_frame"] == 12
     assert not {"chromaticity_map", "visual_hull", "effective_config"} & set(plan.rules)
     assert not [p for p in plan.of("frame_mesh") if "/vh/" in p]
     # Undone: nothing to do again.
@@ -306,13 +304,16 @@ def test_frame_image_reruns_that_frame_only(run):
     image = run.data / "scenes" / "sheet" / "frames" / "000001" / "cam2.png"
     with replaced(image, tweak_png, run.workdir):
         plan = planned_jobs(run.workdir, run.configfiles)
-    required = hs_jobs("sheet", "000001") | report_jobs("sheet")
-    # The sheet has masks, so its hull reads no frame image; the rule declares the
-    # frame's images all the same (frame_inputs), so the hull may rerun too.
-    assert_plan(plan, required, optional=vh_jobs("sheet", "000001") | VALIDATION)
-    assert plan.of("reconstruct_frame") == {f"results/{NAME}/sheet/bayes_ph/depth/000001.h5"}
+    # bayes_full (the animated variant) copies bayes_ph's results of the sheet.
+    required = hs_jobs("sheet", "000001") | hs_jobs("sheet", "000001", "bayes_full")
+    required |= report_jobs("sheet")
+    # The sheet has masks, so its hull reads no frame image (silhouette_inputs).
+    assert_plan(plan, required, optional=VALIDATION)
+    assert plan.of("reconstruct_frame") == {
+        f"results/{NAME}/sheet/{v}/depth/000001.h5" for v in ("bayes_ph", "bayes_full")
+    }
     assert plan.of("scene_figures") == {f"reports/{NAME}/figures/sheet"}
-    assert not [path for _, path in plan.outputs if "/plane/" in path]
+    assert not [path for _, path in plan.outputs if re.search("/(plane|statue|toy)/", path)]
     assert not [path for _, path in plan.outputs if re.search(r"/00000[02]\.", path)]
     assert not CALIBRATION_RULES & set(plan.rules)
     assert not planned_jobs(run.workdir, run.configfiles)
@@ -321,17 +322,17 @@ def test_frame_image_reruns_that_frame_only(run):
 @pytest.mark.parametrize(
     "change", [{"params": {"n_labels": 7}}, {"depth_from_hull": True}], ids=["n_labels", "hull"]
 )
-def test_reconstruction_parameter_reruns_reconstruction_and_downstream(run, change):
+def test_reconstruction_parameter_reruns_reconstruction_and_downstream(run, change, tmp_path):
     config = yaml.safe_load(run.configfiles[1].read_text())
     config["reconstruction"].update(change)
-    changed_config = run.workdir / f"run-config-{'-'.join(change)}.yaml"
+    changed_config = tmp_path / f"run-config-{'-'.join(change)}.yaml"
     changed_config.write_text(yaml.safe_dump(config))
     plan = planned_jobs(run.workdir, [run.configfiles[0], changed_config])
-    required = all_hs_jobs() | report_jobs("plane", "sheet")
+    required = all_hs_jobs() | report_jobs(*SCENES)
     # The run's recorded configuration changes with it.
     required |= {("effective_config", f"results/{NAME}/config.yaml")}
     assert_plan(plan, required)
-    assert plan.rules["reconstruct_frame"] == 4
+    assert plan.rules["reconstruct_frame"] == 6 * 2  # every frame, both HS variants
     assert not (CALIBRATION_RULES | {"visual_hull", "validate_dataset"}) & set(plan.rules)
     assert not planned_jobs(run.workdir, run.configfiles)
 
@@ -352,45 +353,57 @@ def test_malformed_capture_stops_the_run_before_any_stage(run, capsys):
     assert not planned_jobs(run.workdir, run.configfiles)
 
 
-def test_failed_stage_leaves_no_partial_output_and_rerun_resumes(run):
+def test_failed_stage_leaves_no_partial_output_and_rerun_resumes(run, tmp_path):
     """A corrupt depth file (a stage's output, not a capture): its mesh job fails,
-    nothing after it runs, and the rerun does the failed job and what follows."""
-    depth = run.workdir / f"results/{NAME}/sheet/bayes_ph/depth/000001.h5"
-    failed_mesh = f"results/{NAME}/sheet/bayes_ph/mesh/000001.ply"
-    failed_jobs = hs_jobs("sheet", "000001") - {
-        ("reconstruct_frame", f"results/{NAME}/sheet/bayes_ph/depth/000001.h5")
-    }
+    nothing after it runs, and the rerun does the failed job and what follows.
+
+    On a copy of the run's folder (tests/whole_job.py's copy_run, up to date: the
+    same dataset, times kept), so the shared run stays as it was."""
+    work = copy_run(run, tmp_path / "my run")
+    res = f"results/{NAME}/sheet"
+    depth = work / f"{res}/bayes_ph/depth/000001.h5"
+    failed_mesh = f"{res}/bayes_ph/mesh/000001.ply"
+    # bayes_full's depth of the sheet copies this file (--same-as): that job reads the
+    # corrupt file too; its mesh and evaluation copy the failed mesh's and its eval's.
+    copied_depth = ("reconstruct_frame", f"{res}/bayes_full/depth/000001.h5")
+    failed_jobs = hs_jobs("sheet", "000001") | hs_jobs("sheet", "000001", "bayes_full")
+    failed_jobs -= {("reconstruct_frame", f"{res}/bayes_ph/depth/000001.h5")}
     downstream = (failed_jobs | report_jobs("sheet")) - {("frame_mesh", failed_mesh)}
-    before = snapshot(run.workdir)
+    downstream -= {copied_depth}  # not downstream of the failed mesh job
+    before = snapshot(work)
     original = depth.read_bytes()
-    with replaced(depth, lambda p: p.write_bytes(p.read_bytes()[:200]), run.workdir):
-        ok, _, _ = _snakemake(run.workdir, run.configfiles, keep_going=True)
-        failed = snapshot(run.workdir)
+    with replaced(depth, lambda p: p.write_bytes(p.read_bytes()[:200]), work):
+        ok, _, _ = _snakemake(work, run.configfiles, keep_going=True)
+        failed = snapshot(work)
     # The good depth file back, newer than what reads it (as when its stage reruns).
     depth.write_bytes(original)
-    stamp = newest_output(run.workdir) + 1.0
-    os.utime(depth, (stamp, stamp))
+    make_newest(depth, work)
     assert not ok, "the run with a truncated depth file succeeded"
-    assert not (run.workdir / failed_mesh).exists()
+    assert not (work / failed_mesh).exists()
     # Nothing downstream of the failure was written (the old files are still there, stale).
     assert not under(changed(before, failed), downstream)
     assert all(failed[p] == before[p] for p in under(before, downstream))
+    # Nothing else but the copy of the corrupt file (measured: it runs and copies it,
+    # the input check h5py.is_hdf5 passing a truncated file; allowed, not required).
+    written = changed(before, failed) - {failed_mesh, depth.relative_to(work).as_posix()}
+    assert written <= {copied_depth[1]}
     assert not [p for p in failed if ".tmp" in Path(p).name]
 
     # The rerun does the failed job and what follows, nothing else.
-    plan = planned_jobs(run.workdir, run.configfiles)
+    plan = planned_jobs(work, run.configfiles)
     assert_plan(plan, failed_jobs | report_jobs("sheet"))
-    ok, _, updated = _snakemake(run.workdir, run.configfiles)
+    ok, _, updated = _snakemake(work, run.configfiles)
     assert ok
     assert set(updated) == {path for _, path in plan.outputs}
-    after = snapshot(run.workdir)
+    after = snapshot(work)
     assert set(after) == set(run.first)  # every output exists again
     rerun = changed(failed, after)
     assert failed_mesh in rerun
-    assert rerun - {depth.relative_to(run.workdir).as_posix()} <= under(after, plan.outputs)
+    assert rerun - {depth.relative_to(work).as_posix()} <= under(after, plan.outputs)
     assert under(rerun, downstream) == under(after, downstream)  # all rewritten
+    assert (work / copied_depth[1]).read_bytes() == original  # the good file copied
     assert not [p for p in after if ".tmp" in Path(p).name]
-    assert not planned_jobs(run.workdir, run.configfiles)
+    assert not planned_jobs(work, run.configfiles)
 
 
 def test_validation_follows_the_capture_files(run):
@@ -402,7 +415,8 @@ def test_validation_follows_the_capture_files(run):
 
 def test_object_mask_reruns_its_chromaticity_map(run):
     """The chromaticity map reads the object's silhouette (the first frame's masks
-    of the scene that shows it): a changed mask reruns that map, and only it."""
+    of the scene that shows it): a changed mask reruns that map and no other
+    calibration, and that frame's hull and reconstructions (which read its masks)."""
     import json
 
     scenes = sorted((run.data / "scenes").iterdir())
@@ -423,4 +437,10 @@ def test_object_mask_reruns_its_chromaticity_map(run):
     calib = f"results/{NAME}/calib/chromaticity"
     assert plan.of("chromaticity_map") == {f"{calib}/{obj}.h5", f"{calib}/{obj}.png"}
     assert not (CALIBRATION_RULES - {"chromaticity_map"}) & set(plan.rules)
+    # The scene is reconstructed: the mask is its frame's silhouette (the hull's and
+    # both HS variants' input; bayes_full reads the map too) and the report shows the map.
+    s, f = scene.name, first.name
+    required = {("chromaticity_map", f"{calib}/{obj}.{ext}") for ext in ("h5", "png")}
+    required |= vh_jobs(s, f) | hs_jobs(s, f) | hs_jobs(s, f, "bayes_full") | report_jobs(s)
+    assert_plan(plan, required, optional=VALIDATION)
     assert not planned_jobs(run.workdir, run.configfiles)
