@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import os
 import sys
+import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -69,13 +70,15 @@ def note_read(path: str | Path) -> None:
 
 
 def record_reads(folder: str | Path) -> None:
-    """Record every file this process opens to read, into ``FOLDER/<pid>.json`` at exit.
+    """Record every file this process opens to read, into ``FOLDER/<pid>-<ns>.json`` at exit.
 
     Opt-in, for tests (``COLOURHS_AUDIT_READS=FOLDER``, read by ``colourhs.cli.main``):
     a :func:`sys.addaudithook` hook collects the absolute paths of Python's ``open``
     events in a mode that reads what the file holds (not ``w``/``w+``/``x``) and of
     :func:`note_read`'s events; they are written with ``sys.argv``. Python's own
-    imports are recorded too (the reader filters).
+    imports are recorded too (the reader filters). The file name adds the exit
+    time (ns) to the process id: process ids wrap around in a long run (32,768 on
+    a default Linux), and one job's record must not overwrite another's.
     """
     reads = set()
 
@@ -93,7 +96,8 @@ def record_reads(folder: str | Path) -> None:
 
     def write():
         record = {"argv": sys.argv, "reads": sorted(reads)}
-        Path(folder, f"{os.getpid()}.json").write_text(json.dumps(record))
+        name = f"{os.getpid()}-{time.time_ns()}.json"
+        Path(folder, name).write_text(json.dumps(record))
 
     import atexit
 
