@@ -1,7 +1,7 @@
 """Where a smooth surface's Bayesian depth offset comes from (issue 11, items 2-3).
 
 Run: ``.venv/bin/python benchmarks/depth_offsets.py [--seeds 1-4] [--modes exact,noise]
-[--blur 1,0]``.
+[--blur 1,0,1c,0c]``.
 
 For every seed (a random rig of the ``random-tiny`` ranges at ``--size``, 7 board
 poses: a different draw than ``tests/test_exact.py``'s 3-pose rigs) it renders the
@@ -13,7 +13,9 @@ plane and one sheet frame per mode, with the TRUE calibration
   them), so the only error beyond ``exact`` is the sensor's noise.
 
 and reconstructs each with Bayesian HS for each Gaussian blur of the Helmholtz
-sides (``reconstruct(..., blur_px=)``, :func:`colourhs.reconstruct.sides.side_maps`).
+sides (``reconstruct(..., blur_px=)``, :func:`colourhs.reconstruct.sides.side_maps`),
+sampled bilinearly or, with a trailing ``c`` (``1c``), by cubic convolution
+(:data:`colourhs.reconstruct.sides.ORDER` set to 3 for that variant).
 Besides the depth errors it evaluates the consistency energy E
 (:func:`colourhs.reconstruct.surface.hs_residuals`, one robust scale: the
 truth's) on the same pixels at the truth, at the result, and at the result
@@ -80,7 +82,8 @@ def energies(frame, result, truth_depth, blur_px) -> dict:
 
 
 def run_seed(seed: int, mode: str, preset, blurs, root: Path) -> list[dict]:
-    """One seed x mode: render, then every scene x blur."""
+    """One seed x mode: render, then every scene x blur (a trailing ``c``: cubic sampling)."""
+    import colourhs.reconstruct.sides as sides
     from colourhs.ply import load_mesh
     from colourhs.raycast import render_depth_normals
     from colourhs.reconstruct.frame import load_frame, reconstruct
@@ -100,14 +103,17 @@ def run_seed(seed: int, mode: str, preset, blurs, root: Path) -> list[dict]:
     for scene in SCENES:
         frame = load_frame(data, scene, "000000", photometric_h5=data / "gt" / "photometric.h5")
         mesh = load_mesh(data / "scenes" / scene / "gt" / "000000.ply")
-        for blur in blurs:
+        for label in blurs:
+            # The sampler: the module's default, set for this variant only.
+            sides.ORDER = 3 if label.endswith("c") else 1
+            blur = float(label.rstrip("c"))
             res = reconstruct(frame, "bayes", blur_px=blur)
             ref = frame.rig.camera(res.info["reference"])
             gd, gn = render_depth_normals(*mesh, ref, frame.rig.image.width, frame.rig.image.height)
             m = res.mask & np.isfinite(gd)
             e = (res.depth[m] - gd[m]) * 1e3
             ang = np.degrees(np.arccos(np.clip(np.sum(res.normal[m] * gn[m], axis=1), -1, 1)))
-            row = {"seed": seed, "mode": mode, "scene": scene, "blur_px": blur}
+            row = {"seed": seed, "mode": mode, "scene": scene, "blur_px": label}
             row |= {
                 "depth_median_mm": float(np.median(np.abs(e))),
                 "depth_signed_median_mm": float(np.median(e)),
@@ -128,14 +134,16 @@ def main(argv=None) -> pd.DataFrame:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--seeds", default="1-4", help="seeds, e.g. 1-4 (default 1-4)")
     p.add_argument("--modes", default="exact,noise", help="exact and/or noise (default both)")
-    p.add_argument("--blur", default="1,0", help="blurs of the sides, pixels (default 1,0)")
+    p.add_argument(
+        "--blur", default="1,0", help="blurs of the sides, pixels, c: cubic (default 1,0)"
+    )
     p.add_argument("--size", default="320x240", help="image size WxH (default 320x240)")
     args = p.parse_args(argv)
     width, height = (int(v) for v in args.size.split("x"))
     preset = replace(
         PRESETS["random-tiny"], name="offsets", width=width, height=height, sheet_frames=1
     )
-    blurs = [float(b) for b in args.blur.split(",")]
+    blurs = args.blur.split(",")
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for seed in _seeds(args.seeds):
