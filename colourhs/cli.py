@@ -342,14 +342,16 @@ INPUTS = {
 }
 
 #: Input files whose contents are checked before a subcommand runs, by kind:
-#: ``hdf5`` (an HDF5 file), ``ply`` (starts with a PLY header), ``json`` or ``yaml``
+#: ``depth`` (a results-contract depth file, read in full by its reader
+#: :func:`colourhs.depthfile.read_depth`), ``hdf5`` (an HDF5 file whose datasets all
+#: read to the end), ``ply`` (starts with a PLY header), ``json`` or ``yaml``
 #: (parses). Folders are refused.
 INPUT_KINDS = {
     "crosstalk": "json",
     "noise": "json",
     "photometric": "hdf5",
     "chromaticity": "hdf5",
-    "depth": "hdf5",
+    "depth": "depth",
     "config": "yaml",
     "json": "json",
     "hull": "ply",
@@ -357,7 +359,7 @@ INPUT_KINDS = {
     "gt": "ply",
 }
 #: What --same-as copies: a depth file (reconstruct), a metrics JSON (evaluate), a PLY (mesh).
-SAME_AS_KINDS = {"reconstruct": "hdf5", "evaluate": "json", "mesh": "ply"}
+SAME_AS_KINDS = {"reconstruct": "depth", "evaluate": "json", "mesh": "ply"}
 #: Input arguments that are positional (named without --), per subcommand.
 POSITIONAL = {"dataset", "depth", "mesh", "json", "photometric:poses"}
 #: Inputs that may be folders: the dataset, report --calibration (figures) and --calib.
@@ -376,10 +378,10 @@ def _input_problem(path: Path, kind: str | None, folder_ok: bool) -> str:
         return "no such file or folder"
     if path.is_dir():
         return "" if folder_ok else "a folder, not a file"
+    if kind == "depth":
+        return _depth_problem(path)
     if kind == "hdf5":
-        import h5py
-
-        return "" if h5py.is_hdf5(path) else "not an HDF5 file"
+        return _hdf5_problem(path)
     if kind == "ply":
         with open(path, "rb") as f:
             return "" if f.read(4) in (b"ply\n", b"ply\r") else "not a PLY file"
@@ -397,6 +399,43 @@ def _input_problem(path: Path, kind: str | None, folder_ok: bool) -> str:
         except (UnicodeDecodeError, ValueError, yaml.YAMLError) as e:
             return f"not {kind.upper()} ({' '.join(str(e).split())})"
     return ""
+
+
+def _depth_problem(path: Path) -> str:
+    """What :func:`colourhs.depthfile.read_depth` finds wrong with depth file ``path``
+    (truncated, a dataset or attribute missing, shapes that disagree, no pixel), without
+    the file name it starts with; "" when it reads."""
+    from colourhs.depthfile import read_depth
+
+    try:
+        read_depth(path)
+    except (ValueError, OSError, KeyError) as e:
+        return " ".join(str(e).removeprefix(f"{path}: ").split())
+    return ""
+
+
+def _hdf5_problem(path: Path) -> str:
+    """What is wrong with HDF5 file ``path`` ("" when nothing): not HDF5, or a dataset
+    that does not read to its end (a truncated or half-written file), with h5py's reason.
+    Its keys and shapes are :func:`_check_maps`'s to check."""
+    import h5py
+
+    if not h5py.is_hdf5(path):
+        return "not an HDF5 file"
+    try:
+        with h5py.File(path, "r") as f:
+            f.visititems(_read_dataset)
+    except (OSError, KeyError, RuntimeError) as e:
+        return f"not a readable HDF5 file ({' '.join(str(e).split())})"
+    return ""
+
+
+def _read_dataset(_name: str, item) -> None:
+    """Read ``item`` in full if it is a dataset; None, so ``visititems`` visits them all."""
+    import h5py
+
+    if isinstance(item, h5py.Dataset):
+        item[()]
 
 
 def _check_inputs(args) -> None:

@@ -7,13 +7,15 @@ import shutil
 import subprocess
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 import pandas as pd
 import pytest
 import yaml
 from whole_job import VARIANTS, snapshot
 
-from colourhs.cli import PROJECT_ROOT, main
+from colourhs.cli import PROJECT_ROOT, _input_problem, main
+from colourhs.depthfile import DepthResult, write_depth
 
 
 def test_synth_refuses_to_overwrite(tmp_path, capsys):
@@ -282,6 +284,36 @@ USER_ERRORS = {  # argv -> what the one line must say
         ["--config", "bad.yaml: not YAML"],
     ),
     "folder json": (["metrics", "{b}", "{o}/m.csv"], ["json", ": a folder, not a file"]),
+    # issue 12: depth files are read in full (colourhs.depthfile.read_depth) and maps to
+    # their end before a stage starts, not just their signature; the error names the option
+    "mesh half depth": (
+        ["mesh", "{b}/half.h5", "{o}/m.ply"],
+        ["mesh: depth ", "half.h5: not a readable HDF5 depth file (Unable to", "truncated file"],
+    ),
+    "mesh no normal": (
+        ["mesh", "{b}/nonormal.h5", "{o}/m.ply"],
+        ["mesh: depth ", "nonormal.h5: missing dataset 'normal'"],
+    ),
+    "evaluate half depth": (
+        ["evaluate", "{b}/half.h5", "{b}/ok.ply", "{o}/e.json", "--same-as", "{b}/ok.json"],
+        ["evaluate: depth ", "half.h5: not a readable HDF5 depth file", "truncated file"],
+    ),
+    "evaluate no normal": (
+        ["evaluate", "{b}/nonormal.h5", "{b}/ok.ply", "{o}/e.json"],
+        ["evaluate: depth ", "nonormal.h5: missing dataset 'normal'"],
+    ),
+    "same-as half depth": (
+        _rec("statue", "--same-as", "{b}/half.h5"),
+        ["reconstruct: --same-as ", "half.h5: not a readable HDF5 depth file", "truncated file"],
+    ),
+    "same-as no normal": (
+        _rec("statue", "--same-as", "{b}/nonormal.h5"),
+        ["reconstruct: --same-as ", "nonormal.h5: missing dataset 'normal'"],
+    ),
+    "half maps": (
+        _rec("toy", "--chromaticity", "{b}/halfmaps.h5"),
+        ["reconstruct: --chromaticity ", "halfmaps.h5: not a readable HDF5 file", "truncated file"],
+    ),
     # tuning values out of the config schema's ranges, named with their option
     "n labels": (_rec("plane", "--n-labels", "-3"), ["--n-labels -3: -3 is less than", "3"]),
     "alpha": (_rec("plane", "--alpha", "1.5"), ["--alpha 1.5: 1.5 is greater than"]),
@@ -308,7 +340,34 @@ def bad_inputs(tmp_path_factory) -> Path:
     with h5py.File(root / "small.h5", "w") as f:
         for cam in ("cam1", "cam2", "cam3"):
             f[cam] = np.ones((4, 5, 3), np.float32)
+    # issue 12: a good depth file cut to half its bytes, and one without "normal"
+    rng = np.random.default_rng(12)
+    depth = rng.uniform(0.5, 1.0, (48, 64)).astype(np.float32)
+    result = DepthResult(
+        depth, np.ones((48, 64, 3), np.float32), np.ones_like(depth), depth > 0, {}
+    )
+    camera = SimpleNamespace(name="cam1", K=np.eye(3), R=np.eye(3), t=np.zeros(3), dist=[0.0])
+    write_depth(root / "good.h5", result, camera, {"method": "bayes"})
+    assert _input_problem(root / "good.h5", "depth", False) == ""
+    _cut_to_half(root / "good.h5", root / "half.h5")
+    with h5py.File(root / "good.h5") as f, h5py.File(root / "nonormal.h5", "w") as g:
+        for key in ("depth", "confidence", "mask"):
+            g[key] = f[key][()]
+        g.attrs.update(f.attrs)
+    with h5py.File(root / "maps.h5", "w") as f:  # the tiny rig's chromaticity maps
+        for cam in ("cam1", "cam2", "cam3"):
+            f[cam] = rng.uniform(0, 1, (120, 160, 3)).astype(np.float32)
+    assert _input_problem(root / "maps.h5", "hdf5", False) == ""
+    _cut_to_half(root / "maps.h5", root / "halfmaps.h5")
+    (root / "ok.ply").write_text("ply\nformat ascii 1.0\nend_header\n")
+    (root / "ok.json").write_text("{}")
     return root
+
+
+def _cut_to_half(src: Path, out: Path) -> None:
+    """A half-written copy of ``src``: its first half, the HDF5 signature included."""
+    data = src.read_bytes()
+    out.write_bytes(data[: len(data) // 2])
 
 
 @pytest.mark.parametrize("case", USER_ERRORS, ids=list(USER_ERRORS))
