@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import shutil
+from pathlib import Path
+
 import pytest
 
 from colourhs.synth.dataset import Preset, synthesise
@@ -64,3 +67,19 @@ def plane_calibrated(tmp_path_factory):
         "crosstalk_json": root / "crosstalk.json",
         "photometric_h5": root / "photometric.h5",
     }
+
+
+# Capture-format tests (tests/test_capture*.py, builders in tests/capture_helpers.py).
+
+
+@pytest.fixture(scope="module")
+def template(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    from capture_helpers import make_dataset
+
+    return make_dataset(tmp_path_factory.mktemp("template") / "dataset")
+
+
+@pytest.fixture
+def root(template: Path, tmp_path: Path) -> Path:
+    """A fresh copy of the valid dataset, free to mutate."""
+    return Path(shutil.copytree(template, tmp_path / "dataset"))

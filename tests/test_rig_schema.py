@@ -1,7 +1,7 @@
 """rig.json's JSON Schema, colourhs/capture/rig.schema.json (issue 12).
 
 The schema is the format's machine-readable spec and the reader's first check;
-tests/test_capture.py holds the reader's malformed-rig cases, one message each.
+tests/test_capture_rig.py holds the reader's malformed-rig cases, one message each.
 """
 
 from __future__ import annotations

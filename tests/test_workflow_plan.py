@@ -1,8 +1,8 @@
 """colourhs.workflow_plan: what the Snakemake rules read, make and pass on (issue 12).
 
-On test_capture's small dataset (scene toy: one frame, masks, ground truth, the
-chromatic object slinky; scene wave: two frames, nothing else), with a config
-validated as the Snakefile does (the schema's defaults set).
+On the capture tests' small dataset (tests/capture_helpers.py; scene toy: one frame,
+masks, ground truth, the chromatic object slinky; scene wave: two frames, nothing
+else), with a config validated as the Snakefile does (the schema's defaults set).
 """
 
 from __future__ import annotations
@@ -13,8 +13,8 @@ import shutil
 from pathlib import Path
 
 import pytest
+from capture_helpers import make_dataset
 from snakemake.utils import validate
-from test_capture import make_dataset
 
 from colourhs.cli import PROJECT_ROOT
 from colourhs.workflow_plan import MalformedDatasetError, WorkflowPlan
