@@ -127,11 +127,9 @@ model are drawn here.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, replace
-from typing import Any
 
 import numpy as np
 
-from colourhs.geometry import look_at
 from colourhs.synth import scenes as sc
 from colourhs.synth.randomgeometry import _draw_geometry
 from colourhs.synth.randomranges import (
@@ -146,12 +144,13 @@ from colourhs.synth.randomranges import (
 )
 from colourhs.synth.randomscenes import _builders, _tilt_matrix
 from colourhs.synth.rig import (
-    COLOURS,
     CameraModel,
     LightModel,
     Nuisances,
     RigModel,
     _power_for_exposure,
+    chromatic_lights,
+    jsonable,
 )
 
 __all__ = [
@@ -243,8 +242,8 @@ def draw_random(
         "mask_mode": mask_mode,
         "bit_depth": bits,
         "black_level": black,
-        "scenes": _jsonable(scene_desc),
-        "photometric": _jsonable(photometric),
+        "scenes": jsonable(scene_desc),
+        "photometric": jsonable(photometric),
     }
     return RandomDraw(
         rig=rig,
@@ -321,16 +320,7 @@ def _photometric(seed, geo, width, height, nuisances, rg) -> tuple[RigModel, dic
         replace(li, power=_power_for_exposure(li, cams, exposure, sc.WHITE_ALBEDO, profile=True))
         for li in lights
     ]
-    pos = np.asarray(geo["scenes"]["chromatic_light"], float)
-    Rc, _ = look_at(pos, np.zeros(3))
-    chrom = {}
-    for k, colour in enumerate(COLOURS):
-        tilt = (n.chromatic_filter_tilt * (k - 1), -n.chromatic_filter_tilt * (k - 1) / 2)
-        m = 2.0 if n.light_falloff else 0.0
-        li = LightModel(pos, Rc, colour, 1.0, m, m, tilt)
-        chrom[colour] = replace(
-            li, power=_power_for_exposure(li, cams, exposure, sc.WHITE_ALBEDO, own=True)
-        )
+    chrom = chromatic_lights(geo["scenes"]["chromatic_light"], cams, exposure, sc.WHITE_ALBEDO, n)
     recorded = replace(
         n,
         light_exponent_x=rg.led_exponent_x,
@@ -354,20 +344,8 @@ def _disc(rng, k: int) -> np.ndarray:
     return np.stack([r * np.cos(a), r * np.sin(a)], axis=1)
 
 
-def _jsonable(v: Any) -> Any:
-    if isinstance(v, np.ndarray):
-        return v.tolist()
-    if isinstance(v, np.generic):
-        return v.item()
-    if isinstance(v, dict):
-        return {k: _jsonable(x) for k, x in v.items()}
-    if isinstance(v, list | tuple):
-        return [_jsonable(x) for x in v]
-    return v
-
-
 def describe(draw: RandomDraw) -> dict:
     """The draw as JSON-able data (rig model aside)."""
-    return _jsonable(draw.description | {"board": draw.board}) | {
-        "nuisances": _jsonable(asdict(draw.rig.nuisances))
+    return jsonable(draw.description | {"board": draw.board}) | {
+        "nuisances": jsonable(asdict(draw.rig.nuisances))
     }

@@ -42,6 +42,7 @@ their ranges are the table of :mod:`colourhs.synth.randomrig`.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -204,21 +205,26 @@ class RigModel:
     def to_json(self) -> dict:
         """Everything about the rig, for ``gt/rig_model.json``."""
 
-        def clean(v):
-            if isinstance(v, np.ndarray):
-                return v.tolist()
-            if isinstance(v, dict):
-                return {k: clean(x) for k, x in v.items()}
-            if isinstance(v, list | tuple):
-                return [clean(x) for x in v]
-            return v
-
         return {
-            "cameras": [clean(asdict(c)) for c in self.cameras],
-            "lights": [clean(asdict(li)) for li in self.lights],
-            "chromatic_lights": {k: clean(asdict(v)) for k, v in self.chromatic_lights.items()},
-            "nuisances": clean(asdict(self.nuisances)),
+            "cameras": [jsonable(asdict(c)) for c in self.cameras],
+            "lights": [jsonable(asdict(li)) for li in self.lights],
+            "chromatic_lights": {k: jsonable(asdict(v)) for k, v in self.chromatic_lights.items()},
+            "nuisances": jsonable(asdict(self.nuisances)),
         }
+
+
+def jsonable(v: Any) -> Any:
+    """``v`` with numpy arrays and scalars as lists and Python numbers, dicts and
+    sequences converted throughout (tuples become lists), for ``json.dump``."""
+    if isinstance(v, np.ndarray):
+        return v.tolist()
+    if isinstance(v, np.generic):
+        return v.item()
+    if isinstance(v, dict):
+        return {k: jsonable(x) for k, x in v.items()}
+    if isinstance(v, list | tuple):
+        return [jsonable(x) for x in v]
+    return v
 
 
 def make_rig(
@@ -301,17 +307,45 @@ def make_rig(
     lights = [
         replace(li, power=_power_for_exposure(li, cams, n.exposure, white_albedo)) for li in lights
     ]
-    pos = np.asarray(chromatic_light_m, float)
+    chrom = chromatic_lights(chromatic_light_m, cams, n.exposure, white_albedo, n)
+    return RigModel(tuple(cams), tuple(lights), chrom, width, height, n)
+
+
+def chromatic_lights(position_m, cams, exposure, albedo, nuisances) -> dict[str, LightModel]:
+    """The chromaticity captures' lights: one of each colour at ``position_m``, aimed at
+    the origin.
+
+    Parameters
+    ----------
+    position_m : array_like, shape (3,)
+        The lights' position, world metres.
+    cams : sequence of CameraModel
+        The rig's cameras (the exposure is their mean reading).
+    exposure : float
+        Reading of a white Lambertian surface of ``albedo`` at the origin facing the
+        light, fraction of full scale, in the channel of the light's colour.
+    albedo : float
+        That white surface's albedo.
+    nuisances : Nuisances
+        Colour k (0, 1, 2 = red, green, blue) has the profile skew
+        (t (k - 1), -t (k - 1) / 2), t = ``chromatic_filter_tilt`` (1/rad), and the
+        profile exponents 2 with ``light_falloff`` (else 0).
+
+    Returns
+    -------
+    dict
+        Colour name -> LightModel.
+    """
+    n = nuisances
+    pos = np.asarray(position_m, float)
     Rc, _ = look_at(pos, np.zeros(3))
     chrom = {}
     for k, colour in enumerate(COLOURS):
         tilt = (n.chromatic_filter_tilt * (k - 1), -n.chromatic_filter_tilt * (k - 1) / 2)
         m = 2.0 if n.light_falloff else 0.0
         li = LightModel(pos, Rc, colour, 1.0, m, m, tilt)
-        chrom[colour] = replace(
-            li, power=_power_for_exposure(li, cams, n.exposure, white_albedo, own=True)
-        )
-    return RigModel(tuple(cams), tuple(lights), chrom, width, height, n)
+        chrom[colour] = replace(li, power=_power_for_exposure(li, cams, exposure, albedo, own=True))
+    return chrom
 
 
 def _power_for_exposure(light, cams, exposure, albedo, own=False, profile=False) -> float:
