@@ -383,10 +383,12 @@ def test_failed_stage_leaves_no_partial_output_and_rerun_resumes(run, tmp_path):
     # Nothing downstream of the failure was written (the old files are still there, stale).
     assert not under(changed(before, failed), downstream)
     assert all(failed[p] == before[p] for p in under(before, downstream))
-    # Nothing else but the copy of the corrupt file (measured: it runs and copies it,
-    # the input check h5py.is_hdf5 passing a truncated file; allowed, not required).
+    # Nothing else: bayes_full's copy job (--same-as) refuses the truncated file at its
+    # input check (issue 12: before, h5py.is_hdf5 passed it and the job copied it), so
+    # its old output is at most removed (a failed job's), never rewritten.
     written = changed(before, failed) - {failed_mesh, depth.relative_to(work).as_posix()}
     assert written <= {copied_depth[1]}
+    assert failed.get(copied_depth[1]) in (None, before[copied_depth[1]])
     assert not [p for p in failed if ".tmp" in Path(p).name]
 
     # The rerun does the failed job and what follows, nothing else.
