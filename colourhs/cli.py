@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+from collections.abc import Collection
 from pathlib import Path
 
 from colourhs.capture import LIT_THRESHOLD, MIN_SIGNAL, UnknownNameError
@@ -71,9 +72,15 @@ def _frame_arguments(parser) -> None:
     parser.add_argument("frame", help="frame: its folder name under frames/ (e.g. 000000)")
 
 
-def build_parser(show_defaults: bool = False) -> argparse.ArgumentParser:
-    """The command line; ``show_defaults`` imports the stages to show their
-    tuning options' defaults (for --help only: it costs a second)."""
+def build_parser(show_defaults: bool | Collection[str] = False) -> argparse.ArgumentParser:
+    """The command line; ``show_defaults`` (True: every stage; or the names of the
+    subcommands, e.g. ``{"reconstruct"}``) imports those stages to show their
+    tuning options' defaults (for --help only: reconstruct's costs a second)."""
+
+    def defaults_of(command: str) -> dict | None:
+        wanted = show_defaults is True or (show_defaults is not False and command in show_defaults)
+        return _defaults(command) if wanted else None
+
     p = argparse.ArgumentParser(prog="colourhs", description=__doc__)
     p.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     sub = p.add_subparsers(dest="command", required=True)
@@ -137,7 +144,7 @@ def build_parser(show_defaults: bool = False) -> argparse.ArgumentParser:
     ph.add_argument("out", type=Path, help="photometric.h5 to write")
     ph.add_argument("--crosstalk", type=Path, default=None, help="unmix with this calibration")
     ph.add_argument("--figure", type=Path, default=None, help="also write the heat maps PNG")
-    _tuning_options(ph, PHOTOMETRIC_PARAMS, _defaults("photometric") if show_defaults else None)
+    _tuning_options(ph, PHOTOMETRIC_PARAMS, defaults_of("photometric"))
     ph.set_defaults(func=_photometric)
 
     c = sub.add_parser("chromaticity", help="surface chromaticity maps of a chromatic object")
@@ -178,7 +185,7 @@ def build_parser(show_defaults: bool = False) -> argparse.ArgumentParser:
         help="visual hull PLY: depth hypotheses over its depth range",
     )
     rc.add_argument("--same-as", type=Path, default=None, help=SAME_AS_HELP)
-    _tuning_options(rc, RECONSTRUCT_PARAMS, _defaults("reconstruct") if show_defaults else None)
+    _tuning_options(rc, RECONSTRUCT_PARAMS, defaults_of("reconstruct"))
     rc.set_defaults(func=_reconstruct)
 
     h = sub.add_parser("hull", help="visual hull of one frame from its silhouettes (PLY)")
@@ -507,7 +514,9 @@ def main(argv: list[str] | None = None) -> int:
     if "--" in argv:
         k = argv.index("--")
         argv, extra = argv[:k], argv[k + 1 :]
-    args = build_parser(show_defaults=bool({"-h", "--help"} & set(argv))).parse_args(argv)
+    # --help of reconstruct or photometric shows their defaults (imports that stage only).
+    asks_help = bool({"-h", "--help"} & set(argv))
+    args = build_parser(show_defaults=set(argv) if asks_help else False).parse_args(argv)
     args.snakemake_args, args.command_line = extra, command_line
     try:
         _check_inputs(args)

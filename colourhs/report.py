@@ -106,7 +106,6 @@ SOFTWARE = {
     "pandas": ("pandas", ("pandas",)),
     "matplotlib": ("matplotlib", ("matplotlib",)),
     "open3d": ("open3d", ("open3d", "open3d-cpu")),
-    "pymeshlab": ("pymeshlab", ("pymeshlab",)),
     "opencv": (
         "cv2",
         (

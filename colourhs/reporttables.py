@@ -1,7 +1,8 @@
 """The report's tables: ``metrics.csv`` and Snakemake benchmark files, read and summarised.
 
 :func:`read_metrics` reads the results contract's per-frame metrics table
-(``reports/NAME/metrics.csv``, columns :data:`REQUIRED_COLUMNS`) and
+(``reports/NAME/metrics.csv``, columns :data:`REQUIRED_COLUMNS`, defined in
+:mod:`colourhs.contract`) and
 :func:`summarise_metrics` aggregates it over frames, one row per (scene,
 variant), as :data:`AGGREGATION` says. :func:`find_benchmarks`,
 :func:`read_benchmarks` and :func:`summarise_benchmarks` do the same for the
@@ -22,6 +23,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from colourhs.contract import EXTRA_COLUMNS, KEY_COLUMNS, METRIC_COLUMNS, REQUIRED_COLUMNS
 from colourhs.variants import VARIANT_ORDER
 
 __all__ = [
@@ -38,33 +40,6 @@ __all__ = [
     "summarise_benchmarks",
     "summarise_metrics",
 ]
-
-#: The contract's key columns of ``metrics.csv``.
-KEY_COLUMNS = ("scene", "frame", "variant")
-#: The contract's metric columns of ``metrics.csv``, in order.
-METRIC_COLUMNS = (
-    "hausdorff_rms_mm",
-    "hausdorff_mean_mm",
-    "hausdorff_max_mm",
-    "depth_median_mm",
-    "depth_rms_mm",
-    "normal_median_deg",
-)
-#: Every column ``metrics.csv`` must have (results contract, version 1).
-REQUIRED_COLUMNS = KEY_COLUMNS + METRIC_COLUMNS
-#: Extra metric columns that the evaluation writes after the contract's
-#: (:func:`colourhs.evaluate.evaluate_frame`).
-EXTRA_COLUMNS = (
-    "hausdorff_median_mm",
-    "completeness_rms_mm",
-    "completeness_mean_mm",
-    "completeness_max_mm",
-    "depth_p95_mm",
-    "coverage",
-    "hausdorff_samples",
-    "completeness_samples",
-    "outside_share",
-)
 
 #: How a contract metric is aggregated over the frames of one (scene, variant):
 #: "mean", "max", "median", "rms" (``sqrt(mean(x**2))``) or "sum". Other numeric

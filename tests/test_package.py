@@ -80,3 +80,31 @@ def test_one_variant_table():
     assert "from colourhs.variants import VARIANTS" in plan and "VARIANTS = {" not in plan
     common = (PACKAGE.parent / "workflow/rules/common.smk").read_text()
     assert "from colourhs.workflow_plan import" in common and "VARIANTS" not in common
+
+
+def test_each_stage_imports_only_what_it_needs():
+    """Issue 13: a job imports its own stage's libraries only. The command line
+    (cli, commands) none of the heavy ones; an evaluation open3d for its ray
+    casting but not pandas, scipy, matplotlib (only when it colours a mesh),
+    numba or pymeshlab; ``evaluate --help`` not the reconstruction (numba).
+    Measured: about 2 s (one interpreter importing open3d)."""
+    import subprocess
+    import sys
+
+    heavy = ("open3d", "pandas", "scipy", "matplotlib", "numba", "pymeshlab", "skimage")
+    code = (
+        "import sys, contextlib, io\n"
+        f"heavy = {heavy!r}\n"
+        "def loaded(): return sorted(h for h in heavy if h in sys.modules)\n"
+        "from colourhs.cli import main\n"
+        "print(loaded())\n"
+        "with contextlib.redirect_stdout(io.StringIO()), contextlib.suppress(SystemExit):\n"
+        "    main(['evaluate', '--help'])\n"
+        "print(loaded())\n"
+        "import colourhs.evaluate\n"
+        "print(loaded())\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=PACKAGE.parent
+    ).stdout.split("\n")
+    assert out[:3] == ["[]", "[]", "['open3d']"]

@@ -333,7 +333,7 @@ def test_report_timing_and_environment(report):
     assert t["photometric"]["total_s"] == "6.08"
     assert t["sum of jobs"]["total_s"] == "16.1"
     env = {r[0]: r[1] for r in tables["env"][0]}
-    for key in ("python", "colourhs", "numpy", "scipy", "open3d", "pymeshlab", "opencv"):
+    for key in ("python", "colourhs", "numpy", "scipy", "open3d", "opencv"):
         assert env[key]
     assert env["h5py"] and env["snakemake"] and env["numba"] and env["CPU count"]
     text = report.read_text(encoding="utf-8")
