@@ -110,13 +110,53 @@ class DepthMap:
         return camera_centre(self.R, self.t)
 
 
-def _attr_array(f, name, shape, path):
-    if name not in f.attrs:
+#: The contract's datasets of a depth file (``depth`` and ``normal`` are required).
+DATASETS = ("depth", "normal", "confidence", "mask")
+
+
+def _attr_array(attrs: dict, name, shape, path):
+    if name not in attrs:
         raise ValueError(f"{path}: missing attribute {name!r}")
-    a = np.asarray(f.attrs[name], float)
+    a = np.asarray(attrs[name], float)
     if a.shape != shape:
         raise ValueError(f"{path}: attribute {name!r} has shape {a.shape}, expected {shape}")
     return a
+
+
+def _text(value) -> str:
+    return value.decode() if isinstance(value, bytes) else str(value)
+
+
+def _contents(path: Path) -> tuple[dict, dict]:
+    """The contract's datasets (:data:`DATASETS`) and every attribute of depth file
+    ``path``, read in full.
+
+    Raises
+    ------
+    ValueError
+        Naming the file and what does not read (the file itself, its list of datasets
+        or attributes, or one dataset or attribute: a truncated file, a corrupt chunk),
+        with h5py's reason.
+    """
+
+    def read(what: str, get):
+        try:
+            return get()
+        except (OSError, RuntimeError, KeyError) as err:
+            raise ValueError(
+                f"{path}: {what} does not read ({' '.join(str(err).split())})"
+            ) from err
+
+    try:
+        f = h5py.File(path, "r")
+    except OSError as err:
+        raise ValueError(f"{path}: not a readable HDF5 depth file ({err})") from err
+    with f:
+        names = read("the list of datasets", lambda: [n for n in f if n in DATASETS])
+        data = {n: read(f"dataset {n!r}", lambda n=n: f[n][()]) for n in names}
+        keys = read("the list of attributes", lambda: list(f.attrs))
+        attrs = {k: read(f"attribute {k!r}", lambda k=k: f.attrs[k]) for k in keys}
+    return data, attrs
 
 
 def read_depth(path: str | Path) -> DepthMap:
@@ -136,55 +176,45 @@ def read_depth(path: str | Path) -> DepthMap:
     Raises
     ------
     ValueError
-        Naming the file, when a required dataset or attribute is missing, a shape is
-        wrong, or no pixel has a finite depth ("no reconstructed pixels").
+        Naming the file, when it or one of its datasets or attributes does not read
+        (truncated, a corrupt chunk: which one, with h5py's reason), a required dataset
+        or attribute is missing, a shape is wrong, or no pixel has a finite depth
+        ("no reconstructed pixels").
     """
     path = Path(path)
     note_read(path)
+    data, attrs = _contents(path)
+    for name in ("depth", "normal"):
+        if name not in data:
+            raise ValueError(f"{path}: missing dataset {name!r}")
+    depth = np.asarray(data["depth"], np.float32)
+    if depth.ndim != 2:
+        raise ValueError(f"{path}: dataset 'depth' has shape {depth.shape}, expected (H, W)")
+    if depth.size == 0:
+        raise ValueError(f"{path}: no reconstructed pixels (empty depth map {depth.shape})")
+    h, w = depth.shape
+    normal = np.asarray(data["normal"], np.float32)
+    if normal.shape != (h, w, 3):
+        raise ValueError(f"{path}: dataset 'normal' has shape {normal.shape}, expected {(h, w, 3)}")
+    finite = np.isfinite(depth)
+    confidence = np.asarray(data.get("confidence", finite), np.float32)
+    mask = np.asarray(data.get("mask", finite), bool)
+    for name, a in (("confidence", confidence), ("mask", mask)):
+        if a.shape != (h, w):
+            raise ValueError(f"{path}: dataset {name!r} has shape {a.shape}, expected {(h, w)}")
+    if "camera" not in attrs:
+        raise ValueError(f"{path}: missing attribute 'camera'")
+    camera = _text(attrs["camera"])
+    K = _attr_array(attrs, "K", (3, 3), path)
+    R = _attr_array(attrs, "R", (3, 3), path)
+    t = _attr_array(attrs, "t", (3,), path).reshape(3)
+    dist = np.asarray(attrs["dist"], float).ravel() if "dist" in attrs else np.zeros(5)
+    method = _text(attrs.get("method", ""))
+    params = attrs.get("params", "{}")
     try:
-        f = h5py.File(path, "r")
-    except OSError as err:
-        raise ValueError(f"{path}: not a readable HDF5 depth file ({err})") from err
-    with f:
-        for name in ("depth", "normal"):
-            if name not in f:
-                raise ValueError(f"{path}: missing dataset {name!r}")
-        depth = np.asarray(f["depth"][()], np.float32)
-        if depth.ndim != 2:
-            raise ValueError(f"{path}: dataset 'depth' has shape {depth.shape}, expected (H, W)")
-        if depth.size == 0:
-            raise ValueError(f"{path}: no reconstructed pixels (empty depth map {depth.shape})")
-        h, w = depth.shape
-        normal = np.asarray(f["normal"][()], np.float32)
-        if normal.shape != (h, w, 3):
-            raise ValueError(
-                f"{path}: dataset 'normal' has shape {normal.shape}, expected {(h, w, 3)}"
-            )
-        finite = np.isfinite(depth)
-        confidence = (
-            np.asarray(f["confidence"][()], np.float32)
-            if "confidence" in f
-            else finite.astype(np.float32)
-        )
-        mask = np.asarray(f["mask"][()], bool) if "mask" in f else finite
-        for name, a in (("confidence", confidence), ("mask", mask)):
-            if a.shape != (h, w):
-                raise ValueError(f"{path}: dataset {name!r} has shape {a.shape}, expected {(h, w)}")
-        if "camera" not in f.attrs:
-            raise ValueError(f"{path}: missing attribute 'camera'")
-        camera = f.attrs["camera"]
-        camera = camera.decode() if isinstance(camera, bytes) else str(camera)
-        K = _attr_array(f, "K", (3, 3), path)
-        R = _attr_array(f, "R", (3, 3), path)
-        t = _attr_array(f, "t", (3,), path).reshape(3)
-        dist = np.asarray(f.attrs["dist"], float).ravel() if "dist" in f.attrs else np.zeros(5)
-        method = f.attrs.get("method", "")
-        method = method.decode() if isinstance(method, bytes) else str(method)
-        params = f.attrs.get("params", "{}")
-        try:
-            params = json.loads(params) if isinstance(params, str | bytes) else {}
-        except json.JSONDecodeError:
-            params = {}
+        params = json.loads(params) if isinstance(params, str | bytes) else {}
+    except json.JSONDecodeError:
+        params = {}
     if not np.any(finite & (depth > 0)):
         raise ValueError(f"{path}: no reconstructed pixels (depth is empty or all NaN)")
     return DepthMap(

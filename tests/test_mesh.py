@@ -86,27 +86,48 @@ def test_oriented_points_skip_pixels_without_depth_or_normal(tmp_path):
     assert len(points) == (H - 15) * W
 
 
-@pytest.mark.parametrize("case", ["all_nan", "empty", "no_normal", "bad_normal_shape"])
+def corrupt_chunk(path, name: str) -> None:
+    """Zero 64 bytes in the middle of the first (gzip) chunk of dataset ``name``: the
+    file keeps its length and structure, the chunk no longer inflates."""
+    with h5py.File(path, "r") as f:
+        chunk = f[name].id.get_chunk_info(0)
+    data = bytearray(path.read_bytes())
+    middle = chunk.byte_offset + chunk.size // 2
+    data[middle : middle + 64] = bytes(64)
+    path.write_bytes(bytes(data))
+
+
+@pytest.mark.parametrize(
+    "case", ["all_nan", "empty", "no_normal", "bad_normal_shape", "corrupt_chunk"]
+)
 def test_bad_depth_files_are_refused_by_name(tmp_path, case):
+    """A ValueError naming the file and what is wrong. ``corrupt_chunk`` (issue 12):
+    a dataset whose bytes are damaged mid-file raised h5py's OSError ("Can't
+    synchronously read data (filter returned failure during read)"), without the file."""
     path = tmp_path / f"{case}.h5"
     cam = make_camera()
     depth = np.full((H, W), np.nan, np.float32)
     normal = np.zeros((H, W, 3), np.float32)
     if case == "empty":
         depth, normal = np.zeros((0, 0), np.float32), np.zeros((0, 0, 3), np.float32)
-    if case in ("no_normal", "bad_normal_shape"):
+    if case in ("no_normal", "bad_normal_shape", "corrupt_chunk"):
         depth[:] = 0.8
-    with h5py.File(path, "w") as f:
-        f["depth"] = depth
-        if case != "no_normal":
-            f["normal"] = normal[:, :2] if case == "bad_normal_shape" else normal
-        f.attrs.update(camera="cam1", K=cam.K, R=cam.R, t=cam.t)
+    if case == "corrupt_chunk":
+        write_depth_file(path, cam, depth, np.broadcast_to([0.0, 0.0, -1.0], (H, W, 3)))
+        corrupt_chunk(path, "depth")
+    else:
+        with h5py.File(path, "w") as f:
+            f["depth"] = depth
+            if case != "no_normal":
+                f["normal"] = normal[:, :2] if case == "bad_normal_shape" else normal
+            f.attrs.update(camera="cam1", K=cam.K, R=cam.R, t=cam.t)
     out = tmp_path / "mesh.ply"
     expected = {
         "all_nan": "no reconstructed pixels",
         "empty": "no reconstructed pixels",
         "no_normal": "missing dataset 'normal'",
         "bad_normal_shape": "'normal' has shape",
+        "corrupt_chunk": r"dataset 'depth' does not read \(Can't synchronously read data",
     }
     with pytest.raises(ValueError, match=expected[case]) as err:
         frame_mesh(path, out)
