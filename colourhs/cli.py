@@ -30,6 +30,7 @@ from colourhs.commands import (  # noqa: F401 (imported from here by users)
     _mesh,
     _metrics,
     _noise,
+    _pairs,
     _photometric,
     _reconstruct,
     _report,
@@ -345,6 +346,7 @@ INPUTS = {
     "mesh": ("depth", "hull", "same_as"),
     "evaluate": ("depth", "mesh", "gt", "same_as"),
     "metrics": ("json",),
+    "figures": ("depth", "mesh", "gt", "coloured", "animate"),
     "report": ("metrics", "calibration", "config", "dataset", "calib"),
 }
 
@@ -364,11 +366,23 @@ INPUT_KINDS = {
     "hull": "ply",
     "mesh": "ply",
     "gt": "ply",
+    "coloured": "ply",
+    "animate": "ply",
 }
 #: What --same-as copies: a depth file (reconstruct), a metrics JSON (evaluate), a PLY (mesh).
 SAME_AS_KINDS = {"reconstruct": "depth", "evaluate": "json", "mesh": "ply"}
-#: Input arguments that are positional (named without --), per subcommand.
-POSITIONAL = {"dataset", "depth", "mesh", "json", "photometric:poses"}
+#: Input arguments that are positional (named without --): NAME in every subcommand,
+#: COMMAND:NAME in that one (figures --depth and --mesh are options).
+POSITIONAL = {
+    "dataset",
+    "json",
+    "mesh:depth",
+    "evaluate:depth",
+    "evaluate:mesh",
+    "photometric:poses",
+}
+#: Input arguments given as KEY=PATH (a variant's or a frame's file), per subcommand.
+KEY_PATHS = {"figures:depth", "figures:mesh", "figures:coloured", "figures:animate"}
 #: Inputs that may be folders: the dataset, report --calibration (figures) and --calib.
 FOLDER_INPUTS = ("dataset", "calibration", "calib")
 
@@ -452,12 +466,15 @@ def _check_inputs(args) -> None:
         value = getattr(args, name, None)
         kind = SAME_AS_KINDS.get(args.command) if name == "same_as" else INPUT_KINDS.get(name)
         positional = name in POSITIONAL or f"{args.command}:{name}" in POSITIONAL
-        for path in value if isinstance(value, list) else [value]:
+        option = name if positional else "--" + name.replace("_", "-")
+        paths = value if isinstance(value, list) else [value]
+        if f"{args.command}:{name}" in KEY_PATHS:
+            paths = list(_pairs(paths, option).values())
+        for path in paths:
             if path is None:
                 continue
             problem = _input_problem(Path(path), kind, name in FOLDER_INPUTS)
             if problem:
-                option = name if positional else "--" + name.replace("_", "-")
                 raise ValueError(f"{option} {path}: {problem}")
     if args.command == "reconstruct":
         _check_maps(args)

@@ -310,6 +310,19 @@ USER_ERRORS = {  # argv -> what the one line must say
         _rec("statue", "--same-as", "{b}/nonormal.h5"),
         ["reconstruct: --same-as ", "nonormal.h5: missing dataset 'normal'"],
     ),
+    # issue 12: figures' VARIANT=PATH inputs are checked like the other stages' inputs
+    "figures half depth": (
+        ["figures", "{o}/figs", "--depth", "bayes={b}/half.h5", "--mesh", "bayes={b}/ok.ply"],
+        ["figures: --depth ", "half.h5: not a readable HDF5 depth file", "truncated file"],
+    ),
+    "figures no mesh": (
+        ["figures", "{o}/figs", "--depth", "bayes={b}/good.h5", "--mesh", "bayes={o}/no.ply"],
+        ["figures: --mesh ", "no.ply: no such file or folder"],
+    ),
+    "figures not ply": (
+        "figures {o}/figs --depth vh={b}/good.h5 --mesh vh={b}/ok.ply --gt {b}/bad.ply".split(),
+        ["figures: --gt ", "bad.ply: not a PLY file"],
+    ),
     "half maps": (
         _rec("toy", "--chromaticity", "{b}/halfmaps.h5"),
         ["reconstruct: --chromaticity ", "halfmaps.h5: not a readable HDF5 file", "truncated file"],
