@@ -326,7 +326,7 @@ def _evaluate(args) -> int:
 
 
 def _metrics(args) -> int:
-    from colourhs.evaluate import metrics_table
+    from colourhs.contract import metrics_table
 
     table = metrics_table(args.json, args.out)
     print(f"wrote {args.out}: {len(table)} rows")

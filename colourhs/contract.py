@@ -1,11 +1,25 @@
-"""Names of the results contract's ``metrics.csv`` (results-contract.md): its
-columns, in order, with no dependencies, so that the evaluation job that
-writes a row and the report that reads the table share one definition
-(:mod:`colourhs.evaluate`, :mod:`colourhs.reporttables`)."""
+"""The results contract's ``metrics.csv`` (results-contract.md): its columns, in
+order, and :func:`metrics_table`, which writes it from the per-frame metrics JSON.
+
+Light on purpose (the standard library; pandas only inside
+:func:`metrics_table`), so that the evaluation job that writes a row
+(:mod:`colourhs.evaluate`, which imports open3d), the ``colourhs metrics`` job
+that gathers the rows and the report that reads the table
+(:mod:`colourhs.reporttables`) share one definition without importing each
+other's libraries."""
 
 from __future__ import annotations
 
-__all__ = ["EXTRA_COLUMNS", "KEY_COLUMNS", "METRIC_COLUMNS", "REQUIRED_COLUMNS"]
+import json
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from colourhs.io import atomic_output
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+__all__ = ["EXTRA_COLUMNS", "KEY_COLUMNS", "METRIC_COLUMNS", "REQUIRED_COLUMNS", "metrics_table"]
 
 #: The contract's key columns of ``metrics.csv``.
 KEY_COLUMNS = ("scene", "frame", "variant")
@@ -33,3 +47,39 @@ EXTRA_COLUMNS = (
     "completeness_samples",
     "outside_share",
 )
+
+
+def metrics_table(json_paths, out_csv: str | Path) -> pd.DataFrame:
+    """Gather per-frame metrics JSON files into the tidy ``reports/NAME/metrics.csv``.
+
+    One row per (scene, frame, variant), sorted by them; columns
+    :data:`REQUIRED_COLUMNS`, then :data:`EXTRA_COLUMNS`, then ``method`` and
+    ``same_as`` (the variant whose result a row copies: :func:`colourhs.variants.same_as`);
+    empty cells where a metric is unknown (no ground truth). Written atomically.
+
+    Raises
+    ------
+    ValueError
+        On a repeated (scene, frame, variant) or a file missing those keys.
+    """
+    import pandas as pd
+
+    keys = list(KEY_COLUMNS)
+    rows = []
+    for p in json_paths:
+        rec = json.loads(Path(p).read_text())
+        missing = [k for k in keys if k not in rec]
+        if missing:
+            raise ValueError(f"{p}: metrics lack {missing}")
+        rows.append(rec)
+    columns = list(REQUIRED_COLUMNS) + list(EXTRA_COLUMNS) + ["method", "same_as"]
+    table = pd.DataFrame(rows, columns=columns)
+    for key in keys:
+        table[key] = table[key].astype(str)
+    dup = table.duplicated(keys)
+    if dup.any():
+        raise ValueError(f"metrics: repeated rows {table.loc[dup, keys]}")
+    table = table.sort_values(keys).reset_index(drop=True)
+    with atomic_output(out_csv) as tmp:
+        table.to_csv(tmp, index=False)
+    return table

@@ -37,25 +37,24 @@ MeshLab's Hausdorff filter, found by :func:`colourhs.raycast.closest_points`).
 
 from __future__ import annotations
 
-import json
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
 import open3d as o3d
 
-from colourhs.contract import EXTRA_COLUMNS, REQUIRED_COLUMNS
+from colourhs.contract import (  # metrics_table: re-exported, its old home
+    EXTRA_COLUMNS,
+    REQUIRED_COLUMNS,
+    metrics_table,
+)
 from colourhs.deptherrors import depth_errors, depth_summary
 from colourhs.depthfile import read_depth
 from colourhs.geometry import camera_centre, project, world_to_camera
-from colourhs.io import atomic_output, write_json
+from colourhs.io import write_json
 from colourhs.ply import load_mesh, write_ply
 from colourhs.raycast import pixel_rays, raycasting_scene
-
-if TYPE_CHECKING:
-    import pandas as pd
 
 __all__ = [
     "CONTRACT_COLUMNS",
@@ -448,38 +447,3 @@ def evaluate_frame(
     )
     write_json(out_json, info)
     return info
-
-
-def metrics_table(json_paths, out_csv: str | Path) -> pd.DataFrame:
-    """Gather per-frame metrics JSON files into the tidy ``reports/NAME/metrics.csv``.
-
-    One row per (scene, frame, variant), sorted by them; columns
-    :data:`CONTRACT_COLUMNS`, then :data:`EXTRA_COLUMNS`, then ``method`` and
-    ``same_as`` (the variant whose result a row copies: :func:`colourhs.variants.same_as`);
-    empty cells where a metric is unknown (no ground truth). Written atomically.
-
-    Raises
-    ------
-    ValueError
-        On a repeated (scene, frame, variant) or a file missing those keys.
-    """
-    import pandas as pd
-
-    rows = []
-    for p in json_paths:
-        rec = json.loads(Path(p).read_text())
-        missing = [k for k in ("scene", "frame", "variant") if k not in rec]
-        if missing:
-            raise ValueError(f"{p}: metrics lack {missing}")
-        rows.append(rec)
-    columns = list(CONTRACT_COLUMNS) + list(EXTRA_COLUMNS) + ["method", "same_as"]
-    table = pd.DataFrame(rows, columns=columns)
-    for key in ("scene", "frame", "variant"):
-        table[key] = table[key].astype(str)
-    dup = table.duplicated(["scene", "frame", "variant"])
-    if dup.any():
-        raise ValueError(f"metrics: repeated rows {table.loc[dup, ['scene', 'frame', 'variant']]}")
-    table = table.sort_values(["scene", "frame", "variant"]).reset_index(drop=True)
-    with atomic_output(out_csv) as tmp:
-        table.to_csv(tmp, index=False)
-    return table

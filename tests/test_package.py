@@ -82,15 +82,22 @@ def test_one_variant_table():
     assert "from colourhs.workflow_plan import" in common and "VARIANTS" not in common
 
 
-def test_each_stage_imports_only_what_it_needs():
+def test_each_stage_imports_only_what_it_needs(tmp_path):
     """Issue 13: a job imports its own stage's libraries only. The command line
     (cli, commands) none of the heavy ones; an evaluation open3d for its ray
     casting but not pandas, scipy, matplotlib (only when it colours a mesh),
     numba or pymeshlab; ``evaluate --help`` not the reconstruction (numba).
-    Measured: about 2 s (one interpreter importing open3d)."""
+    Issue 12: ``colourhs metrics`` (gathering metrics.csv) pandas only, not open3d
+    (it imported colourhs.evaluate). Measured: about 2 s (one interpreter importing
+    open3d)."""
+    import json
     import subprocess
     import sys
 
+    rows = [tmp_path / f"{v}.json" for v in ("vh", "ml_full")]
+    for path in rows:
+        path.write_text(json.dumps({"scene": "s", "frame": "000000", "variant": path.stem}))
+    metrics = ["metrics", *map(str, rows), str(tmp_path / "metrics.csv")]
     heavy = ("open3d", "pandas", "scipy", "matplotlib", "numba", "pymeshlab", "skimage")
     code = (
         "import sys, contextlib, io\n"
@@ -101,10 +108,14 @@ def test_each_stage_imports_only_what_it_needs():
         "with contextlib.redirect_stdout(io.StringIO()), contextlib.suppress(SystemExit):\n"
         "    main(['evaluate', '--help'])\n"
         "print(loaded())\n"
+        "with contextlib.redirect_stdout(io.StringIO()):\n"
+        f"    assert main({metrics!r}) == 0\n"
+        "print(loaded())\n"
         "import colourhs.evaluate\n"
         "print(loaded())\n"
     )
     out = subprocess.run(
         [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=PACKAGE.parent
     ).stdout.split("\n")
-    assert out[:3] == ["[]", "[]", "['open3d']"]
+    assert out[:4] == ["[]", "[]", "['pandas']", "['open3d', 'pandas']"]
+    assert (tmp_path / "metrics.csv").read_text().count("\n") == 3  # header and two rows
