@@ -11,10 +11,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-import yaml
-
-from colourhs.capture import open_dataset, validate
-
 PROJECT_ROOT = Path(__file__).resolve().parents[1]
 SNAKEFILE = PROJECT_ROOT / "Snakefile"
 
@@ -89,12 +85,17 @@ def _synth(args) -> int:
 
 
 def _validate(args) -> int:
+    from colourhs.capture import validate
+
     summary = validate(args.dataset, args.summary)
     print(json.dumps(summary, indent=2))
     return 0
 
 
 def _run(args) -> int:
+    import yaml
+
+    from colourhs.capture import open_dataset
     from colourhs.variants import parse_variants
 
     dataset = Path(args.dataset).resolve()
@@ -349,6 +350,9 @@ def _figures(args) -> int:
 
 
 def _report(args) -> int:
+    import yaml
+
+    from colourhs.capture import open_dataset
     from colourhs.report import build_report, find_benchmarks
     from colourhs.reportinfo import resolve_config
 
@@ -377,6 +381,8 @@ def _report(args) -> int:
 
 
 def _config(args) -> int:
+    import yaml
+
     from colourhs.io import atomic_output
 
     with atomic_output(args.out) as tmp:

@@ -249,3 +249,18 @@ def test_error_message_and_attributes(tmp_path: Path) -> None:
     assert isinstance(err, ValueError)
     copy = pickle.loads(pickle.dumps(err))
     assert str(copy) == str(err) and copy.path == err.path
+
+
+def test_every_public_name_resolves() -> None:
+    """The package loads its submodules on first use (issue 12): every name of
+    ``__all__`` still resolves, is listed by dir() and keeps its own module; an
+    unknown name is an AttributeError."""
+    import colourhs.capture as capture
+
+    for name in capture.__all__:
+        value = getattr(capture, name)
+        module = getattr(value, "__module__", None)
+        assert module is None or module.startswith("colourhs.capture."), (name, module)
+    assert set(capture.__all__) <= set(dir(capture)) and len(capture.__all__) == 23
+    with pytest.raises(AttributeError, match="no attribute 'nosuch'"):
+        capture.nosuch  # noqa: B018

@@ -23,9 +23,17 @@ Modules (everything public is re-exported here; import from ``colourhs.capture``
 - :mod:`~colourhs.capture.jsonvalues`: JSON reading, schema and value checks;
 - :mod:`~colourhs.capture.png`: PNG header checks, :func:`read_image`, :func:`read_mask`;
 - :mod:`~colourhs.capture.layout`: the dataset folder, :func:`open_dataset`, :func:`validate`.
+
+Only :mod:`~colourhs.capture.base` (the standard library) is imported with the
+package; every other name loads its module on first use (PEP 562), so that
+``from colourhs.capture import MIN_SIGNAL`` (the command line's defaults) does
+not import numpy, cv2 and jsonschema.
 """
 
 from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING
 
 from colourhs.capture.base import (
     COLOURS,
@@ -35,17 +43,29 @@ from colourhs.capture.base import (
     CaptureFormatError,
     UnknownNameError,
 )
-from colourhs.capture.dataset import Dataset, Scene
-from colourhs.capture.layout import all_images, open_dataset, validate
-from colourhs.capture.png import read_image, read_mask
-from colourhs.capture.rig import Board, Camera, ImageSpec, ReciprocalPair, Rig
-from colourhs.capture.rigjson import (
-    DIST_LENGTHS,
-    ROTATION_TOLERANCE,
-    load_rig,
-    rig_from_dict,
-    rig_schema,
-)
+
+if TYPE_CHECKING:  # the names _LAZY loads, for type checkers (and the import graph)
+    from colourhs.capture.dataset import Dataset, Scene
+    from colourhs.capture.layout import all_images, open_dataset, validate
+    from colourhs.capture.png import read_image, read_mask
+    from colourhs.capture.rig import Board, Camera, ImageSpec, ReciprocalPair, Rig
+    from colourhs.capture.rigjson import (
+        DIST_LENGTHS,
+        ROTATION_TOLERANCE,
+        load_rig,
+        rig_from_dict,
+        rig_schema,
+    )
+
+#: Submodule -> the public names it holds, imported on first use (:func:`__getattr__`).
+_LAZY = {
+    "dataset": ("Dataset", "Scene"),
+    "layout": ("all_images", "open_dataset", "validate"),
+    "png": ("read_image", "read_mask"),
+    "rig": ("Board", "Camera", "ImageSpec", "ReciprocalPair", "Rig"),
+    "rigjson": ("DIST_LENGTHS", "ROTATION_TOLERANCE", "load_rig", "rig_from_dict", "rig_schema"),
+}
+_MODULE_OF = {name: module for module, names in _LAZY.items() for name in names}
 
 __all__ = [
     "COLOURS",
@@ -72,3 +92,16 @@ __all__ = [
     "rig_schema",
     "validate",
 ]
+
+
+def __getattr__(name: str):
+    """A public name of a submodule (:data:`_LAZY`), imported on first use and kept."""
+    if name not in _MODULE_OF:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"{__name__}.{_MODULE_OF[name]}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))
