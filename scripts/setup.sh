@@ -5,7 +5,8 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-# System libraries that open3d and pymeshlab load, and venv support.
+# System libraries that open3d (the pipeline) and pymeshlab (test-only: the test
+# extra's MeshLab reference, tests/test_evaluate.py) load, and venv support.
 pkgs=(libusb-1.0-0 libgl1 libegl1 libx11-6 libudev1 libglib2.0-0 libgomp1)
 # Headless Chromium for the report's browser test (tests/test_report_browser.py).
 pkgs+=(chromium)
@@ -37,6 +38,8 @@ if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
   .venv/bin/python -m pip install -q -e '.[test]'
   echo "$want" > "$stamp"
 fi
+# pymeshlab is no dependency of the pipeline (its evaluation uses open3d) but of the
+# test extra installed above (.[test]): the tests compare the distances against it.
 .venv/bin/python -c "import open3d, pymeshlab, cv2, numba, colourhs" \
   || { echo "setup: the environment does not import; remove .venv and rerun" >&2; exit 1; }
 echo "setup: ready (.venv)"
