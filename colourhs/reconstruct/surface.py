@@ -11,13 +11,22 @@ better than a few labels. This module finds the continuous surface that
 minimises the consistency energy itself (beyond the paper: its continuous,
 noise-weighted form):
 
-    E(z) = sum_p rho( sum_t sum_k (w_k(X_p) . N_t)^2 / var_k(N_t) / T_p )
+    E(z) = sum_p rho( sum_k (w_k(X_p) . N_p)^2 / var_k(N_p) )
 
 - ``X_p = c + z_p r_p`` is pixel p's point at depth z_p along its ray.
-- ``w_k`` is the eq. (5) row of reciprocal pair k sampled at X_p, and ``N_t``
-  the unit normal of triangle t of the depth map around p (p with two
-  4-neighbours; ``T_p`` triangles). The normal is the surface's own, not the
-  rows' best fit: this is what pins the depth.
+- ``w_k`` is the eq. (5) row of reciprocal pair k sampled at X_p, and ``N_p``
+  the unit normal of the depth map at p: the sum of the normals of p's
+  triangles with its 4-neighbours, which with all four is the
+  central-difference normal ``(X_e - X_w) x (X_s - X_n)`` (one-sided at a
+  surface's edge). The normal is the surface's own, not the rows' best
+  fit: this is what pins the depth. It must be the normal *at p*, where the
+  rows are sampled: each triangle's normal is the surface's normal a third
+  of a pixel away, about footprint / (3 r) off on a surface of radius r,
+  and comparing the rows with those (as this module did until 2026-12-03)
+  left E a floor that falls as the surface flattens; E then preferred
+  flatter surfaces nearer the camera (measured with the true calibration
+  on exact data: a random rig's statue 1.60 mm off, a white ellipsoid 6.3
+  mm; 0.23 and 0.21 mm with the pixel's normal).
 - ``var_k(N) = var(s_a) (v_a . N)^2 + var(s_b) (v_b . N)^2`` is the predicted
   variance of ``w_k . N`` from the sensor noise (:mod:`colourhs.noise`) and the
   interpolation error (a Sampson-normalised residual, so noise along the
@@ -97,15 +106,58 @@ def _cross(ax, ay, az, bx, by, bz):
 
 
 @nb.njit(cache=True, inline="always")
-def _triangle_normal(X, R, p, a, b):
-    """Unit normal (towards the camera) of triangle (p, a, b), its edges and 1 / |raw| * sign."""
-    e1x, e1y, e1z = X[a, 0] - X[p, 0], X[a, 1] - X[p, 1], X[a, 2] - X[p, 2]
-    e2x, e2y, e2z = X[b, 0] - X[p, 0], X[b, 1] - X[p, 1], X[b, 2] - X[p, 2]
-    nx, ny, nz = _cross(e1x, e1y, e1z, e2x, e2y, e2z)
-    ln = np.sqrt(nx * nx + ny * ny + nz * nz)
-    sg = -1.0 if nx * R[p, 0] + ny * R[p, 1] + nz * R[p, 2] > 0.0 else 1.0
+def _pixel_normal(X, R, nbr, p, d):
+    """Unit normal (towards the camera) of the depth map at pixel p, and its derivatives.
+
+    The normal is the sum of the raw normals of p's triangles with its
+    4-neighbours ``nbr[:, p]`` (east, south, west, north; -1 where missing):
+    with all four, ``(X_e - X_w) x (X_s - X_n)``, the central-difference
+    normal at p itself. ``d`` (5, 3) receives the derivatives of the unit
+    normal with respect to the depths of p, east, south, west and north.
+    Returns the normal, and the number of triangles (0: no normal).
+    """
+    rx, ry, rz = 0.0, 0.0, 0.0
+    for j in range(5):
+        d[j, 0] = 0.0
+        d[j, 1] = 0.0
+        d[j, 2] = 0.0
+    m = 0
+    for t in range(4):
+        a, b = nbr[t, p], nbr[(t + 1) % 4, p]
+        if a < 0 or b < 0:
+            continue
+        e1x, e1y, e1z = X[a, 0] - X[p, 0], X[a, 1] - X[p, 1], X[a, 2] - X[p, 2]
+        e2x, e2y, e2z = X[b, 0] - X[p, 0], X[b, 1] - X[p, 1], X[b, 2] - X[p, 2]
+        cx, cy, cz = _cross(e1x, e1y, e1z, e2x, e2y, e2z)
+        rx, ry, rz = rx + cx, ry + cy, rz + cz
+        # d(e1 x e2)/dz_p = R_p x (e1 - e2); /dz_a = R_a x e2; /dz_b = e1 x R_b
+        qx, qy, qz = _cross(R[p, 0], R[p, 1], R[p, 2], e1x - e2x, e1y - e2y, e1z - e2z)
+        d[0, 0] += qx
+        d[0, 1] += qy
+        d[0, 2] += qz
+        qx, qy, qz = _cross(R[a, 0], R[a, 1], R[a, 2], e2x, e2y, e2z)
+        d[1 + t, 0] += qx
+        d[1 + t, 1] += qy
+        d[1 + t, 2] += qz
+        qx, qy, qz = _cross(e1x, e1y, e1z, R[b, 0], R[b, 1], R[b, 2])
+        u = 1 + (t + 1) % 4
+        d[u, 0] += qx
+        d[u, 1] += qy
+        d[u, 2] += qz
+        m += 1
+    ln = np.sqrt(rx * rx + ry * ry + rz * rz)
+    if m == 0 or ln == 0.0:
+        return 0.0, 0.0, 0.0, 0
+    sg = -1.0 if rx * R[p, 0] + ry * R[p, 1] + rz * R[p, 2] > 0.0 else 1.0
     f = sg / ln
-    return nx * f, ny * f, nz * f, e1x, e1y, e1z, e2x, e2y, e2z, f
+    nx, ny, nz = rx * f, ry * f, rz * f
+    # d(unit N) = (I - N N^T) d(raw N) * sign / |raw N|
+    for j in range(5):
+        pq = d[j, 0] * nx + d[j, 1] * ny + d[j, 2] * nz
+        d[j, 0] = (d[j, 0] - pq * nx) * f
+        d[j, 1] = (d[j, 1] - pq * ny) * f
+        d[j, 2] = (d[j, 2] - pq * nz) * f
+    return nx, ny, nz, m
 
 
 @nb.njit(cache=True, inline="always")
@@ -124,94 +176,85 @@ def _sampson(s, var, v, p, k, nx, ny, nz):
 
 
 @nb.njit(parallel=True, cache=True)
-def _triangle_chi2(X, R, s, var, v, valid, nb_a, nb_b, chi2, count):
-    """Per pixel: the summed squared Sampson residuals of its triangles, and their number."""
+def _pixel_chi2(X, R, s, var, v, valid, nbr, chi2, count):
+    """Per pixel: the summed squared Sampson residuals of its rows against its
+    normal (:func:`_pixel_normal`), and the number of triangles that gave it."""
     n = X.shape[0]
     P = s.shape[1]
     for p in nb.prange(n):
+        d = np.empty((5, 3))
         c = 0.0
-        m = 0.0
-        for t in range(4):
-            a, b = nb_a[t, p], nb_b[t, p]
-            if not (valid[p] and a >= 0 and b >= 0):
-                continue
-            nx, ny, nz = _triangle_normal(X, R, p, a, b)[:3]
+        nx, ny, nz, m = _pixel_normal(X, R, nbr, p, d)
+        if valid[p] and m > 0:
             for k in range(P):
                 r = _sampson(s, var, v, p, k, nx, ny, nz)[0]
                 c += r * r
-            m += 1.0
+        else:
+            m = 0
         chi2[p] = c
         count[p] = m
 
 
 @nb.njit(parallel=True, cache=True)
-def _triangle_rows(X, R, s, var, v, ds, dv, valid, nb_a, nb_b, weights, count, res, cols, vals):
+def _pixel_rows(X, R, s, var, v, ds, dv, valid, nbr, weights, res, cols, vals):
     """The weighted Sampson residuals of E and their Jacobian entries.
 
-    Row ``(p * 4 + t) * P + k`` is pair k against triangle t of pixel p, with
-    entries at the depths of p and of the triangle's other two pixels; rows
-    of missing triangles are zero.
+    Row ``p * P + k`` is pair k against pixel p's normal, with entries at the
+    depths of p and of its four neighbours (east, south, west, north; a
+    missing one's entry is 0 at column p); rows of pixels without a normal
+    are zero.
     """
     n = X.shape[0]
     P = s.shape[1]
     for p in nb.prange(n):
-        wt = np.sqrt(weights[p] / max(count[p], 1.0))
-        for t in range(4):
-            a, b = nb_a[t, p], nb_b[t, p]
-            base = (p * 4 + t) * P
-            for k in range(P):
-                res[base + k] = 0.0
-                for j in range(3):
-                    cols[base + k, j] = p
-                    vals[base + k, j] = 0.0
-            if not (valid[p] and a >= 0 and b >= 0):
-                continue
-            nx, ny, nz, e1x, e1y, e1z, e2x, e2y, e2z, f = _triangle_normal(X, R, p, a, b)
-            # d(unit N) = (I - N N^T) d(raw N) * sign / |raw N|
-            qx, qy, qz = _cross(R[p, 0], R[p, 1], R[p, 2], e1x - e2x, e1y - e2y, e1z - e2z)
-            pq = qx * nx + qy * ny + qz * nz
-            dpx, dpy, dpz = (qx - pq * nx) * f, (qy - pq * ny) * f, (qz - pq * nz) * f
-            qx, qy, qz = _cross(R[a, 0], R[a, 1], R[a, 2], e2x, e2y, e2z)
-            pq = qx * nx + qy * ny + qz * nz
-            dax, day, daz = (qx - pq * nx) * f, (qy - pq * ny) * f, (qz - pq * nz) * f
-            qx, qy, qz = _cross(e1x, e1y, e1z, R[b, 0], R[b, 1], R[b, 2])
-            pq = qx * nx + qy * ny + qz * nz
-            dbx, dby, dbz = (qx - pq * nx) * f, (qy - pq * ny) * f, (qz - pq * nz) * f
-            for k in range(P):
-                r, sd, sd2, ca, cb, wx, wy, wz = _sampson(s, var, v, p, k, nx, ny, nz)
-                # d r / d N of (w . N) / sqrt(N' C N)
-                ga, gb = var[p, k, 0] * ca * r / sd2, var[p, k, 1] * cb * r / sd2
-                gx = wx / sd - ga * v[p, k, 0, 0] - gb * v[p, k, 1, 0]
-                gy = wy / sd - ga * v[p, k, 0, 1] - gb * v[p, k, 1, 1]
-                gz = wz / sd - ga * v[p, k, 0, 2] - gb * v[p, k, 1, 2]
-                sa, sb, dsa, dsb = s[p, k, 0], s[p, k, 1], ds[p, k, 0], ds[p, k, 1]
-                dwx = (
-                    dsa * v[p, k, 0, 0]
-                    + sa * dv[p, k, 0, 0]
-                    - dsb * v[p, k, 1, 0]
-                    - sb * dv[p, k, 1, 0]
-                )
-                dwy = (
-                    dsa * v[p, k, 0, 1]
-                    + sa * dv[p, k, 0, 1]
-                    - dsb * v[p, k, 1, 1]
-                    - sb * dv[p, k, 1, 1]
-                )
-                dwz = (
-                    dsa * v[p, k, 0, 2]
-                    + sa * dv[p, k, 0, 2]
-                    - dsb * v[p, k, 1, 2]
-                    - sb * dv[p, k, 1, 2]
-                )
-                row = base + k
-                res[row] = r * wt
-                cols[row, 1] = a
-                cols[row, 2] = b
-                vals[row, 0] = (
-                    (dwx * nx + dwy * ny + dwz * nz) / sd + gx * dpx + gy * dpy + gz * dpz
-                ) * wt
-                vals[row, 1] = (gx * dax + gy * day + gz * daz) * wt
-                vals[row, 2] = (gx * dbx + gy * dby + gz * dbz) * wt
+        d = np.empty((5, 3))
+        wt = np.sqrt(weights[p])
+        nx, ny, nz, m = _pixel_normal(X, R, nbr, p, d)
+        for k in range(P):
+            row = p * P + k
+            res[row] = 0.0
+            cols[row, 0] = p
+            vals[row, 0] = 0.0
+            for j in range(4):
+                q = nbr[j, p]
+                cols[row, 1 + j] = q if q >= 0 else p
+                vals[row, 1 + j] = 0.0
+        if not (valid[p] and m > 0):
+            continue
+        for k in range(P):
+            r, sd, sd2, ca, cb, wx, wy, wz = _sampson(s, var, v, p, k, nx, ny, nz)
+            # d r / d N of (w . N) / sqrt(N' C N)
+            ga, gb = var[p, k, 0] * ca * r / sd2, var[p, k, 1] * cb * r / sd2
+            gx = wx / sd - ga * v[p, k, 0, 0] - gb * v[p, k, 1, 0]
+            gy = wy / sd - ga * v[p, k, 0, 1] - gb * v[p, k, 1, 1]
+            gz = wz / sd - ga * v[p, k, 0, 2] - gb * v[p, k, 1, 2]
+            sa, sb, dsa, dsb = s[p, k, 0], s[p, k, 1], ds[p, k, 0], ds[p, k, 1]
+            dwx = (
+                dsa * v[p, k, 0, 0]
+                + sa * dv[p, k, 0, 0]
+                - dsb * v[p, k, 1, 0]
+                - sb * dv[p, k, 1, 0]
+            )
+            dwy = (
+                dsa * v[p, k, 0, 1]
+                + sa * dv[p, k, 0, 1]
+                - dsb * v[p, k, 1, 1]
+                - sb * dv[p, k, 1, 1]
+            )
+            dwz = (
+                dsa * v[p, k, 0, 2]
+                + sa * dv[p, k, 0, 2]
+                - dsb * v[p, k, 1, 2]
+                - sb * dv[p, k, 1, 2]
+            )
+            row = p * P + k
+            res[row] = r * wt
+            vals[row, 0] = (
+                (dwx * nx + dwy * ny + dwz * nz) / sd + gx * d[0, 0] + gy * d[0, 1] + gz * d[0, 2]
+            ) * wt
+            for j in range(4):
+                if nbr[j, p] >= 0:
+                    vals[row, 1 + j] = (gx * d[1 + j, 0] + gy * d[1 + j, 1] + gz * d[1 + j, 2]) * wt
 
 
 def robust_energy(chi2, usable, scale):
@@ -249,8 +292,8 @@ def hs_residuals(
     -------
     J : sparse (M, n) Jacobian, r : (M,) IRLS-weighted residuals (r . r is
     the quadratic model of the robust energy), info : dict with ``valid``
-    (n,) rows usable, ``weights`` (n,), ``chi2`` (n,) mean squared
-    normalised residual per triangle, ``scale``.
+    (n,) rows usable, ``weights`` (n,), ``chi2`` (n,) summed squared
+    normalised residual of the pixel's P rows, ``scale``.
     """
     n = graph.n
     X = c_ref + R * z[:, None]
@@ -258,12 +301,10 @@ def hs_residuals(
     P = s.shape[1]
     valid = np.all(np.isfinite(s), axis=(1, 2)) & np.all(np.isfinite(ds), axis=(1, 2))
     valid &= np.all(var > 0, axis=(1, 2))
-    nb_a = np.stack([a for a, _ in graph.triangles])
-    nb_b = np.stack([b for _, b in graph.triangles])
+    nbr = np.stack([a for a, _ in graph.triangles])  # east, south, west, north
     chi2 = np.empty(n)
     count = np.empty(n)
-    _triangle_chi2(X, R, s, var, v, valid, nb_a, nb_b, chi2, count)
-    chi2 = chi2 / np.maximum(count, 1)
+    _pixel_chi2(X, R, s, var, v, valid, nbr, chi2, count)
     usable = valid & (count > 0)
     if scale is None:
         # The robust scale: the noise model's, or the residuals' own where the
@@ -281,11 +322,11 @@ def hs_residuals(
     if weights is None:
         weights = 1.0 / (1.0 + chi2 / scale) ** 2  # rho'(chi2): IRLS
     w = np.ascontiguousarray(weights, float)
-    res = np.empty(n * 4 * P)
-    cols = np.empty((n * 4 * P, 3), np.int64)
-    vals = np.empty((n * 4 * P, 3))
-    _triangle_rows(X, R, s, var, v, ds, dv, valid, nb_a, nb_b, w, count, res, cols, vals)
-    indptr = np.arange(0, 3 * len(res) + 1, 3)
+    res = np.empty(n * P)
+    cols = np.empty((n * P, 5), np.int64)
+    vals = np.empty((n * P, 5))
+    _pixel_rows(X, R, s, var, v, ds, dv, valid, nbr, w, res, cols, vals)
+    indptr = np.arange(0, 5 * len(res) + 1, 5)
     J = sp.csr_matrix((vals.ravel(), cols.ravel(), indptr), shape=(len(res), n))
     info = {"valid": usable, "weights": w, "chi2": chi2, "scale": scale}
     return J, res, info
