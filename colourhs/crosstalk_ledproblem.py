@@ -207,7 +207,7 @@ def _pose_derivatives(shot, board, origin, d, cam) -> np.ndarray:
     The board plane moved along its normal, or turned about its two in-plane
     axes through the board's centre; finite differences of the exact geometry.
     """
-    from colourhs.geometry import ray_plane_intersection
+    from colourhs.geometry import axis_angle, ray_plane_intersection
 
     def log_g(R, t):
         n = R @ np.array([0.0, 0.0, -1.0])
@@ -223,17 +223,10 @@ def _pose_derivatives(shot, board, origin, d, cam) -> np.ndarray:
     eps = 1e-5
     out[:, 0] = (log_g(shot.R, shot.t + eps * shot.normal) - base) / eps * POSE_STEP[0]
     for k, axis in enumerate((shot.R[:, 0], shot.R[:, 1])):
-        Q = _rotation(axis, eps)
+        Q = axis_angle(axis, eps)
         R = Q @ shot.R
         out[:, k + 1] = (log_g(R, centre - Q @ (centre - shot.t)) - base) / eps * POSE_STEP[k + 1]
     return np.nan_to_num(out)
-
-
-def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
-    """Rotation matrix by ``angle`` (rad) about unit ``axis`` (Rodrigues)."""
-    a = np.asarray(axis, float) / np.linalg.norm(axis)
-    K = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
-    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
 
 
 def _build_led_problem(rig, shots, fields, opts) -> _LedProblem:

@@ -233,6 +233,14 @@ def triangulate(uvs: np.ndarray, Ks, dists, Rs, ts) -> np.ndarray:
     return X
 
 
+def axis_angle(axis, angle: float) -> np.ndarray:
+    """Rotation matrix (3, 3) by ``angle`` radians about ``axis`` (any length, not zero)."""
+    from scipy.spatial.transform import Rotation  # here: an evaluation imports no scipy
+
+    k = np.asarray(axis, float)
+    return Rotation.from_rotvec(angle * k / np.linalg.norm(k)).as_matrix()
+
+
 def fixation_point(axes: np.ndarray, centres: np.ndarray) -> np.ndarray:
     """The point nearest (least squares) to every camera's optical axis, metres (3,).
 

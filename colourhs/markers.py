@@ -37,6 +37,7 @@ import numpy as np
 import pandas as pd
 from scipy.ndimage import map_coordinates
 from scipy.optimize import least_squares
+from scipy.spatial.transform import Rotation
 
 from colourhs.capture import Board, Camera, Rig, open_dataset, read_image
 from colourhs.geometry import normalised_coordinates, pixels_of, project, triangulate
@@ -459,9 +460,7 @@ def _kabsch(model: np.ndarray, world: np.ndarray) -> tuple[np.ndarray, np.ndarra
     ok = np.all(np.isfinite(world), axis=1)
     A, B = model[ok], world[ok]
     ca, cb = A.mean(axis=0), B.mean(axis=0)
-    U, _, Vt = np.linalg.svd((A - ca).T @ (B - cb))
-    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T))])
-    R = Vt.T @ D @ U.T
+    R = Rotation.align_vectors(B - cb, A - ca)[0].as_matrix()  # R (A - ca) ~ B - cb, det +1
     return R, cb - R @ ca
 
 

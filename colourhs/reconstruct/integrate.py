@@ -137,16 +137,11 @@ def refine_depth(
 
 
 def large_components(mask: np.ndarray, min_size: int) -> np.ndarray:
-    """``mask`` without its 4-connected components smaller than ``min_size`` pixels."""
-    from scipy.ndimage import label
+    """``mask`` (bool) without its 4-connected components smaller than ``min_size`` pixels."""
+    from skimage.morphology import remove_small_objects
 
-    lab, n = label(mask)
-    if n == 0:
-        return mask
-    sizes = np.bincount(lab.ravel())
-    keep = sizes >= min_size
-    keep[0] = False
-    return keep[lab]
+    # max_size (scikit-image >= 0.26) removes components of max_size pixels or fewer.
+    return remove_small_objects(np.asarray(mask, bool), max_size=min_size - 1, connectivity=1)
 
 
 def initial_surface(

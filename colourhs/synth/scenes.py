@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from colourhs.geometry import vertex_normals
+from colourhs.geometry import axis_angle, vertex_normals
 from colourhs.synth.brdf import Material
 
 WHITE_ALBEDO = 0.8  # reflectance of the board's white and of the white reference
@@ -47,14 +47,6 @@ class SceneGeometry:
     material_ids: np.ndarray
     materials: tuple[Material, ...]
     albedo: Callable[[np.ndarray, np.ndarray], np.ndarray]
-
-
-def axis_angle(axis, angle: float) -> np.ndarray:
-    """Rotation matrix (3, 3) by ``angle`` radians about ``axis`` (Rodrigues)."""
-    k = np.asarray(axis, float)
-    k = k / np.linalg.norm(k)
-    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
 
 
 def grid_mesh(nu: int, nv: int, wrap_u: bool = False) -> np.ndarray:
