@@ -292,3 +292,39 @@ def test_input_validation():
         sgm_depth_normal(cost[..., :1], normals[:, :, :1], rays, depths[:1])
     with pytest.raises(ValueError, match="out of range"):
         labelling_energy(np.full((4, 5), 6), cost, normals, rays, depths, ALPHA, TAU)
+
+
+_SGM_RUN = """
+import sys
+import numpy as np
+from colourhs.reconstruct.mrf import sgm_depth_normal
+rng = np.random.default_rng(0)
+H, W, K = 24, 32, 48
+cost = rng.random((H, W, K), dtype=np.float32)
+n = rng.normal(size=(H, W, K, 3)).astype(np.float32)
+n /= np.linalg.norm(n, axis=-1, keepdims=True)
+u, v = np.meshgrid(np.linspace(-0.3, 0.3, W), np.linspace(-0.2, 0.2, H))
+rays = np.stack([u, v, np.ones_like(u)], -1).astype(np.float32)
+lab, S = sgm_depth_normal(cost, n, rays, np.linspace(0.6, 1.0, K), 0.35, 30.0)
+sys.stdout.write(S.tobytes().hex())
+"""
+
+
+def test_same_result_compiled_afresh_or_from_the_cache(tmp_path):
+    """The SGM kernels give the same S whether numba compiles them or loads them
+    from its cache (with fastmath's "reassoc"/"contract" they did not: a fresh
+    checkout's first run differed from later ones). Two processes, one cache
+    folder; about 25 s (most of it compiling)."""
+    import os
+    import subprocess
+    import sys
+
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"))
+    runs = [
+        subprocess.run(
+            [sys.executable, "-c", _SGM_RUN], env=env, capture_output=True, text=True, check=True
+        ).stdout
+        for _ in range(2)
+    ]
+    assert list((tmp_path / "numba").rglob("*.nbc"))  # the second run loaded the cache
+    assert runs[0] == runs[1]

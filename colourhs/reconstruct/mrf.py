@@ -61,8 +61,14 @@ from numba.extending import overload
 __all__ = ["labelling_energy", "sgm_depth_normal"]
 
 # fastmath without the "nnan"/"ninf" flags: the prior tests j_hat for NaN/inf,
-# which those flags would allow LLVM to fold away.
-_FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
+# which those flags would allow LLVM to fold away; and without "reassoc" and
+# "contract": with them a kernel compiled afresh and the same kernel loaded
+# from numba's cache summed S in different orders (S differed by ~1e-7
+# relative; a tiny statue frame's refined depth then by up to 0.22 mm), so
+# a fresh checkout's first run disagreed with every later one. Without them
+# the two agree to the bit, at the same speed (SGM 160x240x192: 2.5-2.7 s CPU
+# against 2.3-2.8 s, a loaded machine).
+_FASTMATH = {"nsz", "arcp", "afn"}
 _DEN_EPS = 1e-12  # |n . r_q| at or below this: prediction uninformative
 _JH_MAX = 1e6  # |j_hat| beyond this: treated as uninformative (V = tau either way)
 
