@@ -57,11 +57,14 @@ EDGE_FOOTPRINTS = 6.0  # depth jump between neighbours that separates surfaces
 
 
 class SurfaceGraph:
-    """The pixels of a depth map, their 4-neighbour triangles and surfaces.
+    """The pixels of a depth map, their linked 4-neighbours and surfaces.
 
     Neighbours whose initial depths differ by more than ``edge_footprints``
     pixel footprints are not linked (a depth edge); connected linked pixels
-    form one surface.
+    form one surface. ``neighbours`` (4, n): each pixel's linked east, south,
+    west and north neighbour (its index among the graph's pixels, -1 where
+    none), counter-clockwise in the image: consecutive ones span p's
+    triangles (:func:`_pixel_normal`).
     """
 
     def __init__(
@@ -92,8 +95,7 @@ class SurfaceGraph:
 
         east, west = neighbour(0, 1), neighbour(0, -1)
         south, north = neighbour(1, 0), neighbour(-1, 0)
-        # The four triangles around each pixel, counter-clockwise in the image.
-        self.triangles = [(east, south), (south, west), (west, north), (north, east)]
+        self.neighbours = np.stack([east, south, west, north])
         p = np.concatenate([np.flatnonzero(east >= 0), np.flatnonzero(south >= 0)])
         q = np.concatenate([east[east >= 0], south[south >= 0]])
         g = sp.coo_matrix((np.ones(len(p)), (p, q)), shape=(n, n))
@@ -301,7 +303,7 @@ def hs_residuals(
     P = s.shape[1]
     valid = np.all(np.isfinite(s), axis=(1, 2)) & np.all(np.isfinite(ds), axis=(1, 2))
     valid &= np.all(var > 0, axis=(1, 2))
-    nbr = np.stack([a for a, _ in graph.triangles])  # east, south, west, north
+    nbr = graph.neighbours
     chi2 = np.empty(n)
     count = np.empty(n)
     _pixel_chi2(X, R, s, var, v, valid, nbr, chi2, count)
