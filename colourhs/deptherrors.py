@@ -65,6 +65,7 @@ def depth_errors(
     gt_normals: np.ndarray,
     width: int | None = None,
     height: int | None = None,
+    truth: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, dict]:
     """Per-pixel depth and normal errors of a depth map against a GT mesh.
 
@@ -79,6 +80,10 @@ def depth_errors(
         The GT mesh (metres) and its unit vertex normals.
     width, height : int, optional
         Image size, pixels (default: the depth map's; must match it).
+    truth : (depth, normals), optional
+        The GT already rendered into the reference camera
+        (:func:`colourhs.raycast.depth_normal_maps` of a cast the caller also
+        uses for something else); the GT mesh arguments are then not cast again.
 
     Returns
     -------
@@ -95,14 +100,16 @@ def depth_errors(
         raise ValueError(
             f"{depth_map.path}: depth map is {depth_map.depth.shape}, image is {(height, width)}"
         )
-    gd, gn = render_depth_normals(
-        np.asarray(gt_vertices, float),
-        np.asarray(gt_triangles),
-        np.asarray(gt_normals, float),
-        depth_map,
-        width,
-        height,
-    )
+    if truth is None:
+        truth = render_depth_normals(
+            np.asarray(gt_vertices, float),
+            np.asarray(gt_triangles),
+            np.asarray(gt_normals, float),
+            depth_map,
+            width,
+            height,
+        )
+    gd, gn = truth
     depth = np.asarray(depth_map.depth, float)
     err = depth - gd  # NaN where either is NaN
     n = np.asarray(depth_map.normal, float)

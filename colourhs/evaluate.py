@@ -54,7 +54,7 @@ from colourhs.depthfile import read_depth
 from colourhs.geometry import camera_centre, project, world_to_camera
 from colourhs.io import write_json
 from colourhs.ply import load_mesh, write_ply
-from colourhs.raycast import pixel_rays, raycasting_scene
+from colourhs.raycast import PixelHits, cast_pixels, depth_normal_maps, raycasting_scene
 
 __all__ = [
     "CONTRACT_COLUMNS",
@@ -233,7 +233,12 @@ def visible_vertices(
 
 
 def seen_surface(
-    vertices: np.ndarray, triangles: np.ndarray, camera, width: int, height: int
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    camera,
+    width: int,
+    height: int,
+    hits: PixelHits | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """What a camera sees of a mesh.
 
@@ -245,6 +250,9 @@ def seen_surface(
         A :class:`colourhs.capture.Camera` or :class:`colourhs.depthfile.DepthMap`.
     width, height : int
         Image size, pixels.
+    hits : PixelHits, optional
+        This mesh already cast from ``camera``'s pixels (:func:`colourhs.raycast.cast_pixels`);
+        cast here when None.
 
     Returns
     -------
@@ -258,17 +266,13 @@ def seen_surface(
         The hit points (one per True pixel, row-major), metres.
     """
     tri = np.asarray(triangles).reshape(-1, 3)
-    origin, dirs = pixel_rays(camera, width, height)
-    rays = np.concatenate([np.broadcast_to(origin, dirs.shape), dirs], axis=1)
-    ans = raycasting_scene(vertices, tri).cast_rays(o3d.core.Tensor(rays.astype(np.float32)))
-    t_hit = ans["t_hit"].numpy().astype(float)
-    hit = np.isfinite(t_hit)
+    if hits is None:
+        hits = cast_pixels(vertices, tri, None, camera, width, height)
     seen = np.zeros(len(tri), bool)
-    seen[ans["primitive_ids"].numpy()[hit].astype(np.int64)] = True
+    seen[hits.triangles] = True
     visible, _ = visible_vertices(vertices, tri, camera, width, height)
     seen |= visible[tri].any(axis=1)
-    points = origin + dirs[hit] * t_hit[hit, None]
-    return seen, hit.reshape(height, width), points
+    return seen, hits.hit.reshape(height, width), hits.points
 
 
 def evaluated_vertices(
@@ -388,11 +392,16 @@ def evaluate_frame(
     dist_v = None
     if gt_ply is not None:
         gv, gt_tri, gn = load_mesh(gt_ply)
-        _, _, depth_metrics = depth_errors(dm, gv, gt_tri, gn)
+        # One cast of the GT from the reference camera's pixels serves both metrics.
+        hits = cast_pixels(gv, gt_tri, gn, dm, dm.width, dm.height)
+        truth = depth_normal_maps(hits, dm)
+        _, _, depth_metrics = depth_errors(dm, gv, gt_tri, gn, truth=truth)
         info.update(depth_metrics)
         if mesh is not None:
             v, tri, _ = mesh
-            seen, pixel_mask, gt_points = seen_surface(gv, gt_tri, dm, dm.width, dm.height)
+            seen, pixel_mask, gt_points = seen_surface(
+                gv, gt_tri, dm, dm.width, dm.height, hits=hits
+            )
             if seen.any():
                 target = gt_tri[seen]
                 evaluated, visible = evaluated_vertices(v, tri, dm, pixel_mask, dilate_px)

@@ -7,6 +7,8 @@ Meshes are read by :func:`colourhs.ply.load_mesh`.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import open3d as o3d
 
@@ -14,8 +16,6 @@ from colourhs.capture import Camera
 from colourhs.geometry import backproject, pixel_grid
 
 SHADOW_EPS_M = 2e-5
-#: The last camera's pixel rays (:func:`pixel_rays`): evaluation casts the same rays twice.
-_RAYS: dict = {}
 
 
 def raycasting_scene(vertices: np.ndarray, triangles: np.ndarray) -> o3d.t.geometry.RaycastingScene:
@@ -128,11 +128,8 @@ def closest_points(
 def pixel_rays(camera, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
     """World rays through every pixel centre of a camera, row-major.
 
-    The last camera's rays are kept (read-only) and returned again for the
-    same camera and size: undistorting every pixel takes about half a second
-    at 640 x 480, and an evaluation casts the same rays twice. ``camera``: any
-    object with ``K``, ``dist``, ``R``, ``t`` (a Camera or a DepthMap); ``width``,
-    ``height``: the image size, pixels.
+    ``camera``: any object with ``K``, ``dist``, ``R``, ``t`` (a Camera or a
+    DepthMap); ``width``, ``height``: the image size, pixels.
 
     Returns
     -------
@@ -141,24 +138,40 @@ def pixel_rays(camera, width: int, height: int) -> tuple[np.ndarray, np.ndarray]
     directions : ndarray, shape (height * width, 3)
         Unit ray directions (world frame).
     """
-    params = (camera.K, camera.dist, camera.R, camera.t)
-    key = (int(width), int(height), *(np.asarray(x, float).tobytes() for x in params))
-    if key not in _RAYS:
-        grid = pixel_grid(width, height).reshape(-1, 2)
-        rays = backproject(grid, *params)
-        for a in rays:
-            a.flags.writeable = False
-        _RAYS.clear()
-        _RAYS[key] = rays
-    return _RAYS[key]
+    grid = pixel_grid(width, height).reshape(-1, 2)
+    return backproject(grid, camera.K, camera.dist, camera.R, camera.t)
 
 
-def _cast_pixels(vertices, triangles, normals, camera, width, height):
+@dataclass(frozen=True)
+class PixelHits:
+    """A mesh ray cast from every pixel centre of a camera (:func:`cast_pixels`).
+
+    ``hit`` is row-major (height * width,); the other arrays have one row per
+    hit, in the same order.
+    """
+
+    scene: o3d.t.geometry.RaycastingScene
+    origin: np.ndarray  # (3,) the camera centre, metres
+    hit: np.ndarray  # (H*W,) bool
+    points: np.ndarray  # (M, 3) hit points on the mesh, metres
+    normals: np.ndarray | None  # (M, 3) interpolated unit normals facing the camera
+    triangles: np.ndarray  # (M,) index of the triangle hit
+    barycentric: np.ndarray  # (M, 3) the hit's weights of that triangle's vertices
+    width: int
+    height: int
+
+
+def cast_pixels(vertices, triangles, normals, camera, width: int, height: int) -> PixelHits:
     """Ray cast a mesh from every pixel centre of a camera.
 
-    Returns the open3d scene, the hit mask (H*W,), the hit points (M, 3) on
-    the mesh and their interpolated unit normals facing the camera.
+    ``vertices`` (V, 3) metres, ``triangles`` (T, 3), ``normals`` (V, 3) unit
+    vertex normals or None (then ``PixelHits.normals`` is None); ``camera``:
+    any object with ``K``, ``dist``, ``R``, ``t``. One cast serves every use
+    of the same mesh and camera (the evaluation's depth errors and its seen
+    region).
     """
+    vertices = np.asarray(vertices, float)
+    triangles = np.asarray(triangles).reshape(-1, 3)
     scene = raycasting_scene(vertices, triangles)
     origin, dirs = pixel_rays(camera, width, height)
     rays = np.concatenate([np.broadcast_to(origin, dirs.shape), dirs], axis=1)
@@ -168,10 +181,28 @@ def _cast_pixels(vertices, triangles, normals, camera, width, height):
     uv = ans["primitive_uvs"].numpy()[hit].astype(float)
     bary = np.stack([1 - uv[:, 0] - uv[:, 1], uv[:, 0], uv[:, 1]], axis=1)
     points = np.einsum("mk,mkj->mj", bary, vertices[triangles[tri]])
-    n = np.einsum("mk,mkj->mj", bary, normals[triangles[tri]])
-    n /= np.linalg.norm(n, axis=1, keepdims=True)
-    n *= np.sign(np.sum(n * (origin - points), axis=1))[:, None]
-    return scene, hit, points, n
+    n = None
+    if normals is not None:
+        n = np.einsum("mk,mkj->mj", bary, np.asarray(normals, float)[triangles[tri]])
+        n /= np.linalg.norm(n, axis=1, keepdims=True)
+        n *= np.sign(np.sum(n * (origin - points), axis=1))[:, None]
+    return PixelHits(scene, origin, hit, points, n, tri, bary, int(width), int(height))
+
+
+def depth_normal_maps(hits: PixelHits, camera) -> tuple[np.ndarray, np.ndarray]:
+    """z-depth (H, W) in metres and world unit normals (H, W, 3) of a cast; NaN where none.
+
+    ``camera`` is the one ``hits`` was cast from (its ``R``, ``t`` give z).
+    """
+    n_px = hits.width * hits.height
+    depth = np.full(n_px, np.nan)
+    depth[hits.hit] = (hits.points @ np.asarray(camera.R, float).T + np.asarray(camera.t, float))[
+        :, 2
+    ]
+    nrm = np.full((n_px, 3), np.nan)
+    if hits.normals is not None:
+        nrm[hits.hit] = hits.normals
+    return depth.reshape(hits.height, hits.width), nrm.reshape(hits.height, hits.width, 3)
 
 
 def surface_points(
@@ -196,7 +227,8 @@ def surface_points(
     normals : (N, 3) interpolated unit normals facing the reference camera.
     pixels : (N,) flat pixel indices (row * width + column) in the reference camera.
     """
-    scene, hit, points, n = _cast_pixels(vertices, triangles, normals, reference, width, height)
+    hits = cast_pixels(vertices, triangles, normals, reference, width, height)
+    scene, hit, points, n = hits.scene, hits.hit, hits.points, hits.normals
     keep = np.ones(len(points), bool)
     for cam in cameras:
         for centre in (cam.centre, cam.light_centre):
@@ -222,9 +254,5 @@ def render_depth_normals(
     Ray casts the mesh from every pixel centre; NaN where a ray misses.
     Normals are the mesh's interpolated vertex normals, facing the camera.
     """
-    _, hit, points, n = _cast_pixels(vertices, triangles, normals, camera, width, height)
-    depth = np.full(width * height, np.nan)
-    depth[hit] = (points @ np.asarray(camera.R, float).T + np.asarray(camera.t, float))[:, 2]
-    nrm = np.full((width * height, 3), np.nan)
-    nrm[hit] = n
-    return depth.reshape(height, width), nrm.reshape(height, width, 3)
+    hits = cast_pixels(vertices, triangles, normals, camera, width, height)
+    return depth_normal_maps(hits, camera)

@@ -31,7 +31,7 @@ def shaded_render(
     """Shaded image of a triangle mesh seen by a pinhole camera (ray cast, no OpenGL).
 
     One ray per pixel centre (open3d ``RaycastingScene``, via
-    :func:`colourhs.raycast._cast_pixels`); Lambertian shading from a
+    :func:`colourhs.raycast.cast_pixels`); Lambertian shading from a
     headlight at the camera centre, ``ambient + (1 - ambient) |n . ray|``
     with the interpolated (area-weighted) vertex normal ``n``.
 
@@ -59,7 +59,7 @@ def shaded_render(
         The render, white where no ray hits the mesh.
     """
     from colourhs.capture import Camera
-    from colourhs.raycast import _cast_pixels
+    from colourhs.raycast import cast_pixels
 
     vertices = np.asarray(vertices, dtype=np.float64)
     triangles = np.asarray(triangles, dtype=np.int64)
@@ -73,7 +73,8 @@ def shaded_render(
         light_offset=np.zeros(3),
     )
     normals = vertex_normals(vertices, triangles)
-    scene, hit, points, n = _cast_pixels(vertices, triangles, normals, camera, width, height)
+    hits = cast_pixels(vertices, triangles, normals, camera, width, height)
+    hit, points, n = hits.hit, hits.points, hits.normals
     ray = points - camera.centre
     ray /= np.linalg.norm(ray, axis=1, keepdims=True)
     cos = np.nan_to_num(np.abs(np.sum(n * ray, axis=1)), nan=1.0)
@@ -85,20 +86,8 @@ def shaded_render(
         rgb = rgb / 255.0 if np.issubdtype(rgb.dtype, np.integer) else rgb.astype(np.float64)
         if rgb.shape != vertices.shape:
             raise ValueError(f"vertex_rgb must be (V, 3) = {vertices.shape}, got {rgb.shape}")
-        # Triangle and barycentric coordinates of each hit (the hit points lie on the mesh).
-        closest = scene.compute_closest_points(_o3d_tensor(points))
-        tri = closest["primitive_ids"].numpy().astype(np.int64)
-        uv = closest["primitive_uvs"].numpy().astype(np.float64)
-        bary = np.stack([1.0 - uv[:, 0] - uv[:, 1], uv[:, 0], uv[:, 1]], axis=1)
-        albedo = np.einsum("mk,mkj->mj", bary, rgb[triangles[tri]])
+        albedo = np.einsum("mk,mkj->mj", hits.barycentric, rgb[triangles[hits.triangles]])
     image = np.empty((height * width, 3))
     image[:] = BACKGROUND
     image[hit] = np.clip(albedo, 0.0, 1.0) * shade[:, None]
     return np.round(image.reshape(height, width, 3) * 255.0).astype(np.uint8)
-
-
-def _o3d_tensor(a: np.ndarray):
-    """A float32 open3d tensor of ``a``."""
-    import open3d as o3d
-
-    return o3d.core.Tensor(np.ascontiguousarray(a, dtype=np.float32))

@@ -22,9 +22,16 @@ from colourhs.evaluate import (
     seen_surface,
     visible_vertices,
 )
-from colourhs.geometry import look_at
+from colourhs.geometry import look_at, project
 from colourhs.ply import load_mesh, write_ply
-from colourhs.raycast import closest_on_triangles, closest_points, pixel_rays, render_depth_normals
+from colourhs.raycast import (
+    cast_pixels,
+    closest_on_triangles,
+    closest_points,
+    depth_normal_maps,
+    pixel_rays,
+    render_depth_normals,
+)
 
 W, H = 128, 96
 
@@ -207,17 +214,34 @@ def test_seen_surface_is_the_front():
     assert np.all(pixel[~visible] == -1) and np.all(pixel[visible] >= 0)
 
 
-def test_pixel_rays_are_kept_for_the_same_camera():
+def test_pixel_rays():
     cam = make_camera()
     origin, dirs = pixel_rays(cam, W, H)
-    assert dirs.shape == (W * H, 3) and not dirs.flags.writeable
+    assert dirs.shape == (W * H, 3)
     assert np.abs(np.linalg.norm(dirs, axis=1) - 1).max() < 1e-12
     assert np.allclose(origin, cam.centre, atol=1e-12)
-    assert pixel_rays(cam, W, H)[1] is dirs  # kept
-    moved = Camera("cam1", cam.K, cam.dist, cam.R, cam.t + [0.0, 0.0, 1e-3], "red", np.zeros(3))
-    assert pixel_rays(moved, W, H)[1] is not dirs
-    assert np.array_equal(pixel_rays(moved, W, H)[1], dirs)  # a shift: the same directions
-    assert pixel_rays(cam, W - 1, H)[1].shape == ((W - 1) * H, 3)
+    # Each ray projects back onto its own pixel centre.
+    uv = project(origin + 0.7 * dirs, cam.K, cam.dist, cam.R, cam.t)
+    grid = np.stack(np.meshgrid(np.arange(W), np.arange(H)), -1).reshape(-1, 2)
+    assert np.abs(uv - grid).max() < 1e-6
+
+
+def test_one_cast_serves_depth_errors_and_the_seen_region(tmp_path):
+    # The evaluation's shared cast gives what the two separate casts give.
+    cam = make_camera()
+    gv, gt, gn = sphere(0.1, 40)
+    gd, gnorm = render_depth_normals(gv, gt, gn, cam, W, H)
+    dm = read_depth(_depth_map(tmp_path, "d", gd + 1e-3, gnorm, cam))
+    hits = cast_pixels(gv, gt, gn, cam, W, H)
+    truth = depth_normal_maps(hits, cam)
+    assert np.array_equal(truth[0], gd, equal_nan=True)
+    assert np.array_equal(truth[1], gnorm, equal_nan=True)
+    a = depth_errors(dm, gv, gt, gn, truth=truth)
+    b = depth_errors(dm, gv, gt, gn)
+    assert a[2] == b[2] and abs(a[2]["depth_median_mm"] - 1.0) < 1e-3
+    s1 = seen_surface(gv, gt, cam, W, H, hits=hits)
+    s2 = seen_surface(gv, gt, cam, W, H)
+    assert all(np.array_equal(x, y) for x, y in zip(s1, s2, strict=True))
 
 
 def test_evaluate_frame_and_metrics_table(tmp_path):
