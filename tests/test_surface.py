@@ -13,7 +13,7 @@ from colourhs.reconstruct.frame import foreground, load_frame, reference_rays
 from colourhs.reconstruct.ml import candidate_labels
 from colourhs.reconstruct.sides import helmholtz_sides, whitened_cost
 from colourhs.reconstruct.spline import SplineSurface
-from colourhs.reconstruct.surface import SurfaceGraph, fill_holes, hs_residuals
+from colourhs.reconstruct.surface import SurfaceGraph, fill_holes, hs_residuals, surface_normals
 
 
 def _plane_depth(rays, c, n, d):
@@ -41,6 +41,24 @@ def test_fill_holes_is_exact_on_a_plane():
     hole = ~mask.ravel()
     assert np.all(np.isfinite(filled[hole])) and not np.isfinite(filled[~hole]).any()
     assert np.abs(filled[hole] - z[hole]).max() < 1e-9
+
+
+def test_surface_normals_exact_on_planes_and_never_across_a_depth_edge():
+    """Two planes, one 50 mm behind the other's edge: every pixel's normal is its
+    own plane's (to 1e-9), at the depth edge and the image border too."""
+    H, W = 40, 60
+    v, u = np.mgrid[0:H, 0:W]
+    rays = np.stack([((u - 30.2) / 250.0).ravel(), ((v - 19.6) / 260.0).ravel(), np.ones(H * W)], 1)
+    c = np.array([0.02, 0.01, -0.9])
+    n1, n2 = np.array([0.1, -0.2, 0.97]), np.array([-0.3, 0.1, 0.95])
+    n1, n2 = n1 / np.linalg.norm(n1), n2 / np.linalg.norm(n2)
+    left = (u < 27).ravel()
+    z = np.where(left, _plane_depth(rays, c, n1, 0.0), _plane_depth(rays, c, n2, 0.05))
+    graph = SurfaceGraph(np.ones(H * W, bool), (H, W), z, z / 250.0)
+    assert graph.n_surfaces == 2
+    got = surface_normals(graph, z, rays, c)
+    want = np.where(left[:, None], -n1, -n2)  # towards the camera (+z looks away from it)
+    assert np.abs(got - want).max() < 1e-9
 
 
 def test_spline_reproduces_smooth_depths_and_numbers_surfaces():

@@ -406,9 +406,12 @@ def refine_surface(
         out_z[filled] = zh[filled]
         valid |= filled
     out_n = np.full((H * W, 3), np.nan)
-    pix = np.flatnonzero(valid)
-    out_n[pix] = surface_normals(out_z, rays, c_ref, shape, pix)
-    valid[pix] = np.all(np.isfinite(out_n[pix]), axis=1)
+    if valid.any():  # the output's normals: E's, over the output's own links
+        # Filled holes had no footprint: it is z / focal length, so scale it from out_z.
+        per_m = float(np.median(footprint[graph.pix] / np.abs(z0[graph.pix])))
+        final = SurfaceGraph(valid, shape, out_z, np.abs(out_z) * per_m, edge_footprints)
+        out_n[final.pix] = surface_normals(final, out_z[final.pix], rays, c_ref)
+        valid[final.pix] = np.all(np.isfinite(out_n[final.pix]), axis=1)
     return (
         out_z,
         out_n,

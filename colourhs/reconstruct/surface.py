@@ -392,24 +392,30 @@ def _quadric(r: np.ndarray) -> np.ndarray:
     return np.stack([r[:, i] * r[:, j] for i in range(3) for j in range(i, 3)], axis=1)
 
 
-def surface_normals(z: np.ndarray, rays, c_ref, shape, pix) -> np.ndarray:
-    """Unit normals (towards the camera) of depth map ``z`` at ``pix``.
+def surface_normals(graph: SurfaceGraph, z: np.ndarray, rays, c_ref) -> np.ndarray:
+    """Unit normals (towards the camera) of a depth map at the graph's pixels.
 
-    Central differences, one-sided where a neighbour has no depth (NaN where
-    neither side has).
+    The normal E compares each pixel's eq. (5) rows with (:func:`_pixel_normal`):
+    central differences over the pixel's linked neighbours, one-sided at a
+    surface's edge, never across a depth edge. ``z`` (graph.n,) depths along
+    the unit ``rays`` (H*W, 3) from ``c_ref``, metres. NaN rows where a pixel
+    has no two consecutive linked neighbours (no triangle).
     """
-    H, W = shape
-    X = c_ref + rays * z[:, None]
-    r, c = np.divmod(pix, W)
+    R = np.ascontiguousarray(rays[graph.pix], float)
+    X = c_ref + R * np.asarray(z, float)[:, None]
+    out = np.empty((graph.n, 3))
+    _pixel_normals(X, R, graph.neighbours, out)
+    return out
 
-    def side(i, j):
-        i, j = np.clip(i, 0, H - 1), np.clip(j, 0, W - 1)
-        q = i * W + j
-        return np.where(np.isfinite(z[q]), q, pix)
 
-    du = X[side(r, c + 1)] - X[side(r, c - 1)]
-    dv = X[side(r + 1, c)] - X[side(r - 1, c)]
-    N = np.cross(du, dv)
-    with np.errstate(invalid="ignore", divide="ignore"):  # isolated pixels: NaN
-        N /= np.linalg.norm(N, axis=1, keepdims=True)
-    return N * np.where(np.sum(N * rays[pix], axis=1) > 0, -1.0, 1.0)[:, None]
+@nb.njit(parallel=True, cache=True)
+def _pixel_normals(X, R, nbr, out):
+    """:func:`_pixel_normal` of every pixel into ``out`` (n, 3); NaN where none."""
+    for p in nb.prange(X.shape[0]):
+        d = np.empty((5, 3))
+        nx, ny, nz, m = _pixel_normal(X, R, nbr, p, d)
+        if m == 0:
+            nx, ny, nz = np.nan, np.nan, np.nan
+        out[p, 0] = nx
+        out[p, 1] = ny
+        out[p, 2] = nz
