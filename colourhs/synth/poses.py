@@ -15,12 +15,10 @@ from colourhs.synth.rig import RigModel
 
 
 def rotation_xyz(ax: float, ay: float, az: float) -> np.ndarray:
-    """Rotation Rz(az) Ry(ay) Rx(ax), angles in radians."""
-    cx, sx, cy, sy, cz, sz = np.cos(ax), np.sin(ax), np.cos(ay), np.sin(ay), np.cos(az), np.sin(az)
-    Rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
-    Ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
-    Rz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
-    return Rz @ Ry @ Rx
+    """Rotation Rz(az) Ry(ay) Rx(ax), angles in radians (extrinsic x, y, z)."""
+    from scipy.spatial.transform import Rotation
+
+    return Rotation.from_euler("xyz", [ax, ay, az]).as_matrix()
 
 
 def board_poses(
