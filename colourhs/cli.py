@@ -37,6 +37,7 @@ from colourhs.commands import (  # noqa: F401 (imported from here by users)
     _run,
     _synth,
     _validate,
+    frame_indices,
 )
 
 NUISANCE_SWITCHES = ("light_falloff", "vignetting", "crosstalk", "noise", "saturate")
@@ -103,6 +104,20 @@ def build_parser(show_defaults: bool | Collection[str] = False) -> argparse.Argu
         default=[],
         choices=NUISANCE_SWITCHES,
         help="nuisances to switch off (default: none, every nuisance on)",
+    )
+    s.add_argument(
+        "--frames",
+        type=frame_indices,
+        default=None,
+        help="render only these frames of the sheet's sequence: first-last and single "
+        "indices, comma-separated, from 0 (e.g. 40-59 for frames 000040 to 000059 of the "
+        "paper preset's 201); each equals the same frame of a full render (default: all)",
+    )
+    s.add_argument(
+        "--scenes",
+        default=None,
+        help="comma-separated scenes to render, of plane, statue, toy, sheet (with their "
+        "chromatic captures; default all); the calibration captures are always rendered",
     )
     s.set_defaults(func=_synth)
 

@@ -4,6 +4,7 @@ parsed arguments (the Snakemake rules call these subcommands)."""
 
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import shlex
@@ -65,6 +66,21 @@ def _defaults(command: str) -> dict:
     return dict(DEFAULTS)
 
 
+def frame_indices(text: str) -> tuple[int, ...]:
+    """Frame indices from ``"40-59"``, ``"3"`` or ``"0-2,7"`` (ranges inclusive), sorted."""
+    out = set()
+    for item in text.split(","):
+        first, sep, last = item.strip().partition("-")
+        if not first.isdigit() or (sep and not last.isdigit()):
+            raise argparse.ArgumentTypeError(
+                f"frames {text!r}: expected FIRST-LAST or INDEX, comma-separated"
+            )
+        out.update(range(int(first), int(last if sep else first) + 1))
+    if not out:
+        raise argparse.ArgumentTypeError(f"frames {text!r}: an empty range")
+    return tuple(sorted(out))
+
+
 def _synth(args) -> int:
     from colourhs.synth.dataset import PRESETS, synthesise
     from colourhs.synth.rig import Nuisances
@@ -72,6 +88,7 @@ def _synth(args) -> int:
     if args.preset not in PRESETS:
         raise ValueError(f"unknown preset {args.preset!r}; presets: {', '.join(PRESETS)}")
     nuisances = Nuisances().without(*args.off)
+    scenes = None if args.scenes is None else tuple(s.strip() for s in args.scenes.split(","))
     synthesise(
         args.out,
         args.preset,
@@ -79,6 +96,8 @@ def _synth(args) -> int:
         nuisances=nuisances,
         overwrite=args.overwrite,
         workers=args.workers,
+        scenes=scenes,
+        frames=args.frames,
     )
     print(f"wrote {args.out}")
     return 0

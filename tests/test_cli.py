@@ -242,6 +242,14 @@ USER_ERRORS = {  # argv -> what the one line must say
     "object": (["chromaticity", "{d}", "nosuch", "{o}/c.h5"], ["nosuch", "toy"]),
     "dataset": (["markers", "{o}/nowhere", "{o}/p.csv"], ["dataset", "nowhere: no such file"]),
     "preset": (["synth", "{o}/s", "--preset", "huge"], ["unknown preset 'huge'", "demo"]),
+    "frames": (
+        ["synth", "{o}/s", "--preset", "tiny", "--frames", "2-3"],
+        ["frames [3]: the tiny preset's sheet has frames 0-2"],
+    ),
+    "synth scene": (
+        ["synth", "{o}/s", "--scenes", "sheet,nosuch"],
+        ["unknown scenes ['nosuch']", "plane, statue, toy, sheet"],
+    ),
     "variant": (
         ["run", "{d}", "--directory", "{o}", "--variants", "vh,foo"],
         ["unknown variant(s) 'foo'", "bayes_full"],

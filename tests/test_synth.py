@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import json
 import shutil
 
@@ -10,7 +11,8 @@ import h5py
 import numpy as np
 import pytest
 
-from colourhs.capture import CaptureFormatError, load_rig, open_dataset, read_image
+from colourhs.capture import CaptureFormatError, load_rig, open_dataset, read_image, validate
+from colourhs.commands import frame_indices
 from colourhs.geometry import project
 from colourhs.helmholtz import constraint_residual, pair_rows, sample_bilinear
 from colourhs.ply import load_mesh
@@ -260,6 +262,41 @@ def test_deterministic_for_a_seed(tmp_path):
     rel = "chromatic/toy/red/cam2.png"
     assert (a / rel).read_bytes() == (b / rel).read_bytes()
     assert (a / rel).read_bytes() != (c / rel).read_bytes()
+
+
+def _files(root):
+    return {str(p.relative_to(root)): p for p in sorted(root.rglob("*")) if p.is_file()}
+
+
+def test_a_slice_of_the_sequence_equals_the_full_render(tiny_dataset, tmp_path):
+    """Sheet frames 1-2 of 0-2 alone: every file equals the full render's (same
+    seed and preset; PNG, PLY, JSON and HDF5 bytes), and only frame 000000's
+    images, masks and mesh are missing. The slice, whose frames start at 000001,
+    is a valid dataset."""
+    part = synthesise(tmp_path / "slice", "tiny", frames=range(1, 3), progress=False)
+    full, sliced = _files(tiny_dataset), _files(part)
+    missing = {f"scenes/sheet/{k}/000000{e}" for k, e in (("frames", ""), ("masks", ""))}
+    missing = {f"{m}/{c}.png" for m in missing for c in ("cam1", "cam2", "cam3")}
+    assert set(full) - set(sliced) == missing | {"scenes/sheet/gt/000000.ply"}
+    assert set(sliced) <= set(full)
+    different = [k for k, p in sliced.items() if p.read_bytes() != full[k].read_bytes()]
+    assert different == []
+    assert len(sliced) == 93  # measured: 93 of the full render's 100 files
+    summary = validate(part)
+    assert open_dataset(part).scenes["sheet"].frames == ("000001", "000002")
+    assert summary["scenes"]["sheet"]["frames"] == 2
+    with pytest.raises(ValueError, match="frames \\[3\\]: the tiny preset's sheet has frames 0-2"):
+        synthesise(tmp_path / "x", "tiny", frames=[2, 3], progress=False)
+    with pytest.raises(ValueError, match="the sheet, which is not rendered"):
+        synthesise(tmp_path / "x", "tiny", frames=[2], scenes=("plane",), progress=False)
+
+
+def test_frame_indices_of_the_command_line():
+    assert frame_indices("40-59") == tuple(range(40, 60))
+    assert frame_indices("7,0-2") == (0, 1, 2, 7)
+    for bad in ("5-a", "-3", "", "4,"):
+        with pytest.raises(argparse.ArgumentTypeError, match="expected FIRST-LAST"):
+            frame_indices(bad)
 
 
 def test_failed_render_leaves_nothing(tmp_path, monkeypatch):

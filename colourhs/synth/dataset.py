@@ -226,7 +226,7 @@ class _Job:
     gt_chroma: str | None = None  # relpath of the true chromaticity maps
 
 
-def _jobs(preset: Preset, poses, parts, content: Content | None = None) -> list[_Job]:
+def _jobs(preset: Preset, poses, parts, content: Content | None = None, frames=None) -> list[_Job]:
     content = fixed_content(preset) if content is None else content
     masks = content.mask_mode != "none"
     board = preset.board
@@ -261,7 +261,7 @@ def _jobs(preset: Preset, poses, parts, content: Content | None = None) -> list[
         )
     if "scenes" in parts:
         n = preset.sheet_frames
-        for f in range(n):
+        for f in range(n) if frames is None else frames:
             jobs.append(
                 _Job(
                     lambda f=f: content.sheet(f / max(n - 1, 1)),
@@ -313,6 +313,7 @@ def synthesise(
     workers: int | None = None,
     scenes: tuple[str, ...] | None = None,
     exact: bool = False,
+    frames=None,
 ) -> Path:
     """Render a synthetic colour HS dataset into ``out`` (capture format v1).
 
@@ -340,6 +341,11 @@ def synthesise(
     exact : randomised presets: force 16-bit images and exact masks, keeping
         the rest of the seed's draw (for consistency tests). The fixed
         presets are always so.
+    frames : render only these frames of the sheet's sequence (indices in
+        ``range(preset.sheet_frames)``, e.g. ``range(40, 60)``); default all. A
+        frame's shape (its phase is ``i / (sheet_frames - 1)``) and noise (drawn
+        per image from ``seed`` and the image's path) do not depend on which other
+        frames are rendered: its files equal those of a full render.
 
     Returns
     -------
@@ -351,9 +357,15 @@ def synthesise(
     unknown = set(parts) - set(PARTS)
     if unknown:
         raise ValueError(f"unknown parts {sorted(unknown)}; choose from {PARTS}")
+    if scenes is not None and set(scenes) - set(SCENE_META):
+        unknown = sorted(set(scenes) - set(SCENE_META))
+        raise ValueError(f"unknown scenes {unknown}; scenes: {', '.join(SCENE_META)}")
+    if frames is not None and ("scenes" not in parts or "sheet" not in (scenes or ("sheet",))):
+        raise ValueError("frames selects frames of the sheet, which is not rendered")
     if out.exists() and not overwrite:
         raise FileExistsError(f"{out}: already exists (pass overwrite=True to replace it)")
     workers = (os.cpu_count() or 1) if workers is None else int(workers)
+    frames = _frame_selection(p, frames)
     if p.randomised:
         from colourhs.synth.randomrig import RANGES_BY_NAME, describe, draw_random
 
@@ -393,7 +405,7 @@ def synthesise(
     try:
         with _single_threaded_blas():
             _write_dataset(
-                tmp, rig, p, poses, seed, nuis, parts, progress, workers, scenes, content
+                tmp, rig, p, poses, seed, nuis, parts, progress, workers, scenes, content, frames
             )
         if out.exists():
             shutil.rmtree(out)
@@ -404,10 +416,24 @@ def synthesise(
     return out
 
 
+def _frame_selection(preset: Preset, frames=None) -> tuple[int, ...] | None:
+    """The sheet frames to render, checked: sorted unique indices in
+    ``range(preset.sheet_frames)``, or None (all)."""
+    if frames is None:
+        return None
+    out = tuple(sorted({int(f) for f in frames}))
+    bad = [f for f in out if not 0 <= f < preset.sheet_frames]
+    if bad or not out:
+        raise ValueError(
+            f"frames {bad or '(none)'}: the {preset.name} preset's sheet has frames "
+            f"0-{preset.sheet_frames - 1}"
+        )
+    return out
+
+
 def _write_dataset(
-    root, rig, p, poses, seed, nuis, parts, progress, workers, scenes=None, content=None
+    root, rig, p, poses, seed, nuis, parts, progress, workers, scenes, content, frames
 ):
-    content = fixed_content(p) if content is None else content
     (root / "rig.json").write_text(json.dumps(rig_json(rig, p, p.board), indent=2))
     gt = root / "gt"
     gt.mkdir()
@@ -432,7 +458,7 @@ def _write_dataset(
             d = root / "scenes" / name
             d.mkdir(parents=True, exist_ok=True)
             (d / "scene.json").write_text(json.dumps(meta, indent=2))
-    jobs = _jobs(p, poses, parts, content)
+    jobs = _jobs(p, poses, parts, content, frames)
     if scenes is not None:
         jobs = [j for j in jobs if _scene_of(j) in (None, *scenes)]
     rays = [camera_rays(c, p.width, p.height, p.supersample) for c in rig.cameras]
