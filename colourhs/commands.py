@@ -35,7 +35,7 @@ RECONSTRUCT_PARAMS = {
     "min_component": (int, "smallest kept surface, pixels (default: 0.2 %% of the image)"),
     "link_m": (float, "tangent-plane distance that links neighbours into one surface, metres"),
     "surface_iterations": (int, "Levenberg-Marquardt steps before and after the depth search"),
-    "spline_px": (float, "spline control spacing, pixels (default: 1/80 of the width)"),
+    "spline_px": (float, "spline control spacing, pixels (default: 1/120 of the width)"),
     "blur_px": (float, "blur of the Helmholtz sides, pixels (default: sides.BLUR_PX)"),
 }
 

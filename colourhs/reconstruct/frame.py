@@ -184,7 +184,7 @@ def reconstruct(
     surface_iterations, spline_px : the final refinement
         (:func:`colourhs.reconstruct.refine.refine_surface`):
         Levenberg-Marquardt steps before and after its depth search, and the
-        spline control spacing (default 1/80 of the width,
+        spline control spacing (default 1/120 of the width,
         :func:`colourhs.reconstruct.spline.default_spacing`).
     blur_px : Gaussian blur of the Helmholtz sides before sampling, pixels
         (ML HS's continuous step and the refinement; default

@@ -13,21 +13,30 @@ import scipy.sparse as sp
 
 
 def default_spacing(width: int) -> float:
-    """Spline control spacing in pixels: 1/80 of the image width (at least 4).
+    """Spline control spacing in pixels: 1/120 of the image width (at least 4).
 
-    It trades the detail a spline can hold for the number of free depth
-    modes the noise can exploit; a fraction of the width is a fixed field
-    angle, so the same detail of an object at any resolution. Measured on a
-    random rig's statue (640x480, exact data): 1/40 of the width left
-    0.40 mm median depth error, 1/80 0.066 mm, 1/160 0.068 mm; with noise
-    1/80 was also better than 1/40 (1.1 against 1.6 mm). Those figures
-    predate E's pixel normals (:mod:`colourhs.reconstruct.surface`);
-    remeasured after it on another rig's statue (random-tiny ranges, seed 1,
-    640x480, exact data, true calibration): 1/80 1.40 mm, 1/160 0.19 mm,
-    1/320 0.32 mm. Not changed yet: a finer spline also fits more noise, and
-    the randomised rigs under noise have not been measured with it.
+    Beyond the paper (its Bayesian HS has no spline). The spacing trades the
+    detail a spline can hold for the number of free depth modes the noise
+    can exploit. A fraction of the width is a fixed field angle, so the same
+    detail of an object at any resolution, and more pixels per control point
+    (less noise per mode) as the resolution grows; 4 px is the floor under
+    which a control point is no longer constrained by the pixels around it
+    (at 480 px wide and less the floor applies). Measured on randomised rigs
+    (``--preset random``, 640x480, so 8 / 5.3 / 4 px), statue depth median
+    |error| in mm for 1/80, 1/120, 1/160 of the width:
+
+    - all nuisances but cross-talk, true calibration, seeds 0-3: 0.61 / 0.21
+      / 0.35, 1.78 / 0.27 / 0.29, 0.28 / 0.09 / 0.24, 0.26 / 0.04 / 0.08
+      (normals 0.53-1.14 deg at 1/80, 0.29-0.54 at 1/120); six
+      Levenberg-Marquardt steps instead of three changed none of them by more
+      than 0.09 mm;
+    - exact data, seeds 1 and 3: 0.60 / 0.031 / 0.077 and 0.048 / 0.028 / 0.030.
+
+    Planes and sheets, and every scene with the pipeline's own calibration:
+    ``benchmarks/generalisation.py`` (the commit that set 1/120 gives its
+    before and after).
     """
-    return max(4.0, width / 80.0)
+    return max(4.0, width / 120.0)
 
 
 def cubic_weights(t: np.ndarray) -> np.ndarray:
