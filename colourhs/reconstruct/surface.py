@@ -397,9 +397,9 @@ def surface_normals(graph: SurfaceGraph, z: np.ndarray, rays, c_ref) -> np.ndarr
 
     The normal E compares each pixel's eq. (5) rows with (:func:`_pixel_normal`):
     central differences over the pixel's linked neighbours, one-sided at a
-    surface's edge, never across a depth edge. ``z`` (graph.n,) depths along
-    the unit ``rays`` (H*W, 3) from ``c_ref``, metres. NaN rows where a pixel
-    has no two consecutive linked neighbours (no triangle).
+    surface's edge, never across a depth edge. ``z`` (graph.n,) z-depths,
+    metres, along ``rays`` (H*W, 3, unit z-depth) from ``c_ref``. NaN rows
+    where a pixel has no two consecutive linked neighbours (no triangle).
     """
     R = np.ascontiguousarray(rays[graph.pix], float)
     X = c_ref + R * np.asarray(z, float)[:, None]
