@@ -462,3 +462,17 @@ def test_readme_commands_exist():
     ci = (PROJECT_ROOT / ".ci" / "run").read_text()
     assert "bash scripts/setup.sh && .venv/bin/python -m pytest" in ci
     assert Path(PROJECT_ROOT / "scripts" / "setup.sh").exists()
+
+
+def test_synth_help_names_exactly_the_presets(capsys):
+    """The help once named a preset (random-tiny-lens) that ``PRESETS`` refused."""
+    import re
+
+    from colourhs.synth.dataset import PRESETS
+
+    with pytest.raises(SystemExit):
+        main(["synth", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    listed = re.search(r"--preset PRESET (.+?) \(default demo\)", text).group(1)
+    listed = re.sub(r"-\s+", "-", listed)  # argparse may wrap a line after a hyphen
+    assert set(re.split(r", | or ", listed)) == set(PRESETS)

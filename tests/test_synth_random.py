@@ -414,3 +414,16 @@ def test_hs_constraint_holds_at_ground_truth(tmp_path, seed):
         r, n = _residuals(root, scene)
         assert n > 5000, scene
         assert np.nanmedian(r) < 1e-3, (scene, np.nanmedian(r))
+
+
+def test_lens_preset_draws_skewed_cameras_with_rational_and_thin_prism_terms():
+    """``--preset random-tiny-lens``: the random-tiny rig with the camera model's
+    less common coefficients (rational and thin-prism terms, skew)."""
+    from colourhs.synth.randomrig import RANGES_BY_NAME, draw_random
+    from colourhs.synth.rig import Nuisances
+
+    p = PRESETS["random-tiny-lens"]
+    d = draw_random(3, p.width, p.height, Nuisances(), RANGES_BY_NAME[p.random_ranges])
+    for cam in d.rig.cameras:
+        assert len(cam.dist) >= 12 and np.all(cam.dist[5:8] != 0) and np.any(cam.dist[8:12] != 0)
+        assert cam.K[0, 1] != 0

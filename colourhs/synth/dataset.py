@@ -109,6 +109,19 @@ PRESETS = {
         randomised=True,
         random_ranges="random-tiny",
     ),
+    # random-tiny with skewed cameras and rational and thin-prism lens terms
+    # (randomranges.RANGES_BY_NAME), for the camera model's less common coefficients.
+    "random-tiny-lens": Preset(
+        "random-tiny-lens",
+        160,
+        120,
+        0.0,
+        3,
+        sheet_frames=4,
+        statue_level=5,
+        randomised=True,
+        random_ranges="random-tiny-lens",
+    ),
 }
 
 
