@@ -109,20 +109,12 @@ PRESETS = {
         randomised=True,
         random_ranges="random-tiny",
     ),
-    # random-tiny with skewed cameras and rational and thin-prism lens terms
-    # (randomranges.RANGES_BY_NAME), for the camera model's less common coefficients.
-    "random-tiny-lens": Preset(
-        "random-tiny-lens",
-        160,
-        120,
-        0.0,
-        3,
-        sheet_frames=4,
-        statue_level=5,
-        randomised=True,
-        random_ranges="random-tiny-lens",
-    ),
 }
+# random-tiny with skewed cameras and rational and thin-prism lens terms
+# (randomranges.RANGES_BY_NAME), for the camera model's less common coefficients.
+PRESETS["random-tiny-lens"] = replace(
+    PRESETS["random-tiny"], name="random-tiny-lens", random_ranges="random-tiny-lens"
+)
 
 
 @dataclass(frozen=True)
