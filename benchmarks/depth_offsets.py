@@ -36,7 +36,8 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from generalisation import _seeds
+
+from colourhs.commands import frame_indices as _seeds
 
 HERE = Path(__file__).parent
 SCENES = ("plane", "sheet")

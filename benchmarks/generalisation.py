@@ -45,6 +45,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from colourhs.commands import frame_indices
 from colourhs.variants import VARIANTS
 
 HERE = Path(__file__).parent
@@ -57,14 +58,6 @@ TARGETS = {  # issue 11: median over seeds (worst seed within 2x)
     ("toy", "bayes_full", "depth_median_mm"): 2.0,
     ("sheet", "bayes_ph", "depth_median_mm"): 0.5,
 }
-
-
-def _seeds(text: str) -> list[int]:
-    out = []
-    for part in text.split(","):
-        a, _, b = part.partition("-")
-        out += list(range(int(a), int(b or a) + 1))
-    return out
 
 
 def calibrate(data: Path, calib: Path) -> dict:
@@ -301,7 +294,7 @@ def main(argv=None) -> dict:
         table = pd.read_csv(args.summarise)
     else:
         tables = []
-        for seed in _seeds(args.seeds):
+        for seed in frame_indices(args.seeds):
             tables.append(
                 run_seed(seed, args.preset, args.sheet_frames, args.keep, args.variants.split(","))
             )

@@ -39,7 +39,9 @@ from dataclasses import replace
 from pathlib import Path
 
 import pandas as pd
-from generalisation import _seeds, calibrate, calibration_errors, evaluate_variant
+from generalisation import calibrate, calibration_errors, evaluate_variant
+
+from colourhs.commands import frame_indices as _seeds
 
 HERE = Path(__file__).parent
 SCENES = ("plane", "sheet")

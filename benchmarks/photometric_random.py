@@ -54,6 +54,7 @@ import numpy as np
 import pandas as pd
 
 from colourhs import photometric as ph
+from colourhs.commands import frame_indices
 
 HERE = Path(__file__).parent
 ROOT = HERE.parent
@@ -209,17 +210,9 @@ def summary(df: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(out)
 
 
-def _seeds(text: str) -> list[int]:
-    out = []
-    for part in text.split(","):
-        lo, _, hi = part.partition("-")
-        out += list(range(int(lo), int(hi or lo) + 1))
-    return out
-
-
 def main(argv=None) -> pd.DataFrame:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--seeds", type=_seeds, default=_seeds("0-7"))
+    ap.add_argument("--seeds", type=frame_indices, default=frame_indices("0-7"))
     ap.add_argument("--preset", choices=("random", "random-tiny", "demo"), default="random")
     ap.add_argument("--nuisances", choices=("noxt", "all"), default="noxt")
     ap.add_argument("--poses", type=lambda s: s.split(","), default=["marker", "truth"])
