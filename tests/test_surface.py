@@ -164,8 +164,8 @@ def test_lm_stops_on_a_converged_surface(plane_sides, monkeypatch):
     assert graph.n_surfaces == 5
     problem = rf._problem(graph, rays[graph.pix], sides, ref.centre, 8.0, 1e-3, rf.ROBUST)
     solves = []
-    real = rf.spsolve
-    monkeypatch.setattr(rf, "spsolve", lambda A, b: solves.append(1) or real(A, b))
+    real = rf.solve_spd
+    monkeypatch.setattr(rf, "solve_spd", lambda A, b: solves.append(1) or real(A, b))
     c, energy = problem.lm(problem.fit(z[graph.pix]), 4)
     assert len(solves) <= 4 + 2, len(solves)
     assert np.all(np.isfinite(c)) and energy[-1] <= energy[0]

@@ -112,12 +112,13 @@ def _parabola(c_m, c_0, c_p):
     return np.clip(np.nan_to_num(off), -0.5, 0.5)
 
 
-def _subpixel(volume: np.ndarray, labels: np.ndarray) -> np.ndarray:
+def _subpixel(volume: np.ndarray, rows: np.ndarray, labels: np.ndarray) -> np.ndarray:
+    """Sub-label positions (N,) of ``labels`` in rows ``rows`` of ``volume`` (M, L):
+    the vertex of the parabola through the label and its two neighbours."""
     K = volume.shape[1]
-    idx = np.arange(len(labels))
     lm = np.clip(labels - 1, 0, K - 1)
     lp = np.clip(labels + 1, 0, K - 1)
-    off = _parabola(volume[idx, lm], volume[idx, labels], volume[idx, lp])
+    off = _parabola(volume[rows, lm], volume[rows, labels], volume[rows, lp])
     inside = (labels > 0) & (labels < K - 1)
     return labels + np.where(inside, off, 0.0)
 
@@ -215,8 +216,6 @@ def reconstruct(
         raise ValueError("no foreground pixels in the reference camera: nothing to reconstruct")
     pairs = pair_arrays(rig)
     evaluate = data_term_evaluator(frame, ref, pairs)
-    # float16 normals: half the memory of the volume.
-    cost, normals = evaluate(rays[pix], depths, np.float16, progress)
     info = {
         "method": method,
         "reference": ref.name,
@@ -228,26 +227,25 @@ def reconstruct(
     }
     shape = (H, W)
     if method == "ml":
+        # float16 normals: half the memory of the volume.
+        cost, normals = evaluate(rays[pix], depths, np.float16, progress)
         z, nrm, ok, conf = _ml_solution(
             frame, cost, depths, pix, rays, ref, pairs, shape, max_cost, blur_px
         )
     else:
-        labels, frac, normals = _bayes_labelling(
-            cost / cost_scale,
-            normals,
-            pix,
-            rays,
-            depths,
-            shape,
-            alpha,
-            tau,
-            info,
-            INVALID_COST / cost_scale,
+        box, local = _mrf_box(pix, shape)
+        h, w = box[1] - box[0], box[3] - box[2]
+        # The volumes over the MRF's box, the data term written into them directly.
+        cost = np.full((h * w, n_labels), INVALID_COST, np.float32)
+        normals = np.zeros((h * w, n_labels, 3), np.float16)
+        evaluate(rays[pix], depths, np.float16, progress, out=(cost, normals, local))
+        labels, frac = _bayes_labelling(
+            cost, normals, local, box, rays, depths, shape, alpha, tau, info, cost_scale
         )
         z, nrm, ok, conf = _labelled_surface(
-            cost, normals, labels, frac, depths, pix, shape, max_cost
+            cost[local, labels], normals[local, labels], frac, depths, pix, shape, max_cost
         )
-        del normals
+        del cost, normals
         if refine and ok.sum() > 10:
             min_px = int(0.002 * H * W if min_component is None else min_component)
             # Wrong labels (a few labels off or worse) must not move the surface.
@@ -307,26 +305,31 @@ def depth_hypotheses(
 
 
 def data_term_evaluator(frame: Frame, ref: Camera, pairs):
-    """``evaluate(rays, depths, normal_dtype=np.float32, bar=False)``: the eq. (5)
-    data term (:func:`colourhs.reconstruct.dataterm.data_term`) of rays from
-    ``ref``'s centre at each hypothesised depth, in chunks of ``CHUNK``
-    pixels (bounds the float32 normals buffer); returns the (N, L) cost and
-    (N, L, 3) normals."""
+    """``evaluate(rays, depths, normal_dtype=np.float32, bar=False, out=None)``:
+    the eq. (5) data term (:func:`colourhs.reconstruct.dataterm.data_term`)
+    of rays from ``ref``'s centre at each hypothesised depth, in chunks of
+    ``CHUNK`` pixels (bounds the float32 normals buffer); returns the (N, L)
+    cost and (N, L, 3) normals, or with ``out = (cost, normals, rows)``
+    writes ray i's into row ``rows[i]`` of those arrays and returns them."""
     prepared = prepare_images(
         frame.images, frame.saturated, pairs, frame.mu, frame.chroma, frame.silhouettes
     )
     cameras = frame.rig.cameras
 
-    def evaluate(pixel_rays, hypotheses, normal_dtype=np.float32, bar=False):
-        cost = np.empty((len(pixel_rays), len(hypotheses)), np.float32)
-        normals = np.empty((len(pixel_rays), len(hypotheses), 3), normal_dtype)
+    def evaluate(pixel_rays, hypotheses, normal_dtype=np.float32, bar=False, out=None):
+        if out is None:
+            cost = np.empty((len(pixel_rays), len(hypotheses)), np.float32)
+            normals = np.empty((len(pixel_rays), len(hypotheses), 3), normal_dtype)
+            rows = np.arange(len(pixel_rays))
+        else:
+            cost, normals, rows = out
         chunks = range(0, len(pixel_rays), CHUNK)
         for s in tqdm(chunks, desc="data term", unit="chunk", disable=not bar, leave=False):
             c, n = data_term(
                 pixel_rays[s : s + CHUNK], ref.centre, hypotheses, cameras, prepared, pairs
             )
-            cost[s : s + len(c)] = c
-            normals[s : s + len(c)] = n
+            cost[rows[s : s + len(c)]] = c
+            normals[rows[s : s + len(c)]] = n
         return cost, normals
 
     return evaluate
@@ -352,14 +355,13 @@ def _ml_solution(frame, cost, depths, pix, rays, ref, pairs, shape, max_cost, bl
     return z, nrm, ok, conf
 
 
-def _labelled_surface(cost, normals, labels, frac, depths, pix, shape, max_cost):
+def _labelled_surface(chosen, n_sel, frac, depths, pix, shape, max_cost):
     """The labelling as (H*W,) depth, (H*W, 3) normal, validity (the chosen
-    hypothesis costs less than ``max_cost``) and confidence (1 - its cost)."""
+    hypothesis' cost ``chosen`` is under ``max_cost``) and confidence (1 - that cost);
+    ``n_sel`` (N, 3) are the chosen hypotheses' normals."""
     H, W = shape
-    idx = np.arange(len(pix))
-    chosen = cost[idx, labels]
     valid = chosen < max_cost
-    n_sel = normals[idx, labels].astype(float)
+    n_sel = n_sel.astype(float)
     n_sel /= np.maximum(np.linalg.norm(n_sel, axis=1, keepdims=True), 1e-12)
     z = np.full(H * W, np.nan)
     z[pix] = _depth_at(depths, frac)
@@ -383,53 +385,45 @@ def _without_rims(ok, shape, erode_px):
     return ok & binary_erosion(ok.reshape(shape), iterations=erode_px).ravel()
 
 
-def _bayes_labelling(cost, normals, pix, rays, depths, shape, alpha, tau, info, invalid):
-    """MAP labels of the MRF (SGM with the depth-normal prior) over the foreground's box.
+def _mrf_box(pix, shape):
+    """The MRF's box: the foreground's bounding box plus a margin of 2 pixels
+    (the background carries no data, only path length), as ``(r0, r1, c0, c1)``,
+    and the foreground pixels' indices (N,) in it, row-major."""
+    H, W = shape
+    rows, cols = np.divmod(pix, W)
+    r0, r1 = max(rows.min() - 2, 0), min(rows.max() + 3, H)
+    c0, c1 = max(cols.min() - 2, 0), min(cols.max() + 3, W)
+    return (int(r0), int(r1), int(c0), int(c1)), (rows - r0) * (c1 - c0) + (cols - c0)
 
-    ``cost`` is the scaled data cost of the foreground pixels, ``invalid``
-    the cost given to the box's background. Returns the labels, their
-    sub-label positions (a parabola through the aggregated cost) and the
-    normals volume of the foreground pixels.
+
+def _bayes_labelling(cost, normals, local, box, rays, depths, shape, alpha, tau, info, cost_scale):
+    """MAP labels of the MRF (SGM with the depth-normal prior) over the box of :func:`_mrf_box`.
+
+    ``cost`` (h*w, L) and ``normals`` (h*w, L, 3) are the data term over the
+    box, the foreground at rows ``local`` (N,); the MRF's data cost is
+    ``cost / cost_scale``, ``INVALID_COST / cost_scale`` on the box's
+    background. Returns the foreground's labels (N,) and their sub-label
+    positions (a parabola through the aggregated cost).
     """
     from colourhs.reconstruct.mrf import labelling_energy, sgm_depth_normal
 
     H, W = shape
     n_labels = len(depths)
-    # The MRF runs over the foreground's bounding box (plus a margin): the
-    # background carries no data, only path length.
-    rows, cols = np.divmod(pix, W)
-    r0, r1 = max(rows.min() - 2, 0), min(rows.max() + 3, H)
-    c0, c1 = max(cols.min() - 2, 0), min(cols.max() + 3, W)
+    r0, r1, c0, c1 = box
     h, w = r1 - r0, c1 - c0
-    local = (rows - r0) * w + (cols - c0)
-    box_cost = np.full((h * w, n_labels), invalid, np.float32)
-    box_cost[local] = cost
-    box_n = np.zeros((h * w, n_labels, 3), np.float16)
-    box_n[local] = normals
+    scaled = cost / cost_scale
+    background = np.ones(h * w, bool)
+    background[local] = False
+    scaled[background] = INVALID_COST / cost_scale
+    volumes = (scaled.reshape(h, w, n_labels), normals.reshape(h, w, n_labels, 3))
     box_rays = rays.reshape(H, W, 3)[r0:r1, c0:c1]
     lab, S = sgm_depth_normal(
-        box_cost.reshape(h, w, n_labels),
-        box_n.reshape(h, w, n_labels, 3),
-        box_rays.astype(np.float32),
-        depths.astype(np.float32),
-        alpha,
-        tau,
+        *volumes, box_rays.astype(np.float32), depths.astype(np.float32), alpha, tau
     )
-    info["energy"] = float(
-        labelling_energy(
-            lab,
-            box_cost.reshape(h, w, n_labels),
-            box_n.reshape(h, w, n_labels, 3),
-            box_rays,
-            depths,
-            alpha,
-            tau,
-        )
-    )
-    info["mrf_box"] = [int(r0), int(r1), int(c0), int(c1)]
+    info["energy"] = float(labelling_energy(lab, *volumes, box_rays, depths, alpha, tau))
+    info["mrf_box"] = [r0, r1, c0, c1]
     labels = lab.ravel()[local]
-    frac = _subpixel(S.reshape(h * w, n_labels)[local], labels)
-    return labels, frac, box_n[local]
+    return labels, _subpixel(S.reshape(h * w, n_labels), local, labels)
 
 
 def _consistent_surface(frame, z, ok, rays, ref, pairs, iterations, spline_px, blur_px=None):

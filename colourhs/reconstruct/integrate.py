@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.linalg import spsolve
 
+from colourhs.linalg import NearbySolver
 from colourhs.reconstruct.dataterm import INVALID_COST
 
 
@@ -77,6 +77,7 @@ def refine_depth(
     data_weight: float = 0.05,
     edge_m: float = 0.004,
     anchor_scale: float | None = None,
+    solver: NearbySolver | None = None,
 ) -> np.ndarray:
     """Integrate the normals into a surface, its depth anchored to ``z0``.
 
@@ -90,7 +91,7 @@ def refine_depth(
     predicts (the truncation that keeps depth edges). In log-depth the
     problem is scale-invariant, so the weak anchor does not pull the
     surface towards the camera (as the same terms in metres would: they
-    shrink with the depth). A sparse direct solve of the normal equations.
+    shrink with the depth). The normal equations are solved by ``solver``.
     With ``anchor_scale`` (a relative depth, e.g. two labels over the
     depth) the anchor is robust (Cauchy weights, three reweighted solves),
     so wrong labels do not move the surface.
@@ -102,6 +103,9 @@ def refine_depth(
     rays : (N, 3) rays with unit z-depth.
     mask : (N,) pixels to refine.
     shape : (H, W).
+    solver : solves the normal equations; pass one :class:`NearbySolver`
+        to several calls (the passes of :func:`initial_surface`) so that
+        each solve starts from the factors of an earlier one.
 
     Returns
     -------
@@ -126,9 +130,11 @@ def refine_depth(
     )
     u0 = np.log(np.maximum(z0[pix], 1e-9))
     weight = np.ones(len(pix))
+    solver = NearbySolver() if solver is None else solver
+    u = u0
     for _ in range(3 if anchor_scale else 1):
-        N = (A.T @ A + sp.diags(data_weight**2 * weight)).tocsc()
-        u = spsolve(N, A.T @ target + data_weight**2 * weight * u0)
+        N = A.T @ A + sp.diags(data_weight**2 * weight)
+        u = solver.solve(N, A.T @ target + data_weight**2 * weight * u0, x0=u)
         if anchor_scale:
             weight = 1.0 / (1.0 + ((u - u0) / anchor_scale) ** 2)
     out = z0.copy()
@@ -169,8 +175,9 @@ def initial_surface(
     H, W = shape
     ok &= large_components(ok.reshape(H, W), min_px).ravel()
     z = np.nan_to_num(z)
+    solver = NearbySolver()
     for i in range(passes):
-        z = refine_depth(z, nrm, rays, ok, (H, W), data_weight, edge_m, anchor_scale)
+        z = refine_depth(z, nrm, rays, ok, (H, W), data_weight, edge_m, anchor_scale, solver)
         if i == passes - 1:
             links = surface_links(z, nrm, rays, ok, (H, W), link_m)
             labels = surface_components(links[0], links[1], ok)

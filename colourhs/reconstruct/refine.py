@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.linalg import spsolve
 
+from colourhs.linalg import solve_spd
 from colourhs.reconstruct.sides import HelmholtzSides
 from colourhs.reconstruct.spline import SplineSurface, default_spacing
 from colourhs.reconstruct.surface import (
@@ -100,6 +100,7 @@ class _Problem:
     def __init__(self, graph, R, sides, c_ref, spline, Dw, prior_surface, robust):
         self.graph, self.R, self.sides, self.c_ref = graph, R, sides, c_ref
         self.B, self.Dw, self.robust = spline.basis, Dw, robust
+        self.Bt = spline.basis.T.tocsr()  # B^T, once: every step multiplies by it
         self.ctrl_surface = spline.surface_of
         self.prior_surface = prior_surface
         self.n = graph.n_surfaces
@@ -173,13 +174,13 @@ class _Problem:
             sc = info["scale"]
             s0 = self.state(c, sc, info)
             Dw = self.prior(sc)
-            A = (self.B.T @ (Jz.T @ Jz) @ self.B + Dw.T @ Dw).tocsc()
-            g = self.B.T @ (Jz.T @ r) + Dw.T @ (Dw @ c)
+            A = self.Bt @ ((Jz.T @ Jz) @ self.B) + Dw.T @ Dw
+            g = self.Bt @ (Jz.T @ r) + Dw.T @ (Dw @ c)
             diag = A.diagonal() + 1e-12 * max(A.diagonal().mean(), 1e-300)
             pending = np.ones(self.n, bool)
             for _ in range(LM_TRIES):
                 damp = sp.diags(lam[self.ctrl_surface] * diag)
-                h = spsolve((A + damp).tocsc(), -g)
+                h = solve_spd(A + damp, -g)
                 cc = c + h
                 s1 = self.state(cc, sc)
                 e0, e = self.compare([s0, s1])
@@ -205,7 +206,7 @@ class _Problem:
         """Control points whose spline is the least-squares fit to depths ``z`` (n,)."""
         BtB = (self.B.T @ self.B).tocsc()
         eps = 1e-9 * BtB.diagonal().mean() * sp.identity(self.B.shape[1], format="csc")
-        return spsolve(BtB + eps, self.B.T @ z)
+        return solve_spd(BtB + eps, self.B.T @ z)
 
     def scaled(self, c, factor) -> np.ndarray:
         """Control points with each surface k's depths multiplied by ``factor[k]``."""
