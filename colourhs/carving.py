@@ -30,9 +30,10 @@ import numpy as np
 
 from colourhs.capture import Camera
 from colourhs.geometry import normalised_coordinates, pixels_of
+from colourhs.progress import bar, stage
 from colourhs.silhouettes import silhouette_distance
 
-__all__ = ["SLAB_VOXELS", "carve", "carve_field", "grid_shape"]
+__all__ = ["SLAB_VOXELS", "any_inside", "carve", "carve_field", "grid_shape", "in_slabs"]
 
 SLAB_VOXELS = 1 << 20
 """Voxels projected at once by the carving (bounds its temporary memory, ~100 MB)."""
@@ -185,17 +186,47 @@ def _field_at(index: np.ndarray, views, min_views: int) -> np.ndarray:
     return worst
 
 
-def _field_grid(shape, views, min_views):
-    """The field at every voxel of a grid, in slabs along x."""
+def _field_grid(field, shape, views, min_views, pad=0):
+    """Fill ``field`` with the field at every voxel of a grid, in slabs along x."""
     nx, ny, nz = shape
-    field = np.empty(shape, np.float32)
     step = max(1, SLAB_VOXELS // (ny * nz))
     for i0 in range(0, nx, step):
         i1 = min(nx, i0 + step)
         index = np.indices((i1 - i0, ny, nz), np.float32).reshape(3, -1)
         index[0] += i0
-        field[i0:i1] = _field_at(index, views, min_views).reshape(i1 - i0, ny, nz)
+        values = _field_at(index, views, min_views).reshape(i1 - i0, ny, nz)
+        field[pad + i0 : pad + i1, pad : pad + ny, pad : pad + nz] = values
     return field
+
+
+def _empty_field(shape, pad: int) -> np.ndarray:
+    """A float32 grid of ``shape`` plus ``pad`` voxels all round, the border ``+inf``."""
+    field = np.empty(tuple(n + 2 * pad for n in shape), np.float32)
+    if pad:
+        field[:pad] = field[-pad:] = np.inf
+        field[:, :pad] = field[:, -pad:] = np.inf
+        field[:, :, :pad] = field[:, :, -pad:] = np.inf
+    return field
+
+
+def _upsample_into(field, coarse, B: int, shape, pad: int) -> None:
+    """Every voxel of ``field`` takes its block's value in ``coarse``, one block row at a time."""
+    nx, ny, nz = shape
+    for b, row in enumerate(coarse):
+        plane = np.repeat(np.repeat(row, B, 0), B, 1)[:ny, :nz]
+        i0, i1 = pad + b * B, pad + min(nx, (b + 1) * B)
+        field[i0:i1, pad : pad + ny, pad : pad + nz] = plane
+
+
+def in_slabs(a: np.ndarray, voxels: int = SLAB_VOXELS):
+    """Views of ``a`` along its first axis, of about ``voxels`` elements each."""
+    step = max(1, voxels // max(1, a[:1].size))
+    return (a[i : i + step] for i in range(0, len(a), step))
+
+
+def any_inside(field: np.ndarray) -> bool:
+    """Whether any voxel of a carving field is negative (inside the hull), slab by slab."""
+    return any(bool((s < 0).any()) for s in in_slabs(field))
 
 
 def carve_field(
@@ -207,6 +238,8 @@ def carve_field(
     min_views: int = 2,
     margin_px: float = 0.0,
     block: int = 4,
+    pad: int = 0,
+    progress: bool = False,
 ) -> np.ndarray:
     """Distance of every voxel centre outside the visual hull (the carving's field).
 
@@ -247,16 +280,25 @@ def carve_field(
         that a camera seeing all of it carves by that much. Only blocks near
         the outline, or crossed by the edge of a camera's view (where the
         cameras voting change), are evaluated voxel by voxel.
+    pad : int
+        Voxels of ``+inf`` (outside) added on every side: voxel ``(i, j, k)``
+        is then element ``(i + pad, j + pad, k + pad)``. With ``pad=1``,
+        :func:`~colourhs.hullmesh.hull_surface` (``padded=True``) meshes the
+        field in place instead of a padded copy.
+    progress : bool
+        A progress bar (stderr) over the voxel-by-voxel batches.
 
     Returns
     -------
-    ndarray of float32, shape :func:`grid_shape` ``(lo, hi, voxel_m)``
+    ndarray of float32, shape :func:`grid_shape` ``(lo, hi, voxel_m)`` (plus ``2 * pad``)
         Metres; negative inside the hull, ``+inf`` where too few cameras see.
         Exact (as evaluated per voxel) within a few voxels of the outline.
 
     Notes
     -----
-    Vectorised in batches of :data:`SLAB_VOXELS` voxels (bounded memory).
+    Vectorised in batches of :data:`SLAB_VOXELS` voxels (bounded memory):
+    besides the field itself (4 bytes a voxel), the carving holds about
+    30 bytes per ``block**3`` voxels and a few hundred MB of temporaries.
     """
     if len(silhouettes) != len(cameras):
         raise ValueError(f"{len(silhouettes)} silhouettes for {len(cameras)} cameras")
@@ -264,10 +306,12 @@ def carve_field(
         raise ValueError(f"min_views must be at least 1, got {min_views}")
     lo = np.asarray(lo, float)
     shape = grid_shape(lo, hi, voxel_m)
-    B = int(block)
+    B, pad = int(block), int(pad)
     if B <= 1 or max(shape) < 4 * B:
-        return _field_grid(shape, _views(silhouettes, cameras, lo, voxel_m, margin_px), min_views)
+        views = _views(silhouettes, cameras, lo, voxel_m, margin_px)
+        return _field_grid(_empty_field(shape, pad), shape, views, min_views, pad)
     nb = tuple(-(-n // B) for n in shape)
+    stage(f"carving: coarse pass over {' x '.join(map(str, nb))} blocks", enabled=progress)
     # Per camera, at the block centres: the camera's field and whether it sees the centre.
     centre = np.indices(nb, np.float32).reshape(3, -1)
     d, seen = [], []
@@ -305,19 +349,19 @@ def carve_field(
     outside |= (whole.sum(0) + crossing.sum(0)) < min_views
     inside = ~crossing.any(0) & (coarse < -radius)
     near = ~(outside | inside).reshape(nb)
-    coarse = coarse.reshape(nb)
-    field = np.repeat(np.repeat(np.repeat(coarse, B, 0), B, 1), B, 2)
-    field = np.ascontiguousarray(field[: shape[0], : shape[1], : shape[2]])
+    del d, seen, crossing, whole, outside, inside, points, centre
+    field = _empty_field(shape, pad)  # after the coarse pass's temporaries are gone
+    _upsample_into(field, coarse.reshape(nb), B, shape, pad)
     views = _views(silhouettes, cameras, lo, voxel_m, margin_px)
     offsets = np.indices((B, B, B)).reshape(3, -1).T
     blocks = np.argwhere(near)
     batch = max(1, SLAB_VOXELS // B**3)
-    for b0 in range(0, len(blocks), batch):
+    starts = range(0, len(blocks), batch)
+    for b0 in bar(starts, "carving near the outline", enabled=progress, unit="batch"):
         idx = (blocks[b0 : b0 + batch, None, :] * B + offsets[None]).reshape(-1, 3)
         idx = idx[np.all(idx < np.asarray(shape), axis=1)]
-        field[idx[:, 0], idx[:, 1], idx[:, 2]] = _field_at(
-            idx.T.astype(np.float32), views, min_views
-        )
+        values = _field_at(idx.T.astype(np.float32), views, min_views)
+        field[idx[:, 0] + pad, idx[:, 1] + pad, idx[:, 2] + pad] = values
     return field
 
 

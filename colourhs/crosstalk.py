@@ -97,6 +97,7 @@ from colourhs.crosstalk_led import (
 )
 from colourhs.crosstalk_ledproblem import OFF_DIAGONAL, POSE_STEP
 from colourhs.io import write_json
+from colourhs.progress import bar
 
 __all__ = [
     "LED_DEFAULTS",
@@ -160,6 +161,7 @@ def calibrate_crosstalk(
     poses_csv: str | Path | None = None,
     spatial: bool | None = None,
     degree: int = 3,
+    progress: bool = True,
     **led_params,
 ) -> dict:
     """Mixing per camera from ``chromatic/white/<colour>/<camera>.png`` (and the board).
@@ -182,6 +184,9 @@ def calibrate_crosstalk(
     and "led_factor" (F), "led_factor_sd" and "led_mixing_sd" (its standard
     errors, and those of M) join, with "led_fit" (the fit's diagnostics) at the
     top level.
+
+    ``progress``: a bar over the cameras' filter fields and the board poses,
+    and a line per stage of the LED factor (stderr, :mod:`colourhs.progress`).
     """
     ds = open_dataset(dataset_dir, check_images=False, scenes=())
     if "white" not in ds.chromatic_objects:
@@ -189,7 +194,8 @@ def calibrate_crosstalk(
     spatial = (poses_csv is not None) if spatial is None else bool(spatial)
     out = {"cameras": {}, "method": "median of I_c / I_b under light b alone (white reference)"}
     fields = {}
-    for cam in ds.rig.camera_names:
+    label = "cross-talk: filter mixing field"
+    for cam in bar(ds.rig.camera_names, label, enabled=progress and spatial, unit="camera"):
         imgs, sats = {}, {}
         for colour in COLOURS:
             imgs[colour], sats[colour] = read_image(
@@ -213,7 +219,7 @@ def calibrate_crosstalk(
             f"per-pixel I_c / I_b under light b alone (white reference), Legendre degree {degree}"
         )
     if poses_csv is not None:
-        result = led_factor_from_dataset(ds, poses_csv, fields, **led_params)
+        result = led_factor_from_dataset(ds, poses_csv, fields, progress, **led_params)
         for cam, F in result["factor"].items():
             field = fields[cam].scaled(F)
             out["cameras"][cam] |= {

@@ -22,6 +22,7 @@ import numpy as np
 
 from colourhs.capture import read_image
 from colourhs.crosstalk_ledproblem import OFF_DIAGONAL, _build_led_problem, _LedProblem
+from colourhs.progress import stage
 
 
 @dataclass(frozen=True)
@@ -129,7 +130,9 @@ def shrink_towards_filter(theta, cov) -> tuple[np.ndarray, np.ndarray, float]:
     return 1.0 + gain @ d, tau2 * eye - tau2 * gain, float(np.sqrt(tau2))
 
 
-def led_factor(rig, shots: list[BoardShot], fields: dict, **params) -> dict:
+def led_factor(
+    rig, shots: list[BoardShot], fields: dict, *, progress: bool = False, **params
+) -> dict:
     """The constant LED factor F per camera, ``M_LED(u) = M_filter(u) * F``, from the board.
 
     Constraints (:mod:`colourhs.crosstalk` docstring; eq. 1 with a Lambertian board),
@@ -176,6 +179,7 @@ def led_factor(rig, shots: list[BoardShot], fields: dict, **params) -> dict:
     rig : the dataset's :class:`~colourhs.capture.Rig`.
     shots : board poses with their raw images.
     fields : camera name -> filter :class:`MixingField` (chromatic captures).
+    progress : a bar over the board poses and a line before the fit (stderr).
 
     Returns
     -------
@@ -187,10 +191,11 @@ def led_factor(rig, shots: list[BoardShot], fields: dict, **params) -> dict:
     """
     opts = LED_DEFAULTS | {k: v for k, v in params.items() if v is not None}
     opts["step_px"] = int(opts["step_px"] or max(1, round(rig.image.width / 160)))
-    prob = _build_led_problem(rig, shots, fields, opts)
+    prob = _build_led_problem(rig, shots, fields, opts, progress)
     theta0 = np.ones(prob.nth) if opts.get("initial") is None else np.asarray(opts["initial"])
     if opts.get("return_problem"):
         return prob
+    stage(f"cross-talk: fitting F to {prob.N} board samples", enabled=progress)
     theta, cov, diag = _solve_led_problem(prob, theta0, opts["iterations"], opts["huber"])
     fit_sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     if opts["shrink"]:
@@ -238,6 +243,8 @@ def read_board_shots(ds, poses_csv) -> list[BoardShot]:
     return shots
 
 
-def led_factor_from_dataset(ds, poses_csv, fields: dict, **params) -> dict:
+def led_factor_from_dataset(ds, poses_csv, fields: dict, progress: bool = False, **params) -> dict:
     """:func:`led_factor` on a dataset's board captures and a marker poses table."""
-    return led_factor(ds.rig, read_board_shots(ds, poses_csv), fields, **params)
+    stage("cross-talk: reading the board captures", enabled=progress)
+    shots = read_board_shots(ds, poses_csv)
+    return led_factor(ds.rig, shots, fields, progress=progress, **params)

@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from colourhs.crosstalk_field import legendre_basis
+from colourhs.progress import bar
 
 OFF_DIAGONAL = tuple((c, b) for c in range(3) for b in range(3) if c != b)
 
@@ -152,13 +153,14 @@ class _LedProblem:
         return out
 
 
-def _box_images(rig, shots, k: int, K: int, margin_m: float) -> list[dict]:
+def _box_images(rig, shots, k: int, K: int, margin_m: float, progress=False) -> list[dict]:
     """Per shot and camera: k x k box means, ring means, and where both are usable.
 
     A pixel is valid when its centre sees the board's white surface at least
     ``margin_m`` (and 1.5 pixels) from markers and edges and is not saturated. The box mean
     needs every pixel of its box valid; the ring (the K x K box less the
-    k x k one) averages its valid pixels and needs a third of them.
+    k x k one) averages its valid pixels and needs a third of them. ``progress``:
+    a bar over the shots (stderr).
     """
     import cv2
 
@@ -172,7 +174,7 @@ def _box_images(rig, shots, k: int, K: int, margin_m: float) -> list[dict]:
         return cv2.boxFilter(a, -1, (size, size), normalize=False, borderType=cv2.BORDER_CONSTANT)
 
     out = []
-    for shot in shots:
+    for shot in bar(shots, "cross-talk: board poses", enabled=progress, unit="pose"):
         per = {}
         for cam in rig.cameras:
             name = cam.name
@@ -229,7 +231,7 @@ def _pose_derivatives(shot, board, origin, d, cam) -> np.ndarray:
     return np.nan_to_num(out)
 
 
-def _build_led_problem(rig, shots, fields, opts) -> _LedProblem:
+def _build_led_problem(rig, shots, fields, opts, progress=False) -> _LedProblem:
     from colourhs.geometry import backproject, project, ray_plane_intersection
     from colourhs.helmholtz import sample_bilinear
 
@@ -250,7 +252,7 @@ def _build_led_problem(rig, shots, fields, opts) -> _LedProblem:
     uv = np.stack([gu.ravel(), gv.ravel()], axis=1)
     npx = len(uv)
     iu, iv = uv[:, 0].astype(int), uv[:, 1].astype(int)
-    boxes = _box_images(rig, shots, k, K, opts["margin_m"])
+    boxes = _box_images(rig, shots, k, K, opts["margin_m"], progress)
     parts = []
     for a, A in enumerate(cams):
         origin, d = backproject(uv, A.K, A.dist, A.R, A.t)

@@ -35,6 +35,7 @@ around the fixation point.
 
 from __future__ import annotations
 
+from functools import partial
 from time import perf_counter
 
 import numpy as np
@@ -44,17 +45,20 @@ from colourhs.capture import (
     CaptureFormatError,
     open_dataset,
 )
-from colourhs.carving import _focal, carve, carve_field, grid_shape
+from colourhs.carving import _focal, any_inside, carve, carve_field, grid_shape
 from colourhs.geometry import fixation_point
 from colourhs.hullmesh import (
     depth_bounds,
     hull_depth,
     hull_depth_range,
     hull_surface,
+    march_surface,
     mesh_volume,
+    outward_mesh,
 )
 from colourhs.io import sha256_files
 from colourhs.ply import write_ply
+from colourhs.progress import stage
 from colourhs.silhouettes import DEFAULT_THRESHOLD, silhouettes_and_sources
 
 __all__ = [
@@ -204,6 +208,7 @@ def visual_hull(
     bounds=None,
     min_views: int = 2,
     margin_px: float = 0.5,
+    progress: bool = True,
 ) -> dict:
     """Carve one frame's visual hull and write its mesh (and the ``vh`` depth map).
 
@@ -239,6 +244,9 @@ def visual_hull(
         outline at pixel centres, so the true outline may lie up to half a
         pixel outside them, and every ray through a silhouette pixel's centre
         then meets the hull (it bounds the depth of every silhouette pixel).
+    progress : bool
+        One line per stage on stderr, with the seconds since the start, and a
+        bar over the carving (:mod:`colourhs.progress`).
 
     Returns
     -------
@@ -257,6 +265,8 @@ def visual_hull(
     ds = open_dataset(dataset_dir, check_images=False, scenes=[scene])
     cams = list(ds.rig.cameras)
     ref = ds.rig.camera(reference) if reference else cams[0]
+    say = partial(stage, start=t0, enabled=progress)
+    say(f"visual hull {scene}/{frame}: silhouettes of {len(cams)} views")
     sils, files, source = silhouettes_and_sources(ds, scene, frame, threshold)
     frame_dir = ds.frame_image(scene, frame, cams[0].name).parent
     sil_list = [sils[c.name] for c in cams]
@@ -264,22 +274,35 @@ def visual_hull(
     if bounds is not None:
         lo, hi = working_volume(sil_list, cams, voxel_m, bounds)
     else:
+        say("visual hull: working volume (coarse carve)")
         try:
             lo, hi = working_volume(sil_list, cams, voxel_m, None, min_views)
         except ValueError as err:
             raise CaptureFormatError(frame_dir, f"visual hull: {err}") from None
-    field = carve_field(sil_list, cams, lo, hi, voxel_m, min_views, margin_px)
-    if not (field < 0).any():
+    shape = grid_shape(lo, hi, voxel_m)
+    h, w = sil_list[0].shape
+    say(
+        f"visual hull: carving {' x '.join(map(str, shape))} voxels of "
+        f"{voxel_m * 1e3:.2f} mm from {len(cams)} views of {w} x {h}"
+    )
+    # One voxel of padding: hull_surface meshes the field in place (no copy of the grid).
+    field = carve_field(
+        sil_list, cams, lo, hi, voxel_m, min_views, margin_px, pad=1, progress=progress
+    )
+    if not any_inside(field):
         raise CaptureFormatError(
             frame_dir,
             f"the visual hull carves to nothing in the box {np.round(lo, 4).tolist()} - "
             f"{np.round(hi, 4).tolist()} m (silhouettes inconsistent with the calibration?)",
         )
-    v, t, n = hull_surface(field, lo, voxel_m)
+    say("visual hull: marching cubes")
+    v, t = march_surface(field, lo, voxel_m, padded=True)
+    del field  # before outward_mesh's temporaries (about 1 GB at paper scale)
+    v, t, n = outward_mesh(v, t)
     info = {
         "voxel_m": voxel_m,
         "bounds": [lo.tolist(), hi.tolist()],
-        "grid": list(field.shape),
+        "grid": list(shape),
         "volume_m3": mesh_volume(v, t),
         "n_vertices": len(v),
         "n_triangles": len(t),
@@ -291,6 +314,7 @@ def visual_hull(
     depth = None
     if out_depth_h5 is not None:
         spec = ds.rig.image
+        say(f"visual hull: {len(v)} vertices; depth map in {ref.name}")
         depth = hull_depth(v, t, n, ref, spec.width, spec.height, sils[ref.name])
         depth.info.update(info)
     write_ply(out_ply, v, t, n)
@@ -305,4 +329,5 @@ def visual_hull(
         }
         write_depth(out_depth_h5, depth, ref, attrs)
     info["seconds"] = perf_counter() - t0
+    say("visual hull: written")
     return info

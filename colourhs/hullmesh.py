@@ -16,10 +16,19 @@ from __future__ import annotations
 import numpy as np
 
 from colourhs.capture import Camera
+from colourhs.carving import any_inside, in_slabs
 from colourhs.geometry import backproject, pixel_grid, vertex_normals
 from colourhs.raycast import raycasting_scene
 
-__all__ = ["depth_bounds", "hull_depth", "hull_depth_range", "hull_surface", "mesh_volume"]
+__all__ = [
+    "depth_bounds",
+    "hull_depth",
+    "hull_depth_range",
+    "hull_surface",
+    "march_surface",
+    "mesh_volume",
+    "outward_mesh",
+]
 
 
 # --------------------------------------------------------------------------------------------
@@ -27,22 +36,16 @@ __all__ = ["depth_bounds", "hull_depth", "hull_depth_range", "hull_surface", "me
 
 
 def hull_surface(
-    volume: np.ndarray, lo, voxel_m: float
+    volume: np.ndarray, lo, voxel_m: float, padded: bool = False
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Closed triangle mesh of a carved volume (marching cubes, scikit-image).
 
+    :func:`march_surface`, then :func:`outward_mesh`.
+
     Parameters
     ----------
-    volume : ndarray, shape (nx, ny, nz)
-        Either a bool occupancy (:func:`~colourhs.carving.carve`; meshed half-way between
-        occupied and empty voxel centres) or a float field (:func:`~colourhs.carving.carve_field`,
-        metres, negative inside; meshed at its zero level, by linear
-        interpolation: smoother and closer to the exact hull). ``+inf`` counts
-        as outside.
-    lo : array_like, shape (3,)
-        Box corner, metres; voxel centres are at ``lo + (index + 0.5) * voxel_m``.
-    voxel_m : float
-        Voxel edge, metres.
+    volume, lo, voxel_m, padded
+        As :func:`march_surface`.
 
     Returns
     -------
@@ -56,32 +59,103 @@ def hull_surface(
     Raises
     ------
     ValueError
-        If the volume is empty.
+        As :func:`march_surface`.
+    """
+    return outward_mesh(*march_surface(volume, lo, voxel_m, padded))
+
+
+def march_surface(
+    volume: np.ndarray, lo, voxel_m: float, padded: bool = False
+) -> tuple[np.ndarray, np.ndarray]:
+    """The closed surface of a carved volume by marching cubes, in either winding.
+
+    Parameters
+    ----------
+    volume : ndarray, shape (nx, ny, nz)
+        Either a bool occupancy (:func:`~colourhs.carving.carve`; meshed half-way between
+        occupied and empty voxel centres) or a float field (:func:`~colourhs.carving.carve_field`,
+        metres, negative inside; meshed at its zero level, by linear
+        interpolation: smoother and closer to the exact hull). ``+inf`` counts
+        as outside.
+    lo : array_like, shape (3,)
+        Box corner, metres; voxel centres are at ``lo + (index + 0.5) * voxel_m``.
+    voxel_m : float
+        Voxel edge, metres.
+    padded : bool
+        ``volume`` is a float32 field that already has a one-voxel border of
+        ``+inf`` (:func:`~colourhs.carving.carve_field` with ``pad=1``; voxel 0
+        at index 1, ``lo`` still voxel 0's box corner). It is meshed in place,
+        without a copy: its non-finite values are overwritten by the outside
+        level. The mesh is the same as for the unpadded field.
+
+    Returns
+    -------
+    vertices : ndarray, shape (V, 3)
+        World points, metres.
+    triangles : ndarray of int64, shape (T, 3)
+        All wound the same way, inward or outward (:func:`outward_mesh` orients them).
+
+    Raises
+    ------
+    ValueError
+        If the volume is empty, or ``padded`` and it is not a C-contiguous float32 array.
     """
     from skimage.measure import marching_cubes
 
     vol = np.asarray(volume)
-    if vol.dtype == bool:
-        f = np.where(vol, -0.5, 0.5).astype(np.float32)
-        outside = 0.5
-    else:
-        f = vol.astype(np.float32)
-        finite = f[np.isfinite(f)]
-        outside = float(max(finite.max(initial=0.0), voxel_m))
-        f = np.where(np.isfinite(f), f, outside)
-    if not (f < 0).any():
-        raise ValueError("the carved volume is empty: nothing to mesh")
+    if padded and (vol.dtype != np.float32 or not vol.flags.c_contiguous):
+        raise ValueError(f"a padded volume must be C-contiguous float32, got {vol.dtype}")
     # Zero padding (outside all round) closes the surface where the hull meets the box.
-    padded = np.pad(f, 1, constant_values=outside)
+    f = vol if padded else _padded(vol)
+    if vol.dtype == bool:
+        f[~np.isfinite(f)] = 0.5
+    else:
+        _fill_outside(f, voxel_m)
+    if not any_inside(f):
+        raise ValueError("the carved volume is empty: nothing to mesh")
     verts, faces, _, _ = marching_cubes(
-        padded, level=0.0, spacing=(voxel_m,) * 3, allow_degenerate=False
+        f, level=0.0, spacing=(voxel_m,) * 3, allow_degenerate=False
     )
     # Padded index 1 is voxel 0, centred at lo + voxel_m / 2.
     verts = verts.astype(float) + np.asarray(lo, float) - 0.5 * voxel_m
-    faces = faces.astype(np.int64)
-    if mesh_volume(verts, faces) < 0:
-        faces = faces[:, ::-1].copy()
-    return verts, faces, vertex_normals(verts, faces)
+    return verts, faces.astype(np.int64)
+
+
+def outward_mesh(
+    vertices: np.ndarray, triangles: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A closed mesh with its triangles wound outward, and its outward unit vertex normals.
+
+    Triangles are reversed when the mesh's signed volume (:func:`mesh_volume`)
+    is negative; normals are area-weighted face normals
+    (:func:`~colourhs.geometry.vertex_normals`). Returns (vertices, triangles, normals).
+    """
+    if mesh_volume(vertices, triangles) < 0:
+        triangles = triangles[:, ::-1].copy()
+    return vertices, triangles, vertex_normals(vertices, triangles)
+
+
+def _padded(vol: np.ndarray) -> np.ndarray:
+    """A float32 copy of a volume with a one-voxel ``+inf`` border; a bool one as -0.5 / 0.5."""
+    f = np.full(tuple(n + 2 for n in vol.shape), np.inf, np.float32)
+    inner = f[1:-1, 1:-1, 1:-1]
+    if vol.dtype == bool:
+        inner[...] = np.where(vol, np.float32(-0.5), np.float32(0.5))
+    else:
+        inner[...] = vol
+    return f
+
+
+def _fill_outside(f: np.ndarray, voxel_m: float) -> float:
+    """Overwrite a field's non-finite values by the outside level, in place, slab by slab.
+
+    The level is the largest finite value, at least ``voxel_m`` (metres). Returns it.
+    """
+    top = max(float(np.max(s, where=np.isfinite(s), initial=0.0)) for s in in_slabs(f))
+    outside = max(top, voxel_m)
+    for s in in_slabs(f):
+        s[~np.isfinite(s)] = outside
+    return outside
 
 
 def mesh_volume(vertices: np.ndarray, triangles: np.ndarray) -> float:

@@ -7,6 +7,7 @@ Measured values are written beside each bound.
 
 from __future__ import annotations
 
+import contextlib
 import json
 from pathlib import Path
 
@@ -204,7 +205,8 @@ def random_tiny(tmp_path_factory):
     root = tmp_path_factory.mktemp("xt-random")
     data = _render(root, "random-tiny", 0)
     today = calibrate_crosstalk(data, root / "today.json")
-    new = calibrate_crosstalk(data, root / "new.json", poses_csv=root / "marker_poses.csv")
+    with open(root / "new.stderr", "w") as err, contextlib.redirect_stderr(err):
+        new = calibrate_crosstalk(data, root / "new.json", poses_csv=root / "marker_poses.csv")
     return data, root, today, new
 
 
@@ -423,3 +425,17 @@ def test_no_leak_gives_identity_not_a_crash():
     assert np.array_equal(M, np.broadcast_to(np.eye(3), M.shape))
     theta, cov, tau = shrink_towards_filter(np.ones(18), np.zeros((18, 18)))
     assert np.array_equal(theta, np.ones(18)) and not cov.any() and tau == 0.0
+
+
+def test_calibration_reports_progress_on_stderr(random_tiny, capsys):
+    """Issue 13: the paper-scale cross-talk rule (60 s) printed nothing until it ended.
+    Bars over the cameras' filter fields and the board poses, a line per LED stage
+    (the fixture's calibration wrote its stderr to new.stderr)."""
+    data, root, _, _ = random_tiny
+    err = (root / "new.stderr").read_text()
+    assert "cross-talk: filter mixing field: 100%" in err and "| 3/3 " in err
+    assert "cross-talk: board poses: 100%" in err
+    assert "cross-talk: reading the board captures\n" in err
+    assert "cross-talk: fitting F to " in err
+    calibrate_crosstalk(data, spatial=True, progress=False)
+    assert capsys.readouterr() == ("", "")
