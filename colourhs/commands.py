@@ -243,7 +243,7 @@ def _reconstruct(args) -> int:
 
     params = {k: v for k, v in vars(args).items() if k in RECONSTRUCT_PARAMS and v is not None}
     check_reconstruct_params(params)
-    params["progress"] = sys.stderr.isatty()  # a bar at a terminal, none in a rule's log
+    params["progress"] = True  # on stderr: at a terminal, and in a rule's log
     result = reconstruct_frame(
         args.dataset,
         args.scene,

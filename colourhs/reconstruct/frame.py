@@ -17,8 +17,10 @@
 
 from __future__ import annotations
 
+from functools import partial
+from time import perf_counter
+
 import numpy as np
-from tqdm import tqdm
 
 from colourhs.capture import (
     LIT_THRESHOLD,
@@ -28,6 +30,7 @@ from colourhs.capture import (
 from colourhs.depthfile import DepthResult, write_depth
 from colourhs.geometry import fixation_point, normalised_coordinates, pixel_grid
 from colourhs.io import sha256_files
+from colourhs.progress import bar, stage
 from colourhs.reconstruct.dataterm import INVALID_COST, data_term, pair_arrays, prepare_images
 from colourhs.reconstruct.inputs import Frame, load_frame
 from colourhs.reconstruct.integrate import initial_surface
@@ -191,8 +194,9 @@ def reconstruct(
         (ML HS's continuous step and the refinement; default
         :data:`colourhs.reconstruct.sides.BLUR_PX`, see
         :func:`colourhs.reconstruct.sides.side_maps`).
-    progress : a progress bar (tqdm, on stderr) over the data term's chunks of
-        pixels, the long part of a high-resolution frame.
+    progress : one line per step on stderr, with the seconds since the start,
+        and a bar over the data term's chunks of pixels
+        (:mod:`colourhs.progress`).
 
     Notes
     -----
@@ -204,6 +208,7 @@ def reconstruct(
     """
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+    say = partial(stage, start=perf_counter(), enabled=progress)
     rig = frame.rig
     names = list(rig.camera_names)
     ref_i = names.index(rig.camera(reference).name) if reference else 0
@@ -215,6 +220,7 @@ def reconstruct(
     if len(pix) == 0:
         raise ValueError("no foreground pixels in the reference camera: nothing to reconstruct")
     pairs = pair_arrays(rig)
+    say(f"{method}: data term of {len(pix)} pixels x {n_labels} depths")
     evaluate = data_term_evaluator(frame, ref, pairs)
     info = {
         "method": method,
@@ -229,6 +235,7 @@ def reconstruct(
     if method == "ml":
         # float16 normals: half the memory of the volume.
         cost, normals = evaluate(rays[pix], depths, np.float16, progress)
+        say("ml: each pixel's continuous minimum")
         z, nrm, ok, conf = _ml_solution(
             frame, cost, depths, pix, rays, ref, pairs, shape, max_cost, blur_px
         )
@@ -239,6 +246,7 @@ def reconstruct(
         cost = np.full((h * w, n_labels), INVALID_COST, np.float32)
         normals = np.zeros((h * w, n_labels, 3), np.float16)
         evaluate(rays[pix], depths, np.float16, progress, out=(cost, normals, local))
+        say(f"bayes: MRF labelling over {h} x {w} pixels")
         labels, frac = _bayes_labelling(
             cost, normals, local, box, rays, depths, shape, alpha, tau, info, cost_scale
         )
@@ -250,6 +258,7 @@ def reconstruct(
             min_px = int(0.002 * H * W if min_component is None else min_component)
             # Wrong labels (a few labels off or worse) must not move the surface.
             anchor = 2.0 * float(depths[1] - depths[0]) / float(np.median(depths))
+            say(f"bayes: initial surface ({refine_passes} passes of normal integration)")
             z, nrm, ok = initial_surface(
                 z,
                 nrm,
@@ -266,7 +275,7 @@ def reconstruct(
                 anchor,
             )
             z, nrm, ok, weights, info["surface"] = _consistent_surface(
-                frame, z, ok, rays, ref, pairs, surface_iterations, spline_px, blur_px
+                frame, z, ok, rays, ref, pairs, surface_iterations, spline_px, blur_px, say
             )
             conf = np.where(ok, weights, 0.0).astype(np.float32)
         erode_px = max(1, round(W / 320)) if erode_px is None else erode_px
@@ -305,10 +314,11 @@ def depth_hypotheses(
 
 
 def data_term_evaluator(frame: Frame, ref: Camera, pairs):
-    """``evaluate(rays, depths, normal_dtype=np.float32, bar=False, out=None)``:
+    """``evaluate(rays, depths, normal_dtype=np.float32, show=False, out=None)``:
     the eq. (5) data term (:func:`colourhs.reconstruct.dataterm.data_term`)
     of rays from ``ref``'s centre at each hypothesised depth, in chunks of
-    ``CHUNK`` pixels (bounds the float32 normals buffer); returns the (N, L)
+    ``CHUNK`` pixels (bounds the float32 normals buffer; ``show``: a progress
+    bar over them); returns the (N, L)
     cost and (N, L, 3) normals, or with ``out = (cost, normals, rows)``
     writes ray i's into row ``rows[i]`` of those arrays and returns them."""
     prepared = prepare_images(
@@ -316,7 +326,7 @@ def data_term_evaluator(frame: Frame, ref: Camera, pairs):
     )
     cameras = frame.rig.cameras
 
-    def evaluate(pixel_rays, hypotheses, normal_dtype=np.float32, bar=False, out=None):
+    def evaluate(pixel_rays, hypotheses, normal_dtype=np.float32, show=False, out=None):
         if out is None:
             cost = np.empty((len(pixel_rays), len(hypotheses)), np.float32)
             normals = np.empty((len(pixel_rays), len(hypotheses), 3), normal_dtype)
@@ -324,7 +334,7 @@ def data_term_evaluator(frame: Frame, ref: Camera, pairs):
         else:
             cost, normals, rows = out
         chunks = range(0, len(pixel_rays), CHUNK)
-        for s in tqdm(chunks, desc="data term", unit="chunk", disable=not bar, leave=False):
+        for s in bar(chunks, "data term", enabled=show, unit="chunk"):
             c, n = data_term(
                 pixel_rays[s : s + CHUNK], ref.centre, hypotheses, cameras, prepared, pairs
             )
@@ -426,8 +436,11 @@ def _bayes_labelling(cost, normals, local, box, rays, depths, shape, alpha, tau,
     return labels, _subpixel(S.reshape(h * w, n_labels), local, labels)
 
 
-def _consistent_surface(frame, z, ok, rays, ref, pairs, iterations, spline_px, blur_px=None):
-    """The depth from the agreement of geometry and eq. (5) (see :mod:`.surface`)."""
+def _consistent_surface(
+    frame, z, ok, rays, ref, pairs, iterations, spline_px, blur_px=None, say=None
+):
+    """The depth from the agreement of geometry and eq. (5) (see :mod:`.surface`);
+    ``say(text)`` reports its steps."""
     from colourhs.reconstruct.refine import refine_surface
     from colourhs.reconstruct.sides import helmholtz_sides
 
@@ -436,7 +449,7 @@ def _consistent_surface(frame, z, ok, rays, ref, pairs, iterations, spline_px, b
     footprint = np.abs(z) / float(ref.K[0, 0])
     fill = object_mask(frame, frame.rig.camera_names.index(ref.name)).ravel()
     zr, nr, sinfo = refine_surface(
-        z, ok, rays, ref.centre, (H, W), sides, footprint, spline_px, iterations, fill=fill
+        z, ok, rays, ref.centre, (H, W), sides, footprint, spline_px, iterations, fill=fill, say=say
     )
     ok = (ok | sinfo["filled"]) & np.isfinite(zr) & sinfo["valid"]
     z = np.where(ok, zr, np.nan)

@@ -337,6 +337,7 @@ def refine_surface(
     edge_footprints: float = EDGE_FOOTPRINTS,
     fill: np.ndarray | None = None,
     search: bool = True,
+    say=None,
 ) -> tuple[np.ndarray, np.ndarray, dict]:
     """Minimise E (module docstring) over a B-spline surface, from depths ``z0``.
 
@@ -361,6 +362,7 @@ def refine_surface(
         lit foreground): the holes of each surface inside it (black markers,
         dark spots, pixels whose rows were unusable) are filled by
         :func:`fill_holes` (their weight, and so their confidence, is 0).
+    say : called with a line of text at each step (progress), if given.
 
     Returns
     -------
@@ -373,19 +375,24 @@ def refine_surface(
         search's scale per surface), ``surfaces`` and ``control_points``.
     """
     H, W = shape
+    say = say or (lambda text: None)
     spacing = float(spacing_px or default_spacing(W))
     graph = SurfaceGraph(mask, shape, z0, footprint, edge_footprints)
     R = rays[graph.pix]
     fp = float(np.median(footprint[graph.pix]))
     coarse = _problem(graph, R, sides, c_ref, spacing * COARSE, fp, robust)
+    say(f"refinement: {graph.n_surfaces} surfaces, {iterations} LM steps on a coarse spline")
     c, energies = coarse.lm(coarse.fit(z0[graph.pix]), iterations)
     problem = _problem(graph, R, sides, c_ref, spacing, fp, robust)
     B = problem.B
+    say(f"refinement: {iterations} LM steps on {B.shape[1]} control points")
     c, more = problem.lm(problem.fit(coarse.B @ c), iterations)
     energies += more
     factors = np.ones(graph.n_surfaces)
     if search:
+        say("refinement: depth search along E's valley")
         c, factors = depth_search(problem, c)
+    say(f"refinement: {iterations} final LM steps")
     c, more = problem.lm(c, iterations)
     z = B @ c
     _, _, info = hs_residuals(z, graph, R, sides, c_ref, robust)
