@@ -332,6 +332,81 @@ def sample_sides(sides: HelmholtzSides, X: np.ndarray, R: np.ndarray):
     return s, var, v, ds, dv
 
 
+@nb.njit(cache=True)
+def _smallest_singular(u, vt):
+    """The smallest singular value's right singular vector of the (P, 3) ``u``,
+    by one-sided Jacobi rotations of its columns (Hestenes), in place: on
+    return the columns of ``u`` are orthogonal and the rows of ``vt`` the
+    right singular vectors. Works on W itself, not W^T W, so the small
+    singular value keeps its relative accuracy. Returns the index of the
+    smallest column."""
+    P = u.shape[0]
+    for i in range(3):
+        for j in range(3):
+            vt[i, j] = 1.0 if i == j else 0.0
+    for _ in range(30):
+        rotated = False
+        for j, k in ((0, 1), (0, 2), (1, 2)):
+            alpha = beta = gamma = 0.0
+            for p in range(P):
+                alpha += u[p, j] * u[p, j]
+                beta += u[p, k] * u[p, k]
+                gamma += u[p, j] * u[p, k]
+            if gamma == 0.0 or abs(gamma) <= 1e-15 * np.sqrt(alpha * beta):
+                continue
+            rotated = True
+            zeta = (beta - alpha) / (2.0 * gamma)
+            t = (1.0 if zeta >= 0 else -1.0) / (abs(zeta) + np.sqrt(1.0 + zeta * zeta))
+            c = 1.0 / np.sqrt(1.0 + t * t)
+            s = c * t
+            for p in range(P):
+                a, b = u[p, j], u[p, k]
+                u[p, j], u[p, k] = c * a - s * b, s * a + c * b
+            for p in range(3):
+                a, b = vt[j, p], vt[k, p]
+                vt[j, p], vt[k, p] = c * a - s * b, s * a + c * b
+        if not rotated:
+            break
+    best, least = 0, np.inf
+    for j in range(3):
+        norm = 0.0
+        for p in range(P):
+            norm += u[p, j] * u[p, j]
+        if norm < least:
+            best, least = j, norm
+    return best
+
+
+@nb.njit(parallel=True, cache=True)
+def _whitened_kernel(w, var, v, ok, R, passes, chi2, normal):
+    """:func:`whitened_cost` per point (compiled; see there)."""
+    N, P = w.shape[0], w.shape[1]
+    for i in nb.prange(N):
+        scale = np.ones(P)
+        u = np.empty((P, 3))
+        vt = np.empty((3, 3))
+        nx, ny, nz, lam = 1.0, 0.0, 0.0, 0.0
+        for _ in range(passes + 1):
+            for k in range(P):
+                for j in range(3):
+                    u[k, j] = w[i, k, j] / scale[k]
+            j = _smallest_singular(u, vt)
+            nx, ny, nz = vt[j, 0], vt[j, 1], vt[j, 2]
+            lam = 0.0
+            for k in range(P):  # n' W' W n as a sum of squares: no cancellation
+                r = (w[i, k, 0] * nx + w[i, k, 1] * ny + w[i, k, 2] * nz) / scale[k]
+                lam += r * r
+                if ok[i]:
+                    ca = v[i, k, 0, 0] * nx + v[i, k, 0, 1] * ny + v[i, k, 0, 2] * nz
+                    cb = v[i, k, 1, 0] * nx + v[i, k, 1, 1] * ny + v[i, k, 1, 2] * nz
+                    sd = np.sqrt(var[i, k, 0] * ca * ca + var[i, k, 1] * cb * cb)
+                    scale[k] = max(sd, 1e-300)
+        if nx * R[i, 0] + ny * R[i, 1] + nz * R[i, 2] > 0:
+            nx, ny, nz = -nx, -ny, -nz
+        chi2[i] = lam if ok[i] else np.nan
+        normal[i, 0], normal[i, 1], normal[i, 2] = nx, ny, nz
+
+
 def whitened_cost(sides: HelmholtzSides, X: np.ndarray, R: np.ndarray, passes: int = 2):
     """Per-point ML cost of eq. (5) in noise units, and its normal.
 
@@ -342,6 +417,11 @@ def whitened_cost(sides: HelmholtzSides, X: np.ndarray, R: np.ndarray, passes: i
     sigma_3 / sigma_2, a weak row (a dark sample, a black marker) does not
     make the cost small.
 
+    Compiled: the eigenvector is W's smallest right singular vector, by
+    Jacobi rotations of W itself (:func:`_smallest_singular`; the
+    eigenvalue, the sum of the squared whitened rows along it), where
+    numpy's batched ``eigh`` of W^T W squared W's condition number.
+
     Returns
     -------
     chi2 : (N,) NaN where a sample is unusable. normal : (N, 3) towards -R.
@@ -350,14 +430,7 @@ def whitened_cost(sides: HelmholtzSides, X: np.ndarray, R: np.ndarray, passes: i
     w = s[..., 0, None] * v[:, :, 0] - s[..., 1, None] * v[:, :, 1]
     ok = np.all(np.isfinite(w), axis=(1, 2)) & np.all(var > 0, axis=(1, 2))
     w = np.where(ok[:, None, None], w, 0.0)
-    scale = np.ones(w.shape[:2])
-    for _ in range(passes + 1):
-        ww = w / scale[..., None]
-        lam, vec = np.linalg.eigh(np.einsum("npi,npj->nij", ww, ww))
-        n = vec[:, :, 0]
-        ca = np.einsum("npk,nk->np", v[:, :, 0], n)
-        cb = np.einsum("npk,nk->np", v[:, :, 1], n)
-        scale = np.sqrt(np.where(ok[:, None], var[..., 0] * ca**2 + var[..., 1] * cb**2, 1.0))
-        scale = np.maximum(scale, 1e-300)
-    n = n * np.where(np.sum(n * R, axis=1) > 0, -1.0, 1.0)[:, None]
-    return np.where(ok, np.maximum(lam[:, 0], 0.0), np.nan), n
+    chi2 = np.empty(len(w))
+    normal = np.empty((len(w), 3))
+    _whitened_kernel(w, var, v, ok, np.ascontiguousarray(R, float), passes, chi2, normal)
+    return chi2, normal
