@@ -233,8 +233,9 @@ def reconstruct(
     }
     shape = (H, W)
     if method == "ml":
-        # float16 normals: half the memory of the volume.
-        cost, normals = evaluate(rays[pix], depths, np.float16, progress)
+        # ML HS needs the cost volume only (its normals come from its own minima).
+        cost = np.empty((len(pix), n_labels), np.float32)
+        evaluate(rays[pix], depths, show=progress, out=(cost, None, np.arange(len(pix))))
         say("ml: each pixel's continuous minimum")
         z, nrm, ok, conf = _ml_solution(
             frame, cost, depths, pix, rays, ref, pairs, shape, max_cost, blur_px
@@ -320,7 +321,8 @@ def data_term_evaluator(frame: Frame, ref: Camera, pairs):
     ``CHUNK`` pixels (bounds the float32 normals buffer; ``show``: a progress
     bar over them); returns the (N, L)
     cost and (N, L, 3) normals, or with ``out = (cost, normals, rows)``
-    writes ray i's into row ``rows[i]`` of those arrays and returns them."""
+    writes ray i's into row ``rows[i]`` of those arrays (``normals`` None:
+    not kept) and returns them."""
     prepared = prepare_images(
         frame.images, frame.saturated, pairs, frame.mu, frame.chroma, frame.silhouettes
     )
@@ -339,7 +341,8 @@ def data_term_evaluator(frame: Frame, ref: Camera, pairs):
                 pixel_rays[s : s + CHUNK], ref.centre, hypotheses, cameras, prepared, pairs
             )
             cost[rows[s : s + len(c)]] = c
-            normals[rows[s : s + len(c)]] = n
+            if normals is not None:
+                normals[rows[s : s + len(c)]] = n
         return cost, normals
 
     return evaluate

@@ -26,12 +26,22 @@ CANDIDATES = 4  # local minima of the per-pixel cost kept as candidate roots
 WINDOW = ((-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1))
 
 
-def candidate_labels(cost: np.ndarray, max_cost: float, k: int = CANDIDATES) -> np.ndarray:
+def candidate_labels(
+    cost: np.ndarray, max_cost: float, k: int = CANDIDATES, chunk: int = 65536
+) -> np.ndarray:
     """(N, k) labels of each pixel's ``k`` best local minima of ``cost`` (N, L); -1 = none.
 
     A local minimum is a label whose cost is at most its neighbours' and below
     ``max_cost``; the ends of the range count when they are minima too.
+    ``chunk`` pixels at a time (bounds the temporaries: a few (chunk, L) arrays).
     """
+    out = np.empty((len(cost), min(k, cost.shape[1])), np.int64)
+    for s in range(0, len(cost), chunk):
+        out[s : s + chunk] = _candidates(cost[s : s + chunk], max_cost, k)
+    return out
+
+
+def _candidates(cost, max_cost, k):
     c = np.asarray(cost, np.float32)
     left = np.concatenate([np.full((len(c), 1), np.inf, np.float32), c[:, :-1]], axis=1)
     right = np.concatenate([c[:, 1:], np.full((len(c), 1), np.inf, np.float32)], axis=1)
