@@ -236,9 +236,8 @@ def reconstruct(
         # ML HS needs the cost volume only (its normals come from its own minima).
         cost = np.empty((len(pix), n_labels), np.float32)
         evaluate(rays[pix], depths, show=progress, out=(cost, None, np.arange(len(pix))))
-        say("ml: each pixel's continuous minimum")
         z, nrm, ok, conf = _ml_solution(
-            frame, cost, depths, pix, rays, ref, pairs, shape, max_cost, blur_px
+            frame, cost, depths, pix, rays, ref, pairs, shape, max_cost, blur_px, say
         )
     else:
         box, local = _mrf_box(pix, shape)
@@ -348,7 +347,9 @@ def data_term_evaluator(frame: Frame, ref: Camera, pairs):
     return evaluate
 
 
-def _ml_solution(frame, cost, depths, pix, rays, ref, pairs, shape, max_cost, blur_px=None):
+def _ml_solution(
+    frame, cost, depths, pix, rays, ref, pairs, shape, max_cost, blur_px=None, say=None
+):
     """ML HS (:func:`colourhs.reconstruct.ml.ml_depth`) as (H*W,) depth, (H*W, 3)
     normal, validity and confidence (1 - the best hypothesis' cost)."""
     from colourhs.reconstruct.ml import ml_depth
@@ -356,7 +357,7 @@ def _ml_solution(frame, cost, depths, pix, rays, ref, pairs, shape, max_cost, bl
 
     H, W = shape
     sides = helmholtz_sides(frame, frame.variance, pairs, blur_px=blur_px)
-    z_ml, n_ml, good = ml_depth(cost, depths, pix, rays, ref.centre, sides, shape, max_cost)
+    z_ml, n_ml, good = ml_depth(cost, depths, pix, rays, ref.centre, sides, shape, max_cost, say)
     z = np.full(H * W, np.nan)
     z[pix] = np.where(good, z_ml, np.nan)
     nrm = np.zeros((H * W, 3))

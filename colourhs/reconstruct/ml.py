@@ -18,6 +18,8 @@ continuous minimum (:func:`refine_ml`).
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 from colourhs.reconstruct.sides import HelmholtzSides, sample_sides, whitened_cost
@@ -139,7 +141,8 @@ def window_score(
         chi2 = plane_chi2(sides, Xq, rq, n)
         out[:, j] = np.where(ok, chi2, np.nan)
     usable = np.sum(np.isfinite(out), axis=1)
-    with np.errstate(all="ignore"):
+    with warnings.catch_warnings():  # all-NaN rows (fewer than 4 usable) are expected
+        warnings.simplefilter("ignore", RuntimeWarning)
         med = np.nanmedian(np.where(usable[:, None] >= 4, out, np.nan), axis=1)
     return np.where(usable >= 4, med, np.inf)
 
@@ -153,6 +156,7 @@ def ml_depth(
     sides: HelmholtzSides,
     shape: tuple[int, int],
     max_cost: float,
+    say=None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """ML HS depth, normal and validity of the pixels ``pix`` (module docstring).
 
@@ -161,6 +165,7 @@ def ml_depth(
     cost : (N, L) the data term over the hypotheses ``depths`` (L,), metres.
     rays : (H*W, 3) rays with unit z-depth from ``c_ref``.
     max_cost : hypotheses costing more are no candidates.
+    say : called with a line of text per candidate (progress), if given.
 
     Returns
     -------
@@ -183,6 +188,8 @@ def ml_depth(
         has = lab >= 0
         if not has.any():
             break
+        if say is not None:
+            say(f"ml: candidate {k + 1} of {K} ({int(has.sum())} pixels)")
         lab = np.where(has, lab, 0)
         lm = np.clip(lab - 1, 0, len(depths) - 1)
         lp = np.clip(lab + 1, 0, len(depths) - 1)
