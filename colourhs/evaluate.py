@@ -38,6 +38,7 @@ MeshLab's Hausdorff filter, found by :func:`colourhs.raycast.closest_points`).
 from __future__ import annotations
 
 import time
+from functools import partial
 from pathlib import Path
 
 import cv2
@@ -54,6 +55,7 @@ from colourhs.depthfile import read_depth
 from colourhs.geometry import camera_centre, project, world_to_camera
 from colourhs.io import write_json
 from colourhs.ply import load_mesh, write_ply
+from colourhs.progress import stage
 from colourhs.raycast import PixelHits, cast_pixels, depth_normal_maps, raycasting_scene
 
 __all__ = [
@@ -339,6 +341,7 @@ def evaluate_frame(
     vmax_mm: float | None = None,
     dilate_px: int = 2,
     completeness_samples: int = 20000,
+    progress: bool = True,
 ) -> dict:
     """Score one reconstructed frame against its ground truth (the Snakemake rule's function).
 
@@ -370,6 +373,9 @@ def evaluate_frame(
         completeness (the metric's definition since MeshLab's radius search,
         which slowed with the distance, computed it; the closest-point search
         now takes about a second for all 70 k of a demo frame).
+    progress : bool
+        A line per step on stderr, with the seconds since the start
+        (:mod:`colourhs.progress`; 4.6 s in all at 1280 x 960).
 
     Returns
     -------
@@ -379,6 +385,7 @@ def evaluate_frame(
     from colourhs.colours import value_colours
 
     t0 = time.perf_counter()
+    say = partial(stage, start=t0, enabled=progress)
     dm = read_depth(depth_h5)
     info = {
         "scene": str(scene),
@@ -391,6 +398,7 @@ def evaluate_frame(
     mesh = load_mesh(mesh_ply) if mesh_ply is not None else None  # vertices, triangles, normals
     dist_v = None
     if gt_ply is not None:
+        say(f"evaluate: casting {dm.camera}'s {dm.width} x {dm.height} pixel rays at the GT mesh")
         gv, gt_tri, gn = load_mesh(gt_ply)
         # One cast of the GT from the reference camera's pixels serves both metrics.
         hits = cast_pixels(gv, gt_tri, gn, dm, dm.width, dm.height)
@@ -409,6 +417,11 @@ def evaluate_frame(
                 info["hausdorff_samples"] = int(evaluated.sum())
                 # Seen by the reference camera but off the seen ground truth: invented surface.
                 info["outside_share"] = float(1.0 - evaluated.sum() / max(int(visible.sum()), 1))
+                step = max(1, -(-len(gt_points) // int(completeness_samples)))
+                say(
+                    f"evaluate: accuracy of {int(evaluated.sum())} mesh vertices, "
+                    f"completeness of {len(gt_points[::step])} ground-truth points"
+                )
                 if evaluated.any():  # the evaluated vertices as a point set, in vertex order
                     acc = hausdorff(v[evaluated], None, gv, target)
                     dist_v[evaluated] = acc["distances"]
@@ -420,7 +433,6 @@ def evaluate_frame(
                             "hausdorff_median_mm": _mm(float(np.median(acc["distances"]))),
                         }
                     )
-                step = max(1, -(-len(gt_points) // int(completeness_samples)))
                 comp = hausdorff(gt_points[::step], None, v, tri)
                 info.update(
                     {

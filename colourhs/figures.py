@@ -15,6 +15,7 @@ import numpy as np  # noqa: E402
 
 from colourhs.animation import write_animation  # noqa: E402
 from colourhs.colours import value_colours  # noqa: E402
+from colourhs.progress import bar, stage  # noqa: E402
 from colourhs.render import BACKGROUND, shaded_render  # noqa: E402
 
 __all__ = [
@@ -443,6 +444,7 @@ def scene_figures(
     animation: Mapping[str, str | Path] | None = None,
     fps: float = 8,
     coloured: Mapping[str, str | Path] | None = None,
+    progress: bool = True,
 ) -> list[Path]:
     """A scene's figures, variants side by side (the Snakemake rule's function).
 
@@ -470,6 +472,8 @@ def scene_figures(
     animation : frame -> mesh PLY, in frame order, or None.
     fps : frames per second of the animation.
     coloured : variant -> error-coloured mesh PLY, or None.
+    progress : bars over the variants' maps, the renders and the animation's frames
+        on stderr (:mod:`colourhs.progress`; about 2 s per map or render at 1280 x 960).
 
     Returns
     -------
@@ -485,7 +489,8 @@ def scene_figures(
     renders, dz_mm, dn_deg = {}, {}, {}
     gt = load_mesh(gt_ply) if gt_ply is not None else None
     cam = None
-    for variant, path in depths.items():
+    label = "figures: depth and normal maps" + (", depth errors" if gt is not None else "")
+    for variant, path in bar(depths.items(), label, len(depths), progress, unit="variant"):
         dm = read_depth(path)
         cam = cam or dm
         written.append(depth_map_figure(dm.depth, out / f"{variant}_depth.png", variant))
@@ -495,6 +500,7 @@ def scene_figures(
             if np.isfinite(dz).any():
                 dz_mm[variant], dn_deg[variant] = np.abs(dz) * 1e3, dn
     if dz_mm:
+        stage("figures: depth and normal error maps", enabled=progress)
         written.append(error_maps_figure(dz_mm, out / "depth_error.png", "|depth error|"))
         written.append(
             error_maps_figure(dn_deg, out / "normal_error.png", "normal error", unit="deg")
@@ -506,10 +512,9 @@ def scene_figures(
 
     if cam is None:
         raise ValueError("scene_figures: no depth files given")
-    if gt is not None:
-        renders["ground truth"] = render(gt_ply)
-    for variant, ply in meshes.items():
-        renders[variant] = render(ply)
+    plys = ({"ground truth": gt_ply} if gt is not None else {}) | dict(meshes)
+    for name, ply in bar(plys.items(), "figures: shaded renders", len(plys), progress, unit="mesh"):
+        renders[name] = render(ply)
     written.append(render_grid_figure(renders, out / "figure7.png", "shaded reconstructions"))
     if coloured:
         import json
@@ -532,6 +537,9 @@ def scene_figures(
                 d = np.full(len(v), np.nan)
             meshes_mm[variant] = (v, t, d)
         top = _median_p95([d for _, _, d in meshes_mm.values()])
+        items = bar(
+            list(meshes_mm.items()), "figures: Hausdorff renders", None, progress, unit="mesh"
+        )
         tiles = {
             variant: shaded_render(
                 v,
@@ -544,12 +552,12 @@ def scene_figures(
                 vertex_rgb=value_colours(d, 0.0, top),
                 dist=cam.dist,
             )
-            for variant, (v, t, d) in meshes_mm.items()
+            for variant, (v, t, d) in items
         }
         title = "Hausdorff distance to the ground truth (grey: not evaluated)"
         ncols = 3 if len(tiles) > 4 else None
-        bar = ("viridis", 0.0, top, "distance (mm)")
-        written.append(render_grid_figure(tiles, out / "hausdorff.png", title, ncols, bar))
+        scale = ("viridis", 0.0, top, "distance (mm)")
+        written.append(render_grid_figure(tiles, out / "hausdorff.png", title, ncols, scale))
     if animation:
         # The animated variant from the results contract's path (<variant>/mesh/<frame>.ply).
         n = len(animation)
@@ -557,6 +565,7 @@ def scene_figures(
             f"{Path(p).parent.parent.name}  frame {f} ({i + 1}/{n})"
             for i, (f, p) in enumerate(animation.items())
         ]
-        frames = [render(ply) for ply in animation.values()]
+        plys = bar(animation.values(), "figures: animation", n, progress, unit="frame")
+        frames = [render(ply) for ply in plys]
         written.append(write_animation(frames, out / "animation.gif", fps=fps, labels=labels))
     return written

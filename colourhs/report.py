@@ -35,6 +35,7 @@ import pandas as pd
 import yaml
 
 from colourhs.io import atomic_output
+from colourhs.progress import stage
 from colourhs.reportcalib import calibration_diagnostics
 from colourhs.reportinfo import (
     arrange_figures,
@@ -366,6 +367,7 @@ def build_report(
     config_resolved: bool = False,
     calibration_dir: str | Path | None = None,
     views: bool = False,
+    progress: bool = True,
 ) -> Path:
     """Write the evaluation report ``reports/NAME/index.html`` and return its path.
 
@@ -422,6 +424,9 @@ def build_report(
         Embed each scene's first-frame error-coloured meshes (``results_dir``),
         simplified, in an offline 3D viewer (:func:`colourhs.reportview.scene_views`),
         seen first from the dataset's first camera.
+    progress
+        A line before the calibration's diagnostics and a bar over each scene's
+        3D views on stderr (:mod:`colourhs.progress`; about 2 s per mesh).
 
     Raises
     ------
@@ -445,6 +450,8 @@ def build_report(
     if provenance is None:
         provenance = {**git_provenance(Path(__file__).parent), **run_command()}
     descriptions = scene_descriptions(dataset) if dataset is not None else {}
+    if calibration_dir:
+        stage(f"report: calibration diagnostics of {calibration_dir}", enabled=progress)
     diagnostics = calibration_diagnostics(calibration_dir, dataset) if calibration_dir else []
 
     scenes = list(dict.fromkeys([*sorted(summary["scene"].unique()), *figs]))
@@ -475,7 +482,9 @@ def build_report(
             s["aggregation"] = _aggregation_text(summary)
             s["same_as"] = _same_as_note(metrics, scene)
         s["files"] = _file_links(results_dir, scene, out_dir) if results_dir else {}
-        s["views"] = scene_views(results_dir, scene, rotation=turn) if views else {}
+        s["views"] = (
+            scene_views(results_dir, scene, rotation=turn, progress=progress) if views else {}
+        )
         s["n_files"] = sum(len(ls) for k in s["files"].values() for ls in k.values())
         sections.append(s)
 

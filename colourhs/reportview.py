@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from colourhs.io import note_read
+from colourhs.progress import bar
 from colourhs.reportinfo import result_files
 
 __all__ = ["MAX_TRIANGLES", "mesh_payload", "pack_mesh", "scene_views"]
@@ -97,12 +98,15 @@ def scene_views(
     scene: str,
     max_triangles: int = MAX_TRIANGLES,
     rotation: np.ndarray | None = None,
+    progress: bool = False,
 ) -> dict[str, dict]:
     """Variant -> :func:`mesh_payload` of its first frame's error-coloured mesh
-    (``<variant>/eval/<frame>.ply``), variants in the paper's order; {} when none."""
+    (``<variant>/eval/<frame>.ply``), variants in the paper's order; {} when none.
+    ``progress``: a bar over the meshes on stderr (about 2 s each at 1280 x 960)."""
     files = result_files(results_dir, scene)
+    plys = {v: k["error-coloured mesh"][0] for v, k in files.items() if k["error-coloured mesh"]}
+    label = f"report: 3D views of {scene}"
     return {
-        v: mesh_payload(kinds["error-coloured mesh"][0], max_triangles, rotation)
-        for v, kinds in files.items()
-        if kinds["error-coloured mesh"]
+        v: mesh_payload(ply, max_triangles, rotation)
+        for v, ply in bar(plys.items(), label, len(plys), progress, unit="mesh")
     }

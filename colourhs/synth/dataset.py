@@ -26,9 +26,9 @@ from pathlib import Path
 import cv2
 import h5py
 import numpy as np
-from tqdm import tqdm
 
 from colourhs.ply import write_ply
+from colourhs.progress import bar, stage
 from colourhs.raycast import raycasting_scene
 from colourhs.synth import scenes as sc
 from colourhs.synth.poses import board_poses
@@ -340,7 +340,7 @@ def synthesise(
     parts : subset of ``("photometric", "chromatic", "scenes")`` to render.
     scenes : render only these of ``plane``, ``statue``, ``toy``, ``sheet`` (their
         frames and chromatic captures); default all.
-    progress : show a progress bar.
+    progress : progress on stderr: the mu maps, bars over the camera rays and views.
     overwrite : replace an existing ``out``.
     workers : processes rendering views in parallel (default: CPU count).
     exact : randomised presets: force 16-bit images and exact masks, keeping
@@ -452,6 +452,7 @@ def _write_dataset(
             {n: {"R": R.tolist(), "t": t.tolist()} for n, (R, t) in zip(names, poses, strict=True)}
         )
     )
+    stage(f"synth {p.name}: ground-truth mu maps (gt/photometric.h5)", enabled=progress)
     with h5py.File(gt / "photometric.h5", "w") as f:
         f.attrs["note"] = "mu = rho / sigma (eq. 2) on pixel centres; one scale per pair is free"
         for key, mu in true_mu_maps(rig).items():
@@ -466,11 +467,12 @@ def _write_dataset(
     jobs = _jobs(p, poses, parts, content, frames)
     if scenes is not None:
         jobs = [j for j in jobs if _scene_of(j) in (None, *scenes)]
-    rays = [camera_rays(c, p.width, p.height, p.supersample) for c in rig.cameras]
+    cams = bar(rig.cameras, f"synth {p.name}: camera rays", enabled=progress, unit="camera")
+    rays = [camera_rays(c, p.width, p.height, p.supersample) for c in cams]
     args = [(root, rig, rays, p, job, seed, nuis, content.mask_mode) for job in jobs]
-    bar = tqdm(total=len(jobs), desc=f"synth {p.name}", unit="view", disable=not progress)
-    _render_all(args, workers, bar)
-    bar.close()
+    views = bar(None, f"synth {p.name}", len(jobs), progress, unit="view")
+    _render_all(args, workers, views)
+    views.close()
 
 
 def _render_all(args, workers, bar):

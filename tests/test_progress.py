@@ -1,0 +1,140 @@
+"""Issue 13: every stage that runs more than a few seconds at the paper preset's scale
+(1280 x 960) shows its progress on stderr (which the Snakemake rules send to the job's
+log), through the stage commands; with ``progress=False`` the functions print nothing.
+
+All on the tiny preset (160 x 120): the tests take 13-18 s (measured 6.1-6.7, 5.2-8.9
+and 1.2-2.6 s on the shared 2 cores), plus 6-12 s to render the session's tiny dataset
+when no other test has.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import pytest
+
+from colourhs.cli import main
+from colourhs.evaluate import evaluate_frame
+from colourhs.figures import scene_figures
+from colourhs.hull import visual_hull
+from colourhs.markers import marker_poses
+from colourhs.mesh import frame_mesh
+from colourhs.noise import calibrate_noise
+from colourhs.photometric import photometric_maps
+from colourhs.report import build_report
+from colourhs.synth.dataset import PRESETS, synthesise
+
+
+def _lines(err: str) -> list[str]:
+    """stderr as its lines, a bar's redraws (carriage returns) each a line."""
+    return [line for line in err.replace("\r", "\n").splitlines() if line.strip()]
+
+
+def _run(argv, capsys) -> str:
+    """stderr of ``colourhs ARGV``, which must succeed."""
+    return _run_out(argv, capsys)[1]
+
+
+def _run_out(argv, capsys) -> tuple[str, str]:
+    """stdout and stderr of ``colourhs ARGV``, which must succeed."""
+    assert main([str(a) for a in argv]) == 0
+    return capsys.readouterr()
+
+
+def test_calibration_stages_show_progress(tiny_dataset, tmp_path, capsys):
+    """markers (7 s at paper scale), noise (16 s) and photometric (21 s): bars over the
+    poses, cameras and pairs, a line per later step (6.1-6.7 s here)."""
+    poses = tmp_path / "poses.csv"
+    err = _run(["markers", tiny_dataset, poses], capsys)
+    assert "markers: board poses: 100%" in err and "| 7/7 [" in err  # 7 poses
+    err = _run(["noise", tiny_dataset, tmp_path / "noise.json"], capsys)
+    assert "noise model: 100%" in err and "| 3/3 [" in err  # 3 cameras
+    err = _run(["photometric", tiny_dataset, poses, tmp_path / "ph.h5"], capsys)
+    lines = _lines(err)
+    assert "photometric: reading the board poses: 100%" in err
+    assert "photometric: eq. (6) samples: 100%" in err and "| 3/3 [" in err  # 3 pairs
+    steps = [line for line in lines if not ("%|" in line or line.startswith("cam"))]
+    assert [s.split(" [")[0].split(" of ")[0] for s in steps] == [
+        "photometric: solving for 6 maps",
+        "photometric: dense maps, calibrated regions, eq. (7) residuals",
+        "photometric: writing ph.h5",
+    ]
+    marker_poses(tiny_dataset, tmp_path / "p2.csv", progress=False)
+    calibrate_noise(tiny_dataset, progress=False)
+    photometric_maps(tiny_dataset, poses, tmp_path / "p2.h5", progress=False)
+    assert capsys.readouterr() == ("", "")
+
+
+@pytest.fixture
+def frame_results(tiny_dataset, tmp_path):
+    """The tiny statue's visual hull (results/t/statue/...), without progress."""
+    root = tmp_path / "results" / "t" / "statue"
+    hull, depth = root / "hull" / "000000.ply", root / "vh" / "depth" / "000000.h5"
+    visual_hull(tiny_dataset, "statue", 0, hull, out_depth_h5=depth, progress=False)
+    gt = tiny_dataset / "scenes" / "statue" / "gt" / "000000.ply"
+    return root, hull, depth, gt
+
+
+def test_frame_stages_show_progress(frame_results, tmp_path, capsys):
+    """mesh (11 s at paper scale), evaluate (7.5 s), figures (45 s for 5 variants) and
+    report (16 s): a line per step (with the seconds since the start) or a bar over the
+    variants' maps, renders and 3D views (5.2-8.9 s here)."""
+    root, hull, depth, gt = frame_results
+    mesh, ev = root / "vh" / "mesh" / "000000.ply", root / "vh" / "eval" / "000000"
+    out, err = _run_out(["mesh", depth, mesh, "--hull", hull], capsys)
+    steps = [line.split(": ")[1].split(" ")[0] for line in _lines(err)]
+    assert steps == ["oriented", str(json.loads(out)["points"]), "Poisson", "cropping"]
+    assert all(line.endswith(" s]") for line in _lines(err))
+    err = _run(
+        ["evaluate", depth, mesh, f"{ev}.json", "--gt", gt, "--coloured", f"{ev}.ply"]
+        + ["--scene", "statue", "--frame", "000000", "--variant", "vh"],
+        capsys,
+    )
+    assert _lines(err)[0].startswith("evaluate: casting cam1's 160 x 120 pixel rays")
+    assert len(_lines(err)) == 2 and "evaluate: accuracy of " in err
+    figures = tmp_path / "figures"
+    kw = {"depth": [f"vh={depth}"], "mesh": [f"vh={mesh}"], "coloured": [f"vh={ev}.ply"]}
+    err = _run(["figures", figures, *_options(kw), "--gt", gt], capsys)
+    for label in ("depth and normal maps, depth errors", "shaded renders", "Hausdorff renders"):
+        assert f"figures: {label}: 100%" in err
+    assert "figures: depth and normal error maps\n" in err
+    metrics = tmp_path / "metrics.csv"
+    _run(["metrics", f"{ev}.json", metrics], capsys)
+    report = ["report", tmp_path / "index.html", "--name", "t", "--metrics", metrics]
+    err = _run([*report, "--results", root.parent, "--view"], capsys)
+    assert "report: 3D views of statue: 100%" in err and "| 1/1 [" in err
+    frame_mesh(depth, tmp_path / "m.ply", hull_ply=hull, progress=False)
+    evaluate_frame(depth, mesh, gt, tmp_path / "e.json", progress=False)
+    scene_figures(tmp_path / "f", {"vh": depth}, {"vh": mesh}, gt, progress=False)
+    build_report(
+        tmp_path / "r.html",
+        "t",
+        metrics,
+        [],
+        {},
+        [],
+        {},
+        results_dir=root.parent,
+        views=True,
+        progress=False,
+    )
+    assert capsys.readouterr() == ("", "")
+
+
+def _options(kw: dict) -> list[str]:
+    return [a for k, v in kw.items() for a in (f"--{k}", *v)]
+
+
+def test_synth_shows_its_steps_before_the_views(tmp_path, capsys):
+    """``colourhs synth --preset paper`` was silent 30 s before its bar: 8 s of
+    ground-truth mu maps and 21 s of camera rays (1.2-2.6 s here: the tiny preset's board
+    captures of one pose)."""
+    preset = replace(PRESETS["tiny"], n_poses=1)
+    synthesise(tmp_path / "a", preset, parts=("photometric",), workers=1)
+    err = capsys.readouterr().err
+    assert err.startswith("synth tiny: ground-truth mu maps (gt/photometric.h5)\n")
+    assert "synth tiny: camera rays: 100%" in err and "| 3/3 [" in err  # 3 cameras
+    assert "synth tiny: 100%" in err and "| 1/1 [" in err  # one job: the board pose
+    synthesise(tmp_path / "b", preset, parts=("photometric",), workers=1, progress=False)
+    assert capsys.readouterr() == ("", "")
