@@ -24,6 +24,11 @@ import cv2
 import numpy as np
 
 _UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-14)
+_UNDISTORT_FAST = (cv2.TERM_CRITERIA_COUNT, 20, 0.0)
+UNDISTORT_TOL_PX = 1e-9
+"""Reprojection error (pixels) above which :func:`normalised_coordinates` iterates
+to ``_UNDISTORT_CRITERIA``: far below any measurement, so its result is that
+of the strict iteration (measured 6e-13 px from it on a 12-coefficient lens)."""
 
 
 def camera_centre(R: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -133,16 +138,28 @@ def normalised_coordinates(uv: np.ndarray, K: np.ndarray, dist: np.ndarray) -> n
     """Undistorted normalised image coordinates (x/z, y/z) of pixels ``uv`` (..., 2).
 
     The inverse of :func:`pixels_of`: the skew is taken off first, then
-    ``cv2.undistortPoints`` (iterative, to 1e-14) inverts the distortion.
+    ``cv2.undistortPoints`` inverts the distortion: 20 fixed-point
+    iterations, then, for the points whose reprojection is more than
+    ``UNDISTORT_TOL_PX`` off, iterations to 1e-14 (OpenCV then reprojects
+    at every iteration, 5-10x slower: 1.9 s against 0.4 s for the 1.2 M
+    pixels of a 1280x960 camera).
     """
     uv = np.array(uv, float)
     shape = uv.shape[:-1]
     K = np.asarray(K, float)
+    flat = uv.reshape(-1, 2).copy()
     uv[..., 0] -= K[0, 1] * (uv[..., 1] - K[1, 2]) / K[1, 1]
     K0 = K.copy()
     K0[0, 1] = 0.0
     pts = uv.reshape(-1, 1, 2)
-    xy = cv2.undistortPoints(pts, K0, model_coefficients(dist), criteria=_UNDISTORT_CRITERIA)
+    coeffs = model_coefficients(dist)
+    xy = cv2.undistortPoints(pts, K0, coeffs, criteria=_UNDISTORT_FAST).reshape(-1, 2)
+    u, v = pixels_of(xy[:, 0], xy[:, 1], K, dist)
+    with np.errstate(invalid="ignore"):
+        off = ~(np.hypot(u - flat[:, 0], v - flat[:, 1]) <= UNDISTORT_TOL_PX)
+    if off.any():
+        strict = cv2.undistortPoints(pts[off], K0, coeffs, criteria=_UNDISTORT_CRITERIA)
+        xy[off] = strict.reshape(-1, 2)
     return xy.reshape(*shape, 2)
 
 
