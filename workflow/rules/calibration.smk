@@ -36,8 +36,9 @@ rule crosstalk:
     conda:
         "../envs/colourhs.yaml"
     threads: 1
+    # Measured at 1280x960 (paper preset, benchmarks/bench_paper.py): 2.07 GB, 57 s.
     resources:
-        mem_mb=1000,
+        mem_mb=2500,
         runtime=5,
     params:
         dataset=lambda w: dataset_path(w.name),
@@ -57,6 +58,7 @@ rule noise_model:
     conda:
         "../envs/colourhs.yaml"
     threads: 1
+    # Measured at 1280x960 (paper preset, benchmarks/bench_paper.py): 0.66 GB, 14-16 s.
     resources:
         mem_mb=1000,
         runtime=5,
@@ -83,8 +85,9 @@ rule photometric_maps:
     conda:
         "../envs/colourhs.yaml"
     threads: 1
+    # Measured at 1280x960 (paper preset, benchmarks/bench_paper.py): 1.39 GB, 16-21 s.
     resources:
-        mem_mb=4000,
+        mem_mb=2000,
         runtime=20,
     params:
         dataset=lambda w: dataset_path(w.name),

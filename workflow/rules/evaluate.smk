@@ -26,8 +26,9 @@ rule evaluate_frame:
     conda:
         "../envs/colourhs.yaml"
     threads: 1
+    # Measured at 1280x960 (paper preset, benchmarks/bench_paper.py): 0.60-0.81 GB, 5-8 s.
     resources:
-        mem_mb=3000,
+        mem_mb=1500,
         runtime=10,
     params:
         gt=lambda w, input: f"--gt {shlex.quote(str(input.gt))}" if input.gt else "",

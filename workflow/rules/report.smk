@@ -41,8 +41,9 @@ rule scene_figures:
     conda:
         "../envs/colourhs.yaml"
     threads: 1
+    # Measured at 1280x960 (paper preset, benchmarks/bench_paper.py): 0.90 GB, 45 s for 5 variants.
     resources:
-        mem_mb=3000,
+        mem_mb=1500,
         runtime=10,
     params:
         options=lambda w: figure_options(w.name, w.scene),
@@ -64,8 +65,9 @@ rule report:
     conda:
         "../envs/colourhs.yaml"
     threads: 1
+    # Measured at 1280x960 (paper preset, benchmarks/bench_paper.py): 0.67 GB, 16 s.
     resources:
-        mem_mb=2000,
+        mem_mb=1000,
         runtime=5,
     params:
         figures=lambda w: " ".join(

@@ -18,6 +18,7 @@ rule visual_hull:
     conda:
         "../envs/colourhs.yaml"
     threads: 1
+    # Measured at 1280x960 (paper preset, benchmarks/bench_paper.py): 2.39 GB, 40 s.
     resources:
         mem_mb=3000,
         runtime=10,
@@ -47,8 +48,9 @@ rule frame_mesh:
     conda:
         "../envs/colourhs.yaml"
     threads: 1
+    # Measured at 1280x960 (paper preset, benchmarks/bench_paper.py): 0.45-0.71 GB, 6-11 s.
     resources:
-        mem_mb=3000,
+        mem_mb=1000,
         runtime=10,
     params:
         hull=lambda w, input: (
