@@ -318,10 +318,9 @@ def data_term_evaluator(frame: Frame, ref: Camera, pairs):
     the eq. (5) data term (:func:`colourhs.reconstruct.dataterm.data_term`)
     of rays from ``ref``'s centre at each hypothesised depth, in chunks of
     ``CHUNK`` pixels (bounds the float32 normals buffer; ``show``: a progress
-    bar over them); returns the (N, L)
-    cost and (N, L, 3) normals, or with ``out = (cost, normals, rows)``
-    writes ray i's into row ``rows[i]`` of those arrays (``normals`` None:
-    not kept) and returns them."""
+    bar over them); returns the (N, L) cost and (N, L, 3) normals, or with
+    ``out = (cost, normals, rows)`` writes ray i's into row ``rows[i]`` of
+    those arrays (``normals`` None: not kept) and returns them."""
     prepared = prepare_images(
         frame.images, frame.saturated, pairs, frame.mu, frame.chroma, frame.silhouettes
     )
