@@ -35,6 +35,7 @@ def bench(tiny_dataset, tmp_path_factory) -> dict:
     tmp = tmp_path_factory.mktemp("bench_paper")
     argv = ["--preset", "tiny", "--data", str(tiny_dataset), "--first", "1", "--frames", "2"]
     argv += ["--frames-only", "1", "--check-frames", "1", "--variants", "vh,bayes_ph,bayes_full"]
+    argv += ["--parallel", "2"]  # two jobs at once, each when its inputs exist
     argv += ["--work", str(tmp / "work"), "--results", str(tmp / "results")]
     script = ROOT / "benchmarks" / "bench_paper.py"
     subprocess.run([sys.executable, str(script), *argv], check=True, cwd=ROOT)
@@ -57,6 +58,11 @@ def test_every_rule_is_measured_with_sane_numbers(bench):
     # 8 opening jobs (2 chromatic objects), 9 of the frame (hull, 2 reconstructions
     # of which one a copy, 3 meshes, 3 evaluations), 3 closing jobs.
     assert len(bench["jobs"]) == 20
+    # Two at once (--parallel 2), each after the jobs that write its inputs.
+    jobs = bench["jobs"]
+    assert bench["parallel"] == 2 and 0 < bench["jobs_wall_s"] < sum(j["wall_s"] for j in jobs)
+    assert all(jobs[k]["end_s"] <= j["start_s"] for j in jobs for k in j["after"])
+    assert sum(len(j["after"]) > 0 for j in jobs) >= 12  # the frame's chain and the closing
     for job in bench["jobs"] + bench["reconstruct_2_threads"]:
         assert job["returncode"] == 0
         # Measured: 0.25 GB (a copy) to 0.67 GB (crosstalk); 0.2-37 s on a loaded machine.
