@@ -467,7 +467,9 @@ def scene_figures(
     Parameters
     ----------
     out_dir : folder to write (created).
-    depths, meshes : variant -> results-contract depth file / Poisson mesh of the frame.
+    depths, meshes : variant -> results-contract depth file (or the
+        :class:`colourhs.depthfile.DepthMap` already read from it) / Poisson mesh
+        of the frame.
     gt_ply : the frame's ground-truth mesh, or None.
     animation : frame -> mesh PLY, in frame order, or None.
     fps : frames per second of the animation.
@@ -480,7 +482,7 @@ def scene_figures(
     The PNG/GIF files written.
     """
     from colourhs.deptherrors import depth_errors
-    from colourhs.depthfile import read_depth
+    from colourhs.depthfile import as_depth_map
     from colourhs.ply import load_mesh
 
     out = Path(out_dir)
@@ -491,7 +493,7 @@ def scene_figures(
     cam = None
     label = "figures: depth and normal maps" + (", depth errors" if gt is not None else "")
     for variant, path in bar(depths.items(), label, len(depths), progress, unit="variant"):
-        dm = read_depth(path)
+        dm = as_depth_map(path)
         cam = cam or dm
         written.append(depth_map_figure(dm.depth, out / f"{variant}_depth.png", variant))
         written.append(normal_map_figure(dm.normal, out / f"{variant}_normal.png", variant))
