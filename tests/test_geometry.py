@@ -195,3 +195,16 @@ def test_triangulation_error_scales_with_noise(sigma_px):
     err = np.linalg.norm(g.triangulate(uvs, Ks, dists, Rs, ts) - X, axis=1)
     # About sigma * depth / focal / sin(baseline angle) = 0.64 mm per pixel at 0.8 m.
     assert np.sqrt(np.mean(err**2)) < 2.0e-3 * sigma_px
+
+
+def test_mesh_volume_and_outward_winding():
+    """Issue 12: one signed volume (geometry.mesh_volume), which the hull and the
+    synthetic scenes both orient their meshes by (outward_triangles): a unit cube
+    corner's tetrahedron is 1/6 m^3 wound outward, -1/6 inward, and is turned."""
+    v = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
+    outward = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    inward = outward[:, ::-1]
+    assert g.mesh_volume(v, outward) == pytest.approx(1 / 6, abs=1e-15)
+    assert g.mesh_volume(v, inward) == pytest.approx(-1 / 6, abs=1e-15)
+    assert g.outward_triangles(v, outward) is outward
+    assert np.array_equal(g.outward_triangles(v, inward), outward)
