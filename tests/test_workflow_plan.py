@@ -272,3 +272,33 @@ def test_rules_run_the_python_that_runs_snakemake(data, tmp_path, monkeypatch):
         ).list_rules()
     assert len(rules.getvalue().split()) == 16  # the workflow was read: 15 rules and all
     assert shell('printf %s "$COLOURHS_PYTHON"', read=True) == python
+
+
+def test_config_yaml_states_the_package_defaults():
+    """Issue 12 (one value for each default): what config.yaml writes out for the
+    calibration and surfaces is the package's own default, and the command line's
+    option defaults are the same (the mesh options repeat frame_mesh's: the command
+    line must not import open3d). Measured: 1.5 s (importing colourhs.mesh)."""
+    import inspect
+
+    import yaml
+
+    from colourhs.chromaticity import MIN_SIGNAL
+    from colourhs.cli import build_parser
+    from colourhs.mesh import frame_mesh
+    from colourhs.photometric import DEFAULTS
+    from colourhs.silhouettes import DEFAULT_THRESHOLD
+
+    config = yaml.safe_load((PROJECT_ROOT / "config.yaml").read_text())
+    photometric = config["calibration"]["photometric"]
+    assert len(photometric) == 4 and photometric == {k: DEFAULTS[k] for k in photometric}
+    assert config["calibration"]["chromaticity"] == {"min_signal": MIN_SIGNAL}
+    assert config["surfaces"]["hull"] == {"voxel_m": None, "threshold": DEFAULT_THRESHOLD}
+    signature = inspect.signature(frame_mesh).parameters
+    mesh = {k: signature[k].default for k in ("poisson_depth", "density_quantile")}
+    assert config["surfaces"]["mesh"] == mesh
+    parse = build_parser().parse_args
+    assert vars(parse(["mesh", "d.h5", "m.ply"])).items() >= mesh.items()
+    hull = parse(["hull", "data", "scene", "000000", "h.ply"])
+    assert (hull.threshold, hull.voxel_m) == (DEFAULT_THRESHOLD, None)
+    assert parse(["chromaticity", "data", "toy", "c.h5"]).min_signal == MIN_SIGNAL
