@@ -22,7 +22,6 @@ __all__ = [
     "chromaticity_figure",
     "chromaticity_rgb",
     "depth_map_figure",
-    "error_map_figure",
     "error_maps_figure",
     "mu_maps_figure",
     "normal_map_figure",
@@ -253,40 +252,6 @@ def normal_map_figure(normal: np.ndarray, path: str | Path, title: str = "") -> 
     fig, ax, _ = _image_axes(h, w, title, colourbar=False)
     ax.imshow(rgb, interpolation="nearest")
     return _save_png(fig, path)
-
-
-def error_map_figure(
-    error: np.ndarray,
-    path: str | Path,
-    title: str,
-    unit: str = "mm",
-    vmax: float | None = None,
-) -> Path:
-    """Heat map of a per-pixel error with a colour bar; NaN pixels show as background.
-
-    Parameters
-    ----------
-    error : ndarray, shape (H, W)
-        Non-negative error, already in ``unit``; NaN where none.
-    path : str or Path
-        PNG file to write (atomically).
-    title : str
-        Figure title.
-    unit : str
-        Unit of ``error`` for the colour bar label (e.g. ``"mm"``, ``"deg"``).
-    vmax : float, optional
-        Top of the colour range (0 is the bottom); default the 95th percentile
-        of the finite errors.
-    """
-    error = np.asarray(error, dtype=np.float64)
-    if error.ndim != 2:
-        raise ValueError(f"error map must be 2-D (H, W), got shape {error.shape}")
-    finite = _finite_or_raise(error, "error map")
-    if vmax is None:
-        vmax = float(np.percentile(finite, 95.0))
-    if not vmax > 0:
-        vmax = float(max(finite.max(), 1e-12))
-    return _scalar_map_figure(error, path, title, "inferno", 0.0, vmax, f"error ({unit})")
 
 
 def render_grid_figure(

@@ -276,14 +276,6 @@ def fixation_point(axes: np.ndarray, centres: np.ndarray) -> np.ndarray:
     return np.linalg.solve(A, b)
 
 
-def fit_plane(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Least-squares plane through ``points`` (N, 3): (centroid, unit normal)."""
-    p = np.asarray(points, float)
-    c = p.mean(axis=0)
-    _, _, vt = np.linalg.svd(p - c)
-    return c, vt[-1]
-
-
 def vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     """Area-weighted unit vertex normals (V, 3) of a triangle mesh (0 for unused vertices)."""
     tv = vertices[triangles]
