@@ -239,37 +239,22 @@ def test_rules_run_the_python_that_runs_snakemake(data, tmp_path, monkeypatch):
     """Issue 12: common.smk's shell prefix exports the interpreter running Snakemake,
     quoted: a path with a space and a quote survives (no conda environment: README;
     test_cli.py's lint test checks no rule declares one). Loading the workflow with
-    Snakemake's public API sets the prefix snakemake.shell puts before every rule's
-    command. Measured: 0.2 s with snakemake.api imported (test_workflow.py imports
-    it first), 10 s alone (importing it)."""
-    import contextlib
-    import io
+    Snakemake's public API (tests/read_audit.py) sets the prefix snakemake.shell
+    puts before every rule's command. Measured: 0.2 s with snakemake.api imported
+    (test_workflow.py imports it first), 10 s alone (importing it)."""
     import sys
 
     import yaml
-    from snakemake.api import SnakemakeApi
-    from snakemake.settings.enums import Quietness
-    from snakemake.settings.types import ConfigSettings, OutputSettings, ResourceSettings
+    from read_audit import quiet_workflow
     from snakemake.shell import shell
-
-    from colourhs.cli import SNAKEFILE
 
     python = str(tmp_path / "my env's python" / "bin" / "python")
     monkeypatch.setattr(sys, "executable", python)  # what common.smk reads
     monkeypatch.setattr(shell, "_process_prefix", None)  # restored after the test
     config = tmp_path / "config.yaml"
     config.write_text(yaml.safe_dump({"datasets": {"d": {"path": str(data)}}}))
-    rules = io.StringIO()
-    with (
-        contextlib.redirect_stdout(rules),
-        SnakemakeApi(OutputSettings(quiet={Quietness.ALL})) as api,
-    ):
-        api.workflow(
-            resource_settings=ResourceSettings(cores=1),
-            config_settings=ConfigSettings(configfiles=[config]),
-            snakefile=SNAKEFILE,
-            workdir=tmp_path,
-        ).list_rules()
+    with quiet_workflow(tmp_path, [config]) as (workflow, rules):
+        workflow.list_rules()
     assert len(rules.getvalue().split()) == 16  # the workflow was read: 15 rules and all
     assert shell('printf %s "$COLOURHS_PYTHON"', read=True) == python
 
