@@ -407,15 +407,16 @@ FOLDER_INPUTS = ("dataset", "calibration", "calib")
 USER_ERRORS = (ValueError, OSError, UnknownNameError)
 
 
-def _input_problem(path: Path, kind: str | None, folder_ok: bool) -> str:
+def _input_problem(path: Path, kind: str | None, folder_ok: bool, maps=None) -> str:
     """What is wrong with input ``path`` ("" when nothing): missing, a folder where a
-    file belongs, or contents that are not ``kind`` (:data:`INPUT_KINDS`)."""
+    file belongs, or contents that are not ``kind`` (:data:`INPUT_KINDS`). A depth
+    file that reads goes into ``maps`` (a dict, path -> DepthMap) when given."""
     if not path.exists():
         return "no such file or folder"
     if path.is_dir():
         return "" if folder_ok else "a folder, not a file"
     if kind == "depth":
-        return _depth_problem(path)
+        return _depth_problem(path, maps)
     if kind == "hdf5":
         return _hdf5_problem(path)
     if kind == "ply":
@@ -437,16 +438,19 @@ def _input_problem(path: Path, kind: str | None, folder_ok: bool) -> str:
     return ""
 
 
-def _depth_problem(path: Path) -> str:
+def _depth_problem(path: Path, maps=None) -> str:
     """What :func:`colourhs.depthfile.read_depth` finds wrong with depth file ``path``
     (truncated, a dataset or attribute missing, shapes that disagree, no pixel), without
-    the file name it starts with; "" when it reads."""
+    the file name it starts with; "" when it reads, and then its DepthMap goes into
+    ``maps[str(path)]`` when ``maps`` is given (the stage is given it: read once)."""
     from colourhs.depthfile import read_depth
 
     try:
-        read_depth(path)
+        depth_map = read_depth(path)
     except ValueError as e:  # read_depth names every problem, h5py's too, as a ValueError
         return " ".join(str(e).removeprefix(f"{path}: ").split())
+    if maps is not None:
+        maps[str(path)] = depth_map
     return ""
 
 
@@ -474,9 +478,12 @@ def _read_dataset(_name: str, item) -> None:
         item[()]
 
 
-def _check_inputs(args) -> None:
+def _check_inputs(args) -> dict:
     """Every input path of the subcommand exists, is a file (or an allowed folder)
-    and, for the kinds of :data:`INPUT_KINDS`, reads as one; ValueError otherwise."""
+    and, for the kinds of :data:`INPUT_KINDS`, reads as one; ValueError otherwise.
+    Returns the depth files it read, path (str, as given) -> DepthMap, which the
+    stage is given instead of reading them again."""
+    maps = {}
     for name in INPUTS.get(args.command, ()):
         value = getattr(args, name, None)
         kind = SAME_AS_KINDS.get(args.command) if name == "same_as" else INPUT_KINDS.get(name)
@@ -488,11 +495,12 @@ def _check_inputs(args) -> None:
         for path in paths:
             if path is None:
                 continue
-            problem = _input_problem(Path(path), kind, name in FOLDER_INPUTS)
+            problem = _input_problem(Path(path), kind, name in FOLDER_INPUTS, maps)
             if problem:
                 raise ValueError(f"{option} {path}: {problem}")
     if args.command == "reconstruct":
         _check_maps(args)
+    return maps
 
 
 def _check_maps(args) -> None:
@@ -551,7 +559,7 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser(show_defaults=set(argv) if asks_help else False).parse_args(argv)
     args.snakemake_args, args.command_line = extra, command_line
     try:
-        _check_inputs(args)
+        args.depth_maps = _check_inputs(args)  # read once: the stage is given them
         return args.func(args)
     except USER_ERRORS as e:  # CaptureFormatError is a ValueError
         print(f"colourhs {args.command}: {e}", file=sys.stderr)

@@ -285,6 +285,13 @@ def _pairs(items: list[str], what: str) -> dict[str, str]:
     return out
 
 
+def _depth_input(args, path):
+    """The DepthMap that :func:`colourhs.cli._check_inputs` read from depth file
+    ``path`` (``args.depth_maps``), or ``path`` when it read none: the stage reads
+    each depth file once."""
+    return getattr(args, "depth_maps", {}).get(str(path), path)
+
+
 def _hull(args) -> int:
     from colourhs.hull import visual_hull
 
@@ -307,7 +314,7 @@ def _mesh(args) -> int:
     from colourhs.mesh import frame_mesh
 
     info = frame_mesh(
-        args.depth,
+        _depth_input(args, args.depth),
         args.out,
         hull_ply=args.hull,
         poisson_depth=args.poisson_depth,
@@ -331,7 +338,7 @@ def _evaluate(args) -> int:
     from colourhs.evaluate import evaluate_frame
 
     info = evaluate_frame(
-        args.depth,
+        _depth_input(args, args.depth),
         args.mesh,
         args.gt,
         args.out,
@@ -358,7 +365,7 @@ def _figures(args) -> int:
 
     written = scene_figures(
         args.out,
-        _pairs(args.depth, "--depth"),
+        {k: _depth_input(args, p) for k, p in _pairs(args.depth, "--depth").items()},
         _pairs(args.mesh, "--mesh"),
         args.gt,
         _pairs(args.animate, "--animate"),

@@ -22,7 +22,7 @@ from colourhs.capture import Camera
 from colourhs.geometry import camera_centre
 from colourhs.io import atomic_output, note_read
 
-__all__ = ["DepthMap", "DepthResult", "read_depth", "write_depth"]
+__all__ = ["DepthMap", "DepthResult", "as_depth_map", "read_depth", "write_depth"]
 
 
 @dataclass
@@ -220,3 +220,26 @@ def read_depth(path: str | Path) -> DepthMap:
     return DepthMap(
         depth, normal, confidence, mask, camera, K, dist, R, t, method, params, str(path)
     )
+
+
+def as_depth_map(depth: str | Path | DepthMap) -> DepthMap:
+    """A stage's depth input as a :class:`DepthMap`, read once.
+
+    Parameters
+    ----------
+    depth : str, Path or DepthMap
+        A results-contract depth file, or the :class:`DepthMap` already read from it
+        (the command line reads every depth file to check it before a stage starts,
+        :func:`colourhs.cli._check_inputs`, and passes the map on).
+
+    Returns
+    -------
+    DepthMap
+        ``depth`` itself, or :func:`read_depth` of the file.
+
+    Raises
+    ------
+    ValueError
+        As :func:`read_depth`, naming the file.
+    """
+    return depth if isinstance(depth, DepthMap) else read_depth(depth)

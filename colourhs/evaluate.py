@@ -51,7 +51,7 @@ from colourhs.contract import (  # metrics_table: re-exported, its old home
     metrics_table,
 )
 from colourhs.deptherrors import depth_errors, depth_summary
-from colourhs.depthfile import read_depth
+from colourhs.depthfile import DepthMap, as_depth_map
 from colourhs.geometry import camera_centre, project, world_to_camera
 from colourhs.io import write_json
 from colourhs.ply import load_mesh, write_ply
@@ -330,7 +330,7 @@ def _empty_metrics() -> dict:
 
 
 def evaluate_frame(
-    depth_h5: str | Path,
+    depth_h5: str | Path | DepthMap,
     mesh_ply: str | Path | None,
     gt_ply: str | Path | None,
     out_json: str | Path,
@@ -347,8 +347,10 @@ def evaluate_frame(
 
     Parameters
     ----------
-    depth_h5 : str or Path
-        Results-contract depth file (gives the reference camera and image size).
+    depth_h5 : str, Path or DepthMap
+        Results-contract depth file (gives the reference camera and image size), or
+        the :class:`DepthMap` already read from it
+        (:func:`colourhs.depthfile.as_depth_map`: read once).
     mesh_ply : str or Path, optional
         The frame's Poisson mesh (``mesh/<frame>.ply``); None skips the Hausdorff metrics.
     gt_ply : str or Path, optional
@@ -386,7 +388,7 @@ def evaluate_frame(
 
     t0 = time.perf_counter()
     say = partial(stage, start=t0, enabled=progress)
-    dm = read_depth(depth_h5)
+    dm = as_depth_map(depth_h5)
     info = {
         "scene": str(scene),
         "frame": str(frame),
@@ -455,7 +457,7 @@ def evaluate_frame(
     info.update(
         {
             "mesh_vertices": None if mesh is None else int(len(mesh[0])),
-            "depth_h5": str(depth_h5),
+            "depth_h5": dm.path,
             "mesh_ply": None if mesh_ply is None else str(mesh_ply),
             "gt_ply": None if gt_ply is None else str(gt_ply),
             "dilate_px": int(dilate_px),

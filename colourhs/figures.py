@@ -22,7 +22,6 @@ __all__ = [
     "chromaticity_figure",
     "chromaticity_rgb",
     "depth_map_figure",
-    "error_map_figure",
     "error_maps_figure",
     "mu_maps_figure",
     "normal_map_figure",
@@ -255,40 +254,6 @@ def normal_map_figure(normal: np.ndarray, path: str | Path, title: str = "") -> 
     return _save_png(fig, path)
 
 
-def error_map_figure(
-    error: np.ndarray,
-    path: str | Path,
-    title: str,
-    unit: str = "mm",
-    vmax: float | None = None,
-) -> Path:
-    """Heat map of a per-pixel error with a colour bar; NaN pixels show as background.
-
-    Parameters
-    ----------
-    error : ndarray, shape (H, W)
-        Non-negative error, already in ``unit``; NaN where none.
-    path : str or Path
-        PNG file to write (atomically).
-    title : str
-        Figure title.
-    unit : str
-        Unit of ``error`` for the colour bar label (e.g. ``"mm"``, ``"deg"``).
-    vmax : float, optional
-        Top of the colour range (0 is the bottom); default the 95th percentile
-        of the finite errors.
-    """
-    error = np.asarray(error, dtype=np.float64)
-    if error.ndim != 2:
-        raise ValueError(f"error map must be 2-D (H, W), got shape {error.shape}")
-    finite = _finite_or_raise(error, "error map")
-    if vmax is None:
-        vmax = float(np.percentile(finite, 95.0))
-    if not vmax > 0:
-        vmax = float(max(finite.max(), 1e-12))
-    return _scalar_map_figure(error, path, title, "inferno", 0.0, vmax, f"error ({unit})")
-
-
 def render_grid_figure(
     images: Mapping[str, np.ndarray] | Mapping[str, Mapping[str, np.ndarray]],
     path: str | Path,
@@ -467,7 +432,9 @@ def scene_figures(
     Parameters
     ----------
     out_dir : folder to write (created).
-    depths, meshes : variant -> results-contract depth file / Poisson mesh of the frame.
+    depths, meshes : variant -> results-contract depth file (or the
+        :class:`colourhs.depthfile.DepthMap` already read from it) / Poisson mesh
+        of the frame.
     gt_ply : the frame's ground-truth mesh, or None.
     animation : frame -> mesh PLY, in frame order, or None.
     fps : frames per second of the animation.
@@ -480,7 +447,7 @@ def scene_figures(
     The PNG/GIF files written.
     """
     from colourhs.deptherrors import depth_errors
-    from colourhs.depthfile import read_depth
+    from colourhs.depthfile import as_depth_map
     from colourhs.ply import load_mesh
 
     out = Path(out_dir)
@@ -491,7 +458,7 @@ def scene_figures(
     cam = None
     label = "figures: depth and normal maps" + (", depth errors" if gt is not None else "")
     for variant, path in bar(depths.items(), label, len(depths), progress, unit="variant"):
-        dm = read_depth(path)
+        dm = as_depth_map(path)
         cam = cam or dm
         written.append(depth_map_figure(dm.depth, out / f"{variant}_depth.png", variant))
         written.append(normal_map_figure(dm.normal, out / f"{variant}_normal.png", variant))

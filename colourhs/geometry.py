@@ -276,14 +276,6 @@ def fixation_point(axes: np.ndarray, centres: np.ndarray) -> np.ndarray:
     return np.linalg.solve(A, b)
 
 
-def fit_plane(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Least-squares plane through ``points`` (N, 3): (centroid, unit normal)."""
-    p = np.asarray(points, float)
-    c = p.mean(axis=0)
-    _, _, vt = np.linalg.svd(p - c)
-    return c, vt[-1]
-
-
 def vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     """Area-weighted unit vertex normals (V, 3) of a triangle mesh (0 for unused vertices)."""
     tv = vertices[triangles]
@@ -293,3 +285,15 @@ def vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
         np.add.at(n, triangles[:, k], face)
     norm = np.linalg.norm(n, axis=1, keepdims=True)
     return np.divide(n, norm, out=np.zeros_like(n), where=norm > 0)
+
+
+def mesh_volume(vertices: np.ndarray, triangles: np.ndarray) -> float:
+    """Signed volume (m^3) of a closed mesh; positive when triangles wind outward."""
+    v = np.asarray(vertices, float)[np.asarray(triangles)]
+    return float(np.sum(np.einsum("ij,ij->i", v[:, 0], np.cross(v[:, 1], v[:, 2]))) / 6.0)
+
+
+def outward_triangles(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """``triangles`` (T, 3) of a closed mesh wound outward: reversed (a copy) when
+    the signed volume (:func:`mesh_volume`) is negative, else as given."""
+    return triangles[:, ::-1].copy() if mesh_volume(vertices, triangles) < 0 else triangles

@@ -46,14 +46,13 @@ from colourhs.capture import (
     open_dataset,
 )
 from colourhs.carving import _focal, any_inside, carve, carve_field, grid_shape
-from colourhs.geometry import fixation_point
+from colourhs.geometry import fixation_point, mesh_volume
 from colourhs.hullmesh import (
     depth_bounds,
     hull_depth,
     hull_depth_range,
     hull_surface,
     march_surface,
-    mesh_volume,
     outward_mesh,
 )
 from colourhs.io import sha256_files

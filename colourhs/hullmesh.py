@@ -2,7 +2,7 @@
 
 :func:`hull_surface` meshes a carved volume (:mod:`colourhs.carving`) by
 marching cubes into a closed triangle mesh (world frame of ``rig.json``,
-metres) and :func:`mesh_volume` gives its signed volume. Seen from a camera,
+metres), wound outward (:func:`colourhs.geometry.outward_triangles`). Seen from a camera,
 the hull bounds depth: :func:`depth_bounds` gives each pixel's entry and exit
 z-depths, :func:`hull_depth_range` the z-depth range that reconstruction's
 depth labels must cover, and :func:`hull_depth` the hull's own depth map (the
@@ -17,7 +17,7 @@ import numpy as np
 
 from colourhs.capture import Camera
 from colourhs.carving import any_inside, in_slabs
-from colourhs.geometry import backproject, pixel_grid, vertex_normals
+from colourhs.geometry import backproject, outward_triangles, pixel_grid, vertex_normals
 from colourhs.raycast import raycasting_scene
 
 __all__ = [
@@ -26,7 +26,6 @@ __all__ = [
     "hull_depth_range",
     "hull_surface",
     "march_surface",
-    "mesh_volume",
     "outward_mesh",
 ]
 
@@ -126,12 +125,12 @@ def outward_mesh(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A closed mesh with its triangles wound outward, and its outward unit vertex normals.
 
-    Triangles are reversed when the mesh's signed volume (:func:`mesh_volume`)
-    is negative; normals are area-weighted face normals
-    (:func:`~colourhs.geometry.vertex_normals`). Returns (vertices, triangles, normals).
+    Triangles are reversed when the mesh's signed volume is negative
+    (:func:`colourhs.geometry.outward_triangles`); normals are area-weighted face
+    normals (:func:`~colourhs.geometry.vertex_normals`). Returns (vertices,
+    triangles, normals).
     """
-    if mesh_volume(vertices, triangles) < 0:
-        triangles = triangles[:, ::-1].copy()
+    triangles = outward_triangles(vertices, triangles)
     return vertices, triangles, vertex_normals(vertices, triangles)
 
 
@@ -156,12 +155,6 @@ def _fill_outside(f: np.ndarray, voxel_m: float) -> float:
     for s in in_slabs(f):
         s[~np.isfinite(s)] = outside
     return outside
-
-
-def mesh_volume(vertices: np.ndarray, triangles: np.ndarray) -> float:
-    """Signed volume (m^3) of a closed mesh; positive when triangles wind outward."""
-    v = np.asarray(vertices, float)[np.asarray(triangles)]
-    return float(np.sum(np.einsum("ij,ij->i", v[:, 0], np.cross(v[:, 1], v[:, 2]))) / 6.0)
 
 
 # --------------------------------------------------------------------------------------------

@@ -31,7 +31,7 @@ import numpy as np
 import open3d as o3d
 from scipy.spatial import cKDTree
 
-from colourhs.depthfile import DepthMap, read_depth
+from colourhs.depthfile import DepthMap, as_depth_map
 from colourhs.geometry import backproject, pixel_grid
 from colourhs.ply import load_mesh, write_ply
 from colourhs.progress import stage
@@ -274,7 +274,7 @@ def crop_to_data(mesh: TriMesh, data_points: np.ndarray, max_dist_m: float) -> T
 
 
 def frame_mesh(
-    depth_h5: str | Path,
+    depth_h5: str | Path | DepthMap,
     out_ply: str | Path,
     hull_ply: str | Path | None = None,
     poisson_depth: int = 8,
@@ -292,8 +292,9 @@ def frame_mesh(
 
     Parameters
     ----------
-    depth_h5 : str or Path
-        Results-contract depth file.
+    depth_h5 : str, Path or DepthMap
+        Results-contract depth file, or the :class:`DepthMap` already read from it
+        (:func:`colourhs.depthfile.as_depth_map`: read once).
     out_ply : str or Path
         Mesh to write (binary PLY, world frame, metres, vertex normals), atomically.
     hull_ply : str or Path, optional
@@ -333,11 +334,11 @@ def frame_mesh(
     """
     t0 = time.perf_counter()
     say = partial(stage, start=t0, enabled=progress)
-    say(f"mesh: oriented points of {Path(depth_h5).name}")
-    dm = read_depth(depth_h5)
+    dm = as_depth_map(depth_h5)
+    say(f"mesh: oriented points of {Path(dm.path).name}")
     points, normals = oriented_points(dm)
     if len(points) < 4:
-        raise ValueError(f"{depth_h5}: only {len(points)} pixels with depth and normal")
+        raise ValueError(f"{dm.path}: only {len(points)} pixels with depth and normal")
     spacing = point_spacing(points)
     radius = HULL_RADIUS_SPACINGS * spacing if hull_radius_m is None else float(hull_radius_m)
     n_hull = 0
@@ -360,10 +361,10 @@ def frame_mesh(
     say(f"mesh: cropping {len(mesh.triangles)} triangles to the data")
     mesh = crop_to_data(mesh, points, crop)
     if len(mesh.triangles) == 0:
-        raise ValueError(f"{depth_h5}: Poisson mesh is empty after cropping to the data")
+        raise ValueError(f"{dm.path}: Poisson mesh is empty after cropping to the data")
     write_ply(out_ply, mesh.vertices, mesh.triangles, mesh.normals)
     return {
-        "depth_h5": str(depth_h5),
+        "depth_h5": dm.path,
         "hull_ply": None if hull_ply is None else str(hull_ply),
         "points": int(len(points)),
         "hull_points": n_hull,

@@ -13,7 +13,7 @@ import numpy as np
 import open3d as o3d
 
 from colourhs.capture import Camera
-from colourhs.geometry import backproject, pixel_grid
+from colourhs.geometry import backproject, pixel_grid, world_to_camera
 
 SHADOW_EPS_M = 2e-5
 
@@ -196,9 +196,7 @@ def depth_normal_maps(hits: PixelHits, camera) -> tuple[np.ndarray, np.ndarray]:
     """
     n_px = hits.width * hits.height
     depth = np.full(n_px, np.nan)
-    depth[hits.hit] = (hits.points @ np.asarray(camera.R, float).T + np.asarray(camera.t, float))[
-        :, 2
-    ]
+    depth[hits.hit] = world_to_camera(hits.points, camera.R, camera.t)[:, 2]
     nrm = np.full((n_px, 3), np.nan)
     if hits.normals is not None:
         nrm[hits.hit] = hits.normals

@@ -34,22 +34,33 @@ ENV = "COLOURHS_AUDIT_READS"
 UNDECLARED = {"report": ("benchmarks/snakemake",)}
 
 
-def summary(workdir: Path, configfiles, detailed: bool = False) -> list[list[str]]:
-    """Snakemake's public summary (``DAGApi.summary``, the `--summary` table), one row
-    per output file: output_file, date, rule, log-file(s), [input-file(s), shellcmd,]
-    status, plan; detailed, the inputs and command its job last ran with (Snakemake's
-    records under .snakemake/metadata)."""
+@contextlib.contextmanager
+def quiet_workflow(workdir: Path, configfiles):
+    """The project's workflow through Snakemake's public API (a ``WorkflowApi``) with
+    what it prints captured: yields (the workflow, the StringIO of its stdout)."""
     text = io.StringIO()
     with (
         contextlib.redirect_stdout(text),
         SnakemakeApi(OutputSettings(quiet={Quietness.ALL})) as api,
     ):
-        api.workflow(
-            resource_settings=ResourceSettings(cores=2),
-            config_settings=ConfigSettings(configfiles=[Path(p) for p in configfiles]),
-            snakefile=SNAKEFILE,
-            workdir=workdir,
-        ).dag(DAGSettings()).summary(detailed=detailed)
+        yield (
+            api.workflow(
+                resource_settings=ResourceSettings(cores=2),
+                config_settings=ConfigSettings(configfiles=[Path(p) for p in configfiles]),
+                snakefile=SNAKEFILE,
+                workdir=workdir,
+            ),
+            text,
+        )
+
+
+def summary(workdir: Path, configfiles, detailed: bool = False) -> list[list[str]]:
+    """Snakemake's public summary (``DAGApi.summary``, the `--summary` table), one row
+    per output file: output_file, date, rule, log-file(s), [input-file(s), shellcmd,]
+    status, plan; detailed, the inputs and command its job last ran with (Snakemake's
+    records under .snakemake/metadata)."""
+    with quiet_workflow(workdir, configfiles) as (workflow, text):
+        workflow.dag(DAGSettings()).summary(detailed=detailed)
     lines = text.getvalue().splitlines()
     header = lines.index(next(x for x in lines if x.startswith("output_file\t")))
     columns = 8 if detailed else 6

@@ -12,7 +12,6 @@ from PIL import Image
 from colourhs.colours import colour_values, value_colours
 from colourhs.figures import (
     depth_map_figure,
-    error_map_figure,
     error_maps_figure,
     mu_maps_figure,
     normal_map_figure,
@@ -95,13 +94,10 @@ def test_map_figures_write_png_and_refuse_all_nan(tmp_path, shape):
     normal = rng.normal(size=shape + (3,))
     normal /= np.linalg.norm(normal, axis=-1, keepdims=True)
     normal[:, :5] = np.nan
-    error = rng.random(shape)
-    error[0, 0] = np.nan
     aspect = shape[1] / shape[0]
     ratios = [
         _ratio(depth_map_figure(depth, tmp_path / "d.png", title="depth")),
         _ratio(normal_map_figure(normal, tmp_path / "n.png")),
-        _ratio(error_map_figure(error, tmp_path / "e.png", "error", unit="deg")),
     ]
     for ratio in ratios:
         # Wide images give wide figures and tall ones tall (a colour bar and title add a margin).
@@ -112,8 +108,6 @@ def test_map_figures_write_png_and_refuse_all_nan(tmp_path, shape):
         depth_map_figure(nan, tmp_path / "x.png")
     with pytest.raises(ValueError, match="no finite values"):
         normal_map_figure(np.full(shape + (3,), np.nan), tmp_path / "x.png")
-    with pytest.raises(ValueError, match="no finite values"):
-        error_map_figure(nan, tmp_path / "x.png", "e")
     assert not (tmp_path / "x.png").exists()
 
 

@@ -233,3 +233,57 @@ def test_captures_are_validated_when_their_summary_is_stale(data, tmp_path, monk
     message = f"dataset 'd' is malformed, no stage was run: {image}"
     with pytest.raises(MalformedDatasetError, match=re.escape(message)):
         plan.check_captures()
+
+
+def test_rules_run_the_python_that_runs_snakemake(data, tmp_path, monkeypatch):
+    """Issue 12: common.smk's shell prefix exports the interpreter running Snakemake,
+    quoted: a path with a space and a quote survives (no conda environment: README;
+    test_cli.py's lint test checks no rule declares one). Loading the workflow with
+    Snakemake's public API (tests/read_audit.py) sets the prefix snakemake.shell
+    puts before every rule's command. Measured: 0.2 s with snakemake.api imported
+    (test_workflow.py imports it first), 10 s alone (importing it)."""
+    import sys
+
+    import yaml
+    from read_audit import quiet_workflow
+    from snakemake.shell import shell
+
+    python = str(tmp_path / "my env's python" / "bin" / "python")
+    monkeypatch.setattr(sys, "executable", python)  # what common.smk reads
+    monkeypatch.setattr(shell, "_process_prefix", None)  # restored after the test
+    config = tmp_path / "config.yaml"
+    config.write_text(yaml.safe_dump({"datasets": {"d": {"path": str(data)}}}))
+    with quiet_workflow(tmp_path, [config]) as (workflow, rules):
+        workflow.list_rules()
+    assert len(rules.getvalue().split()) == 16  # the workflow was read: 15 rules and all
+    assert shell('printf %s "$COLOURHS_PYTHON"', read=True) == python
+
+
+def test_config_yaml_states_the_package_defaults():
+    """Issue 12 (one value for each default): what config.yaml writes out for the
+    calibration and surfaces is the package's own default, and the command line's
+    option defaults are the same (the mesh options repeat frame_mesh's: the command
+    line must not import open3d). Measured: 1.5 s (importing colourhs.mesh)."""
+    import inspect
+
+    import yaml
+
+    from colourhs.chromaticity import MIN_SIGNAL
+    from colourhs.cli import build_parser
+    from colourhs.mesh import frame_mesh
+    from colourhs.photometric import DEFAULTS
+    from colourhs.silhouettes import DEFAULT_THRESHOLD
+
+    config = yaml.safe_load((PROJECT_ROOT / "config.yaml").read_text())
+    photometric = config["calibration"]["photometric"]
+    assert len(photometric) == 4 and photometric == {k: DEFAULTS[k] for k in photometric}
+    assert config["calibration"]["chromaticity"] == {"min_signal": MIN_SIGNAL}
+    assert config["surfaces"]["hull"] == {"voxel_m": None, "threshold": DEFAULT_THRESHOLD}
+    signature = inspect.signature(frame_mesh).parameters
+    mesh = {k: signature[k].default for k in ("poisson_depth", "density_quantile")}
+    assert config["surfaces"]["mesh"] == mesh
+    parse = build_parser().parse_args
+    assert vars(parse(["mesh", "d.h5", "m.ply"])).items() >= mesh.items()
+    hull = parse(["hull", "data", "scene", "000000", "h.ply"])
+    assert (hull.threshold, hull.voxel_m) == (DEFAULT_THRESHOLD, None)
+    assert parse(["chromaticity", "data", "toy", "c.h5"]).min_signal == MIN_SIGNAL

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from colourhs.geometry import axis_angle, vertex_normals
+from colourhs.geometry import axis_angle, outward_triangles, vertex_normals
 from colourhs.synth.brdf import Material
 
 WHITE_ALBEDO = 0.8  # reflectance of the board's white and of the white reference
@@ -74,13 +74,6 @@ def merge(name, parts, materials, albedo) -> SceneGeometry:
     return SceneGeometry(
         name, v, t, vertex_normals(v, t), np.concatenate(mids), tuple(materials), albedo
     )
-
-
-def _outward(vertices, triangles):
-    """Flip the winding of a closed part whose signed volume is negative."""
-    v = vertices[triangles]
-    vol = np.einsum("ij,ij->i", v[:, 0], np.cross(v[:, 1], v[:, 2])).sum()
-    return triangles[:, ::-1].copy() if vol < 0 else triangles
 
 
 def transformed(
@@ -291,7 +284,7 @@ def statue(
     wrinkles = 0.012 * np.sin(40 * elev) * np.exp(-(((elev - 0.5) / 0.2) ** 2)) * (u[:, 2] < 0)
     r = radius_m * (1 + _bumps(u, STATUE_FEATURES) + wrinkles)
     v = u * r[:, None] * np.array([1.0, 1.15, 0.9])
-    tris = _outward(v, tris)
+    tris = outward_triangles(v, tris)
     rng = np.random.default_rng(seed)
     blobs = rng.normal(0, radius_m, (10, 3))
     widths = rng.uniform(0.3, 0.7, 10) * radius_m
@@ -312,7 +305,7 @@ def ellipsoid(centre, radii, level: int = 4) -> tuple[np.ndarray, np.ndarray]:
     """A closed ellipsoid mesh (icosphere of subdivision ``level``), outward winding."""
     v, t = _icosphere(level)
     v = v * np.asarray(radii, float) + np.asarray(centre, float)
-    return v, _outward(v, t)
+    return v, outward_triangles(v, t)
 
 
 def helix_tube(
@@ -351,7 +344,7 @@ def helix_tube(
         )
     ).reshape(-1, 3)
     t = grid_mesh(nu, nv, wrap_u=True)
-    return v, _outward(v, t), s
+    return v, outward_triangles(v, t), s
 
 
 TOY_COLOURS = {

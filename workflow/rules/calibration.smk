@@ -11,8 +11,6 @@ rule marker_poses:
         "logs/calib/{name}/marker_poses.log",
     benchmark:
         "benchmarks/snakemake/marker_poses/{name}.tsv"
-    conda:
-        "../envs/colourhs.yaml"
     threads: 1
     resources:
         mem_mb=2000,
@@ -33,8 +31,6 @@ rule crosstalk:
         "logs/calib/{name}/crosstalk.log",
     benchmark:
         "benchmarks/snakemake/crosstalk/{name}.tsv"
-    conda:
-        "../envs/colourhs.yaml"
     threads: 1
     # Measured at 1280x960 (paper preset, benchmarks/bench_paper.py): 2.07 GB, 57 s.
     resources:
@@ -55,8 +51,6 @@ rule noise_model:
         "logs/calib/{name}/noise.log",
     benchmark:
         "benchmarks/snakemake/noise_model/{name}.tsv"
-    conda:
-        "../envs/colourhs.yaml"
     threads: 1
     # Measured at 1280x960 (paper preset, benchmarks/bench_paper.py): 0.66 GB, 14-16 s.
     resources:
@@ -82,8 +76,6 @@ rule photometric_maps:
         "logs/calib/{name}/photometric.log",
     benchmark:
         "benchmarks/snakemake/photometric_maps/{name}.tsv"
-    conda:
-        "../envs/colourhs.yaml"
     threads: 1
     # Measured at 1280x960 (paper preset, benchmarks/bench_paper.py): 1.39 GB, 16-21 s.
     resources:
@@ -109,8 +101,6 @@ rule chromaticity_map:
         "benchmarks/snakemake/chromaticity_map/{name}/{object}.tsv"
     wildcard_constraints:
         object="[A-Za-z0-9_-]+",
-    conda:
-        "../envs/colourhs.yaml"
     threads: 1
     resources:
         mem_mb=1000,

@@ -10,8 +10,6 @@ rule validate_dataset:
         "logs/capture/{name}.log",
     benchmark:
         "benchmarks/snakemake/validate_dataset/{name}.tsv"
-    conda:
-        "../envs/colourhs.yaml"
     threads: 1
     resources:
         mem_mb=1000,

@@ -6,11 +6,6 @@ import shlex
 import sys
 from pathlib import Path
 
-# Rules run the package with the Python that runs Snakemake (the project's
-# venv); with `--sdm conda` with the Python of the rule's conda environment
-# (workflow/envs/colourhs.yaml), which Snakemake activates before the command.
-from snakemake_interface_executor_plugins.settings import DeploymentMethod
-
 from colourhs.workflow_plan import (
     MalformedDatasetError,
     WorkflowPlan,
@@ -19,11 +14,11 @@ from colourhs.workflow_plan import (
     same_option,
 )
 
-_settings = getattr(workflow, "deployment_settings", None)
-if _settings is not None and DeploymentMethod.CONDA in _settings.deployment_method:
-    shell.prefix("export COLOURHS_PYTHON=python; ")
-else:
-    shell.prefix(f"export COLOURHS_PYTHON={shlex.quote(sys.executable)}; ")
+# Rules run the package with the Python that runs Snakemake (the project's venv,
+# which on a cluster sits on the shared file system and serves every node); the
+# path is quoted, so it may contain spaces. There is no conda environment: no
+# conda channel is reachable where the project is built and tested (README).
+shell.prefix(f"export COLOURHS_PYTHON={shlex.quote(sys.executable)}; ")
 
 # A synthetic dataset's folder exists once its checkpoint (synth.smk) has run.
 PLAN = WorkflowPlan(

@@ -23,8 +23,6 @@ rule evaluate_frame:
         "benchmarks/snakemake/evaluate_frame/{name}/{scene}/{variant}/{frame}.tsv"
     wildcard_constraints:
         frame="[0-9]{6}",
-    conda:
-        "../envs/colourhs.yaml"
     threads: 1
     # Measured at 1280x960 (paper preset, benchmarks/bench_paper.py): 0.60-0.81 GB, 5-8 s.
     resources:
@@ -53,8 +51,6 @@ rule metrics_table:
         "logs/evaluate/{name}/metrics.log",
     benchmark:
         "benchmarks/snakemake/metrics_table/{name}.tsv"
-    conda:
-        "../envs/colourhs.yaml"
     threads: 1
     resources:
         mem_mb=1000,

@@ -16,8 +16,6 @@ rule reconstruct_frame:
     wildcard_constraints:
         variant="ml_full|bayes_nocalib|bayes_ph|bayes_full",
         frame="[0-9]{6}",
-    conda:
-        "../envs/colourhs.yaml"
     # One thread: two frames at once keep both cores busy (the solver and the
     # refinement are serial); raise with --set-threads reconstruct_frame=N.
     threads: 1

@@ -6,8 +6,6 @@ rule effective_config:
         "results/{name}/config.yaml",
     log:
         "logs/report/{name}/config.log",
-    conda:
-        "../envs/colourhs.yaml"
     threads: 1
     resources:
         mem_mb=500,
@@ -38,8 +36,6 @@ rule scene_figures:
         "logs/report/{name}/figures/{scene}.log",
     benchmark:
         "benchmarks/snakemake/scene_figures/{name}/{scene}.tsv"
-    conda:
-        "../envs/colourhs.yaml"
     threads: 1
     # Measured at 1280x960 (paper preset, benchmarks/bench_paper.py): 0.90 GB, 45 s for 5 variants.
     resources:
@@ -62,8 +58,6 @@ rule report:
         ),
     log:
         "logs/report/{name}/index.log",
-    conda:
-        "../envs/colourhs.yaml"
     threads: 1
     # Measured at 1280x960 (paper preset, benchmarks/bench_paper.py): 0.67 GB, 16 s.
     resources:

@@ -15,8 +15,6 @@ rule visual_hull:
         "benchmarks/snakemake/visual_hull/{name}/{scene}/{frame}.tsv"
     wildcard_constraints:
         frame="[0-9]{6}",
-    conda:
-        "../envs/colourhs.yaml"
     threads: 1
     # Measured at 1280x960 (paper preset, benchmarks/bench_paper.py): 2.39 GB, 40 s.
     resources:
@@ -45,8 +43,6 @@ rule frame_mesh:
         "benchmarks/snakemake/frame_mesh/{name}/{scene}/{variant}/{frame}.tsv"
     wildcard_constraints:
         frame="[0-9]{6}",
-    conda:
-        "../envs/colourhs.yaml"
     threads: 1
     # Measured at 1280x960 (paper preset, benchmarks/bench_paper.py): 0.45-0.71 GB, 6-11 s.
     resources:

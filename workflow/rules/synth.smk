@@ -8,8 +8,6 @@ checkpoint synth_dataset:
         "logs/synth/{name}.log",
     benchmark:
         "benchmarks/snakemake/synth/{name}.tsv"
-    conda:
-        "../envs/colourhs.yaml"
     threads: 2
     resources:
         mem_mb=4000,
