@@ -233,7 +233,7 @@ def _pose_derivatives(shot, board, origin, d, cam) -> np.ndarray:
 
 def _build_led_problem(rig, shots, fields, opts, progress=False) -> _LedProblem:
     from colourhs.geometry import backproject, project, ray_plane_intersection
-    from colourhs.helmholtz import sample_bilinear
+    from colourhs.sampling import sample_bilinear
 
     W, H = rig.image.width, rig.image.height
     step = int(opts["step_px"])

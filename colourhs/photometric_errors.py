@@ -14,7 +14,7 @@ import pandas as pd
 
 from colourhs.capture import COLOURS, Board, Rig
 from colourhs.geometry import project
-from colourhs.helmholtz import sample_bilinear
+from colourhs.sampling import sample_bilinear
 
 
 def mu_map_errors(result: dict, truth: dict[str, np.ndarray], rig: Rig) -> pd.DataFrame:

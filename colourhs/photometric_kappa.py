@@ -21,7 +21,7 @@ import numpy as np
 
 from colourhs.capture import Board, Camera, Rig
 from colourhs.geometry import backproject, project, ray_plane_intersection
-from colourhs.helmholtz import sample_bilinear
+from colourhs.sampling import sample_bilinear
 
 
 def kappa(

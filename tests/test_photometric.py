@@ -159,9 +159,8 @@ def test_all_samples_masked_is_an_error(tiny_calibration):
 
 def test_unmixing_reduces_the_hs_residual(tiny_dataset):
     """Cross-talk unmixing lowers the eq. (5) residual at ground-truth points."""
+    from hs_constraint import constraint_residual, pair_rows
     from test_synth import _frame, _gt_points, _truth
-
-    from colourhs.helmholtz import constraint_residual, pair_rows
 
     mixing = {c: np.array(v["M"]) for c, v in calibrate_crosstalk(tiny_dataset)["cameras"].items()}
     med = {}

@@ -12,9 +12,9 @@ import re
 import h5py
 import numpy as np
 import pytest
+from hs_constraint import pair_rows
 
 from colourhs.crosstalk import calibrate_crosstalk
-from colourhs.helmholtz import pair_rows
 from colourhs.io import sha256_files
 from colourhs.photometric import read_mu_maps
 from colourhs.ply import load_mesh
