@@ -65,7 +65,6 @@ __all__ = [
     "evaluate_frame",
     "evaluated_vertices",
     "hausdorff",
-    "hausdorff_symmetric",
     "metrics_table",
     "seen_surface",
     "surface_samples",
@@ -165,20 +164,6 @@ def hausdorff(
         "closest": closest,
         "distances": d,
     }
-
-
-def hausdorff_symmetric(vertices_a, triangles_a, vertices_b, triangles_b, **kwargs) -> dict:
-    """Both one-sided distances (:func:`hausdorff` a->b and b->a) and the symmetric maximum.
-
-    Returns
-    -------
-    dict
-        ``a_to_b`` and ``b_to_a`` (the two results) and ``max_m``, the
-        symmetric Hausdorff distance (metres).
-    """
-    ab = hausdorff(vertices_a, triangles_a, vertices_b, triangles_b, **kwargs)
-    ba = hausdorff(vertices_b, triangles_b, vertices_a, triangles_a, **kwargs)
-    return {"a_to_b": ab, "b_to_a": ba, "max_m": max(ab["max_m"], ba["max_m"])}
 
 
 # --------------------------------------------------------------------------- seen region

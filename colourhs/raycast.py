@@ -15,8 +15,6 @@ import open3d as o3d
 from colourhs.capture import Camera
 from colourhs.geometry import backproject, pixel_grid, world_to_camera
 
-SHADOW_EPS_M = 2e-5
-
 
 def raycasting_scene(vertices: np.ndarray, triangles: np.ndarray) -> o3d.t.geometry.RaycastingScene:
     """An open3d ray-casting scene of a triangle mesh (vertices (V, 3) metres, triangles (T, 3))."""
@@ -201,42 +199,6 @@ def depth_normal_maps(hits: PixelHits, camera) -> tuple[np.ndarray, np.ndarray]:
     if hits.normals is not None:
         nrm[hits.hit] = hits.normals
     return depth.reshape(hits.height, hits.width), nrm.reshape(hits.height, hits.width, 3)
-
-
-def surface_points(
-    vertices: np.ndarray,
-    triangles: np.ndarray,
-    normals: np.ndarray,
-    reference: Camera,
-    cameras: tuple[Camera, ...],
-    width: int,
-    height: int,
-    min_cos: float = 0.1,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Surface points seen at the reference camera's pixel centres.
-
-    Casts one ray per pixel centre of ``reference`` onto the mesh and keeps
-    the hits that every camera sees and every collocated light lights
-    (unoccluded, at more than ``min_cos`` incidence).
-
-    Returns
-    -------
-    points : (N, 3) world points on the mesh, metres.
-    normals : (N, 3) interpolated unit normals facing the reference camera.
-    pixels : (N,) flat pixel indices (row * width + column) in the reference camera.
-    """
-    hits = cast_pixels(vertices, triangles, normals, reference, width, height)
-    scene, hit, points, n = hits.scene, hits.hit, hits.points, hits.normals
-    keep = np.ones(len(points), bool)
-    for cam in cameras:
-        for centre in (cam.centre, cam.light_centre):
-            d = centre - points
-            dist = np.linalg.norm(d, axis=1)
-            d /= dist[:, None]
-            keep &= np.sum(d * n, axis=1) > min_cos
-            r = np.concatenate([points + SHADOW_EPS_M * d, d], axis=1).astype(np.float32)
-            keep &= ~scene.test_occlusions(o3d.core.Tensor(r), tfar=float(dist.min())).numpy()
-    return points[keep], n[keep], np.flatnonzero(hit)[keep]
 
 
 def render_depth_normals(

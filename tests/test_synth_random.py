@@ -12,13 +12,12 @@ import cv2
 import h5py
 import numpy as np
 import pytest
-from hs_constraint import constraint_residual, pair_rows
+from hs_constraint import constraint_residual, pair_rows, surface_points
 
 from colourhs.capture import load_rig, open_dataset, read_image, validate
 from colourhs.geometry import project
 from colourhs.markers import to_grey8
 from colourhs.ply import load_mesh
-from colourhs.raycast import surface_points
 from colourhs.sampling import sample_bilinear
 from colourhs.synth import randomrig as rr
 from colourhs.synth.brdf import Material

@@ -159,19 +159,6 @@ def _eval_prior(D, min_prev, jh, w, wtau):
     return v if v < trunc else trunc
 
 
-@njit(cache=True, fastmath=_FASTMATH)
-def _min_prior(prev_L, j_hat, w, tau):
-    """``min_k' prev_L[k'] + w * min(|k' - j_hat|, tau)`` in ``O(K)``.
-
-    Reference entry point (copies ``prev_L``) used by the tests; the sweeps
-    inline the same :func:`_eval_prior` on a shared distance transform.
-    """
-    D = prev_L.astype(np.float32)
-    w32 = np.float32(w)
-    _distance_transform_l1(D, w32)
-    return _eval_prior(D, np.float32(prev_L.min()), np.float32(j_hat), w32, np.float32(w * tau))
-
-
 # ----------------------------------------------------------------------------------------------
 # Sweeps.
 
@@ -335,7 +322,8 @@ def _sweep_horizontal(cost, normals, rays, dks, off, alpha, w, wtau, S, labels, 
                     S[i, jb, k] += lb
             mprev[0] = mnew[0]
             mprev[1] = mnew[1]
-            # both transforms interleaved (independent dependency chains)
+            # _distance_transform_l1 of both, interleaved (two independent
+            # dependency chains: the CPU overlaps them)
             for k in range(1, K):
                 va = La[k - 1] + w
                 if va < La[k]:
