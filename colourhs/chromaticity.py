@@ -52,6 +52,7 @@ import hashlib
 import json
 import os
 from pathlib import Path
+from typing import NamedTuple
 
 import h5py
 import numpy as np
@@ -396,23 +397,32 @@ def _sha256(path: Path) -> str:
     return h.hexdigest()
 
 
+class ObjectChromaticity(NamedTuple):
+    """What :func:`chromaticity_maps` computed for one object."""
+
+    maps: dict[str, np.ndarray]  # camera -> (H, W, 3) chromaticity p, NaN where unknown
+    intensity: np.ndarray  # (H, W) the object's intensity in ``camera`` (for the figure)
+    camera: str
+
+
 def chromaticity_maps(
     dataset_dir: str | Path | Dataset,
     obj: str,
     out_h5: str | Path,
-    figure_png: str | Path | None = None,
     min_signal: float = MIN_SIGNAL,
     object_threshold: float = OBJECT_THRESHOLD,
-) -> dict[str, np.ndarray]:
-    """Chromaticity maps of ``obj`` for every camera, written to HDF5 (and a figure).
+) -> ObjectChromaticity:
+    """Chromaticity maps of ``obj`` for every camera, written to HDF5.
 
     The HDF5 file (results contract: ``results/NAME/calib/chromaticity/<object>.h5``) holds one
     float32 dataset ``"<camera>"`` of shape (H, W, 3) per camera, ``(p_R, p_G, p_B)``, NaN where
     unknown; each with attributes ``mask`` (silhouette file or threshold) and ``valid_pixels``.
     File attributes: ``object``, ``dataset``, ``cameras``, ``normalisation``, ``min_signal``,
     ``object_threshold``, ``inputs`` (JSON: input file relative to the dataset -> sha256) and
-    ``inputs_sha256`` (sha256 of the sorted ``"path sha256"`` lines). Both files are written to
-    temporary names and renamed at the end: nothing is left behind on error.
+    ``inputs_sha256`` (sha256 of the sorted ``"path sha256"`` lines). Written to a temporary
+    name and renamed at the end: nothing is left behind on error. The figure (the paper's
+    Figure 6, :func:`colourhs.figures.chromaticity_figure`) is the command's to draw, from
+    what this returns: calibration modules do not import the figures.
 
     Parameters
     ----------
@@ -422,15 +432,14 @@ def chromaticity_maps(
         The chromatic object.
     out_h5 : str or Path
         HDF5 file to write.
-    figure_png : str or Path, optional
-        PNG figure to write (see :func:`colourhs.figures.chromaticity_figure`).
     min_signal, object_threshold : float
         See :func:`chromaticity_map`.
 
     Returns
     -------
-    dict of str to ndarray
-        Camera name to its map.
+    ObjectChromaticity
+        ``maps``: camera name to its map; ``intensity``: the first camera's intensity
+        image of the object (the figure's), ``camera``: that camera's name.
     """
     # The images it decodes are checked as they are read (read_image), not every header.
     dataset = (
@@ -453,7 +462,6 @@ def chromaticity_maps(
     out_h5 = Path(out_h5)
     out_h5.parent.mkdir(parents=True, exist_ok=True)
     tmp_h5 = out_h5.with_name(f".{out_h5.name}.{os.getpid()}.tmp")
-    tmp_png = None
     try:
         with h5py.File(tmp_h5, "w") as f:
             f.attrs["object"] = obj
@@ -469,20 +477,9 @@ def chromaticity_maps(
                 d = f.create_dataset(camera, data=p, compression="gzip")
                 d.attrs["mask"] = infos[camera]["mask_source"]
                 d.attrs["valid_pixels"] = infos[camera]["valid_pixels"]
-        if figure_png is not None:
-            from colourhs.figures import chromaticity_figure
-
-            figure_png = Path(figure_png)
-            figure_png.parent.mkdir(parents=True, exist_ok=True)
-            tmp_png = figure_png.with_name(f".{figure_png.name}.{os.getpid()}.tmp.png")
-            first = dataset.rig.camera_names[0]
-            chromaticity_figure(
-                infos[first]["intensity"], maps, tmp_png, title=obj, intensity_label=first
-            )
-            os.replace(tmp_png, figure_png)
         os.replace(tmp_h5, out_h5)
     finally:
-        for tmp in (tmp_h5, tmp_png):
-            if tmp is not None and tmp.exists():
-                tmp.unlink()
-    return maps
+        if tmp_h5.exists():
+            tmp_h5.unlink()
+    first = dataset.rig.camera_names[0]
+    return ObjectChromaticity(maps, infos[first]["intensity"], first)

@@ -194,9 +194,13 @@ def _photometric(args) -> int:
     from colourhs.photometric import photometric_maps
 
     params = {k: v for k, v in vars(args).items() if k in PHOTOMETRIC_PARAMS and v is not None}
-    result = photometric_maps(
-        args.dataset, args.poses, args.out, args.crosstalk, args.figure, **params
-    )
+    result = photometric_maps(args.dataset, args.poses, args.out, args.crosstalk, **params)
+    if args.figure:
+        from colourhs.figures import mu_maps_figure
+
+        _figure_or_none(
+            args.out, lambda: mu_maps_figure(result["maps"], result["calibrated"], args.figure)
+        )
     for key, n in result["counts"].items():
         rms = result["residual_rms"][key]
         print(f"{key}: {n} eq. (7) constraints, residual RMS {rms:.4f} (log mu)")
@@ -204,15 +208,37 @@ def _photometric(args) -> int:
     return 0
 
 
+def _figure_or_none(written: str | Path, draw) -> None:
+    """Run ``draw()`` (a calibration figure, written atomically by the figure's own
+    function); if it fails, remove the calibration file ``written`` too, so a failed
+    command leaves neither."""
+    try:
+        draw()
+    except BaseException:
+        Path(written).unlink(missing_ok=True)
+        raise
+
+
 def _chromaticity(args) -> int:
     import numpy as np
 
     from colourhs.chromaticity import chromaticity_maps
 
-    maps = chromaticity_maps(
-        args.dataset, args.object, args.out, figure_png=args.figure, min_signal=args.min_signal
-    )
-    for camera, p in maps.items():
+    result = chromaticity_maps(args.dataset, args.object, args.out, min_signal=args.min_signal)
+    if args.figure:
+        from colourhs.figures import chromaticity_figure
+
+        _figure_or_none(
+            args.out,
+            lambda: chromaticity_figure(
+                result.intensity,
+                result.maps,
+                args.figure,
+                title=args.object,
+                intensity_label=result.camera,
+            ),
+        )
+    for camera, p in result.maps.items():
         print(f"{camera}: {int(np.isfinite(p[..., 0]).sum())} pixels with a chromaticity")
     print(f"wrote {args.out}")
     return 0

@@ -70,7 +70,7 @@ def chromaticity_figure(
     maps : dict of str to ndarray, shape (H, W, 3)
         Camera name to chromaticity map, shown by :func:`chromaticity_rgb`.
     out_png : str or Path
-        PNG file to write (written in place; callers wanting atomicity pass a temporary name).
+        PNG file to write (atomically).
     title : str, optional
         Figure title (e.g. the object's name).
     intensity_label : str, optional
@@ -99,11 +99,7 @@ def chromaticity_figure(
     if title:
         fig.suptitle(title)
     fig.tight_layout()
-    out_png = Path(out_png)
-    try:
-        fig.savefig(out_png, dpi=100, format="png")
-    finally:
-        plt.close(fig)
+    out_png = _save_png(fig, out_png)
     if not os.path.getsize(out_png):
         raise OSError(f"{out_png}: empty figure written")
     return out_png

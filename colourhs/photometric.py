@@ -324,11 +324,10 @@ def photometric_maps(
     poses_csv,
     out_h5,
     crosstalk_json=None,
-    figure_png=None,
     progress: bool = True,
     **params,
 ) -> dict:
-    """Calibrate and write ``photometric.h5`` (results contract) and a Figure-3-like PNG.
+    """Calibrate and write ``photometric.h5`` (results contract).
 
     The HDF5 file holds one float32 (H, W) mu map per Helmholtz camera at
     ``<camera>/<colour>``, its control grid at ``grid/<camera>/<colour>``
@@ -337,7 +336,9 @@ def photometric_maps(
     shading per camera and a hash of the inputs. Written atomically: no
     partial file on error. ``progress``: bars over the board poses and the pairs
     and a line per step on stderr (:mod:`colourhs.progress`; 21 s in all at
-    1280 x 960).
+    1280 x 960). Returns :func:`calibrate`'s result, whose ``maps`` and ``calibrated``
+    the command draws as the paper's Figure 3 (:func:`colourhs.figures.mu_maps_figure`):
+    calibration modules do not import the figures.
     """
     t0 = perf_counter()
     rig, views = load_views(dataset_dir, poses_csv, crosstalk_json, progress)
@@ -365,11 +366,6 @@ def photometric_maps(
         f.attrs["poses"] = json.dumps([v.name for v in views])
         f.attrs["inputs_sha256"] = sha256_files(inputs)
         f.attrs["crosstalk_unmixed"] = bool(crosstalk_json)
-    if figure_png is not None:
-        stage(f"photometric: figure {Path(figure_png).name}", t0, progress)
-        from colourhs.figures import mu_maps_figure
-
-        mu_maps_figure(result["maps"], result["calibrated"], figure_png)
     return result
 
 

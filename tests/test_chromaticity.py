@@ -22,7 +22,7 @@ from colourhs.chromaticity import (
     signal_mask,
     solve_chromaticity,
 )
-from colourhs.figures import chromaticity_rgb
+from colourhs.figures import chromaticity_figure, chromaticity_rgb
 
 # Median relative error bound on the tiny preset (all nuisances on). The demo preset's target
 # is 2 % (measured there: toy 0.85-0.86 %, statue 1.28-1.36 %). The statue's error is shot
@@ -150,7 +150,9 @@ def _tiny_copy(tiny_dataset, tmp_path):
 def test_tiny_maps_match_ground_truth(tiny_dataset, tmp_path, obj):
     out = tmp_path / "calib" / "chromaticity" / f"{obj}.h5"
     png = tmp_path / "calib" / "chromaticity" / f"{obj}.png"
-    maps = chromaticity_maps(tiny_dataset, obj, out, figure_png=png)
+    result = chromaticity_maps(tiny_dataset, obj, out)
+    maps = result.maps
+    chromaticity_figure(result.intensity, maps, png, title=obj, intensity_label=result.camera)
     ds = open_dataset(tiny_dataset)
     assert list(maps) == list(ds.rig.camera_names)
     assert sorted(p.name for p in out.parent.iterdir()) == [f"{obj}.h5", f"{obj}.png"]
@@ -209,7 +211,7 @@ def test_without_silhouettes_a_threshold_finds_the_object(tiny_dataset, tmp_path
     shutil.rmtree(copy / "scenes" / "toy" / "masks")
     ds = open_dataset(copy)
     assert object_silhouette(ds, "toy", "cam1") is None
-    maps = chromaticity_maps(ds, "toy", tmp_path / "toy.h5")
+    maps = chromaticity_maps(ds, "toy", tmp_path / "toy.h5").maps
     with h5py.File(tmp_path / "toy.h5") as f:
         assert f["cam1"].attrs["mask"].startswith("threshold")
     a = np.isfinite(with_masks[..., 0])
@@ -253,7 +255,23 @@ def test_all_samples_masked_leaves_no_output(tiny_dataset, tmp_path):
     out = tmp_path / "toy.h5"
     out.write_bytes(b"previous result")
     with pytest.raises(ValueError, match="all samples masked") as err:
-        chromaticity_maps(tiny_dataset, "toy", out, tmp_path / "toy.png", min_signal=1.5)
+        chromaticity_maps(tiny_dataset, "toy", out, min_signal=1.5)
     assert "toy" in str(err.value) and "cam1" in str(err.value)
     assert out.read_bytes() == b"previous result"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["toy.h5"]
+
+
+def test_command_draws_the_figure_and_leaves_neither_file_when_it_fails(tiny_dataset, tmp_path):
+    """The figure is the command's (calibration modules do not import figures): written
+    beside the maps; a figure that cannot be written removes the maps too."""
+    from colourhs.cli import main
+
+    out, png = tmp_path / "toy.h5", tmp_path / "toy.png"
+    assert main(["chromaticity", str(tiny_dataset), "toy", str(out), "--figure", str(png)]) == 0
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and out.exists()
+    blocked = tmp_path / "file"
+    blocked.write_text("a file, not a folder")
+    out2 = tmp_path / "toy2.h5"
+    fig = str(blocked / "toy.png")
+    assert main(["chromaticity", str(tiny_dataset), "toy", str(out2), "--figure", fig]) == 1
+    assert not out2.exists() and not any(p.name.startswith(".toy") for p in tmp_path.iterdir())
