@@ -54,13 +54,16 @@ PHOTOMETRIC_PARAMS = {
 
 def _defaults(command: str) -> dict:
     """The package's defaults of a stage's tuning options (imported only for --help)."""
+    import dataclasses
     import inspect
 
     if command == "reconstruct":
-        from colourhs.reconstruct.frame import reconstruct
+        from colourhs.reconstruct.frame import ReconstructOptions, reconstruct
 
         sig = inspect.signature(reconstruct).parameters
-        return {k: sig[k].default for k in RECONSTRUCT_PARAMS if k in sig}
+        defaults = {k: p.default for k, p in sig.items() if p.default is not p.empty}
+        defaults |= {f.name: f.default for f in dataclasses.fields(ReconstructOptions)}
+        return {k: defaults[k] for k in RECONSTRUCT_PARAMS if k in defaults}
     from colourhs.photometric import DEFAULTS
 
     return dict(DEFAULTS)

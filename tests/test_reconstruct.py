@@ -21,7 +21,9 @@ from colourhs.ply import load_mesh
 from colourhs.raycast import render_depth_normals
 from colourhs.reconstruct.dataterm import INVALID_COST, data_term, pair_arrays, prepare_images
 from colourhs.reconstruct.frame import (
+    ReconstructOptions,
     load_frame,
+    min_component_px,
     reconstruct,
     reconstruct_frame,
     reference_rays,
@@ -267,3 +269,16 @@ def test_foreground_drops_dark_channels_and_does_not_wrap(tiny_dataset, calib):
     assert fg[:, 51:].sum() == (W - 51) * H - 4 and fg[:, 60:70].all()
     assert not fg[50, W - 2 :].any() and not fg[49, W - 1] and not fg[51, W - 1]
     assert fg[50, 0] and fg[0, 5]  # np.roll's dilation wrapped these round (issue 12)
+
+
+def test_options_min_component_zero_keeps_all_and_unknown_names_are_refused(tiny_dataset):
+    """Issue 12: min_component=0 was replaced by the default (``or`` for ``is None``).
+    0 keeps every component; None is 0.2 % of the image (38 of 160 x 120 pixels); a
+    misspelt option is a TypeError naming it, before any work."""
+    assert min_component_px(0, (120, 160)) == 0
+    assert min_component_px(None, (120, 160)) == 38
+    assert min_component_px(5, (120, 160)) == 5
+    assert ReconstructOptions(min_component=0).min_component == 0
+    fr = load_frame(tiny_dataset, "plane", "000000")
+    with pytest.raises(TypeError, match="n_lables"):
+        reconstruct(fr, "bayes", n_lables=8)

@@ -17,6 +17,7 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from functools import partial
 from time import perf_counter
 
@@ -130,40 +131,13 @@ def _depth_at(depths: np.ndarray, fractional: np.ndarray) -> np.ndarray:
     return depths[0] + fractional * (depths[1] - depths[0])
 
 
-def reconstruct(
-    frame: Frame,
-    method: str = "bayes",
-    reference: str | None = None,
-    n_labels: int = 192,
-    depth_range: tuple[float, float] | None = None,
-    working_radius: float = WORKING_RADIUS,
-    working_radius_m: float | None = None,
-    alpha: float = 0.35,
-    tau: float = 30.0,
-    refine: bool = True,
-    data_weight: float = 0.01,
-    max_cost: float = 0.5,
-    cost_scale: float = 0.05,
-    edge_m: float = 0.02,
-    refine_passes: int = 3,
-    min_component: int | None = None,
-    erode_px: int | None = None,
-    link_m: float = 0.002,
-    surface_iterations: int = 3,
-    spline_px: float | None = None,
-    blur_px: float | None = None,
-    progress: bool = False,
-) -> DepthResult:
-    """Reconstruct one frame with ML or Bayesian colour HS.
+@dataclass(frozen=True)
+class ReconstructOptions:
+    """The reconstruction's tuning options (keywords of :func:`reconstruct`).
 
-    Parameters
+    Attributes
     ----------
-    frame : inputs from :func:`load_frame`.
-    method : ``"ml"`` or ``"bayes"``.
-    reference : reference camera name (default: the first camera).
     n_labels : number of depth hypotheses.
-    depth_range : (near, far) z-depth range in metres; default the working
-        depth zc (where the optical axes meet) +- ``working_radius`` zc.
     working_radius : half the depth range as a fraction of the working depth
         (see ``WORKING_RADIUS``).
     working_radius_m : the same in metres, instead of ``working_radius``
@@ -174,15 +148,16 @@ def reconstruct(
     data_weight : weight of the discrete solution in the initial surface
         (the normal integration that starts the refinement).
     max_cost : pixels whose chosen hypothesis costs more are left out.
+    cost_scale : the Bayesian data term is ``min(cost / cost_scale, 1 / cost_scale)``
+        (sigma_3 / sigma_2 in units of its typical noise level).
     edge_m, refine_passes : the initial surface's edge threshold (metres)
         and number of passes (each re-evaluates the normals).
     min_component : connected groups of valid pixels smaller than this (e.g.
         the white cells inside a marker, cut off by its black ones) are left
-        out of the Bayesian result; default 0.2 % of the image.
+        out of the Bayesian result; default (None) 0.2 % of the image; 0 keeps all
+        (:func:`min_component_px`).
     erode_px : the Bayesian result's mask is eroded by this many pixels;
         default 1 per 320 pixels of image width (at least 1).
-    cost_scale : the Bayesian data term is ``min(cost / cost_scale, 1 / cost_scale)``
-        (sigma_3 / sigma_2 in units of its typical noise level).
     link_m : neighbours within this distance of each other's tangent plane
         belong to one surface (small unlinked pieces are left out).
     surface_iterations, spline_px : the final refinement
@@ -194,92 +169,98 @@ def reconstruct(
         (ML HS's continuous step and the refinement; default
         :data:`colourhs.reconstruct.sides.BLUR_PX`, see
         :func:`colourhs.reconstruct.sides.side_maps`).
+    """
+
+    n_labels: int = 192
+    working_radius: float = WORKING_RADIUS
+    working_radius_m: float | None = None
+    alpha: float = 0.35
+    tau: float = 30.0
+    refine: bool = True
+    data_weight: float = 0.01
+    max_cost: float = 0.5
+    cost_scale: float = 0.05
+    edge_m: float = 0.02
+    refine_passes: int = 3
+    min_component: int | None = None
+    erode_px: int | None = None
+    link_m: float = 0.002
+    surface_iterations: int = 3
+    spline_px: float | None = None
+    blur_px: float | None = None
+
+
+def min_component_px(min_component: int | None, shape: tuple[int, int]) -> int:
+    """Smallest connected group of valid pixels the Bayesian result keeps:
+    ``min_component``, or 0.2 % of the image when it is None (0 keeps all)."""
+    H, W = shape
+    return int(0.002 * H * W if min_component is None else min_component)
+
+
+def reconstruct(
+    frame: Frame,
+    method: str = "bayes",
+    reference: str | None = None,
+    depth_range: tuple[float, float] | None = None,
+    progress: bool = False,
+    **options,
+) -> DepthResult:
+    """Reconstruct one frame with ML or Bayesian colour HS.
+
+    Parameters
+    ----------
+    frame : inputs from :func:`load_frame`.
+    method : ``"ml"`` or ``"bayes"``.
+    reference : reference camera name (default: the first camera).
+    depth_range : (near, far) z-depth range in metres; default the working
+        depth zc (where the optical axes meet) +- ``working_radius`` zc.
     progress : one line per step on stderr, with the seconds since the start,
         and a bar over the data term's chunks of pixels
         (:mod:`colourhs.progress`).
+    **options : the tuning options, :class:`ReconstructOptions` (a TypeError
+        names any other keyword).
 
     Notes
     -----
-    ML: the best hypothesis per pixel, then :func:`refine_ml` (continuous).
-    Bayesian: the MAP labelling of the MRF, a smooth initial surface from
-    the HS normals (:func:`colourhs.reconstruct.integrate.refine_depth`; its depth
-    is still the labelling's), then the depth from the agreement of the
-    geometry with eq. (5) (:func:`colourhs.reconstruct.refine.refine_surface`).
+    ML: the best hypothesis per pixel, then :func:`refine_ml` (continuous),
+    :func:`_ml_reconstruction`. Bayesian: the MAP labelling of the MRF, a smooth
+    initial surface from the HS normals
+    (:func:`colourhs.reconstruct.integrate.refine_depth`; its depth is still the
+    labelling's), then the depth from the agreement of the geometry with eq. (5)
+    (:func:`colourhs.reconstruct.refine.refine_surface`), :func:`_bayes_reconstruction`.
     """
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+    opts = ReconstructOptions(**options)
     say = partial(stage, start=perf_counter(), enabled=progress)
     rig = frame.rig
     names = list(rig.camera_names)
     ref_i = names.index(rig.camera(reference).name) if reference else 0
     ref = rig.cameras[ref_i]
     H, W = rig.image.height, rig.image.width
-    depths = depth_hypotheses(rig, ref, n_labels, depth_range, working_radius, working_radius_m)
+    depths = depth_hypotheses(
+        rig, ref, opts.n_labels, depth_range, opts.working_radius, opts.working_radius_m
+    )
     rays = reference_rays(ref, W, H)
     pix = np.flatnonzero(foreground(frame, ref_i).ravel())
     if len(pix) == 0:
         raise ValueError("no foreground pixels in the reference camera: nothing to reconstruct")
     pairs = pair_arrays(rig)
-    say(f"{method}: data term of {len(pix)} pixels x {n_labels} depths")
+    say(f"{method}: data term of {len(pix)} pixels x {opts.n_labels} depths")
     evaluate = data_term_evaluator(frame, ref, pairs)
     info = {
         "method": method,
         "reference": ref.name,
-        "n_labels": n_labels,
+        "n_labels": opts.n_labels,
         "depth_range_m": [float(depths[0]), float(depths[-1])],
-        "alpha": alpha,
-        "tau": tau,
+        "alpha": opts.alpha,
+        "tau": opts.tau,
         "pixels": int(len(pix)),
     }
-    shape = (H, W)
-    if method == "ml":
-        # ML HS needs the cost volume only (its normals come from its own minima).
-        cost = np.empty((len(pix), n_labels), np.float32)
-        evaluate(rays[pix], depths, show=progress, out=(cost, None, np.arange(len(pix))))
-        z, nrm, ok, conf = _ml_solution(
-            frame, cost, depths, pix, rays, ref, pairs, shape, max_cost, blur_px, say
-        )
-    else:
-        box, local = _mrf_box(pix, shape)
-        h, w = box[1] - box[0], box[3] - box[2]
-        # The volumes over the MRF's box, the data term written into them directly.
-        cost = np.full((h * w, n_labels), INVALID_COST, np.float32)
-        normals = np.zeros((h * w, n_labels, 3), np.float16)
-        evaluate(rays[pix], depths, np.float16, progress, out=(cost, normals, local))
-        say(f"bayes: MRF labelling over {h} x {w} pixels")
-        labels, frac = _bayes_labelling(
-            cost, normals, local, box, rays, depths, shape, alpha, tau, info, cost_scale
-        )
-        z, nrm, ok, conf = _labelled_surface(
-            cost[local, labels], normals[local, labels], frac, depths, pix, shape, max_cost
-        )
-        del cost, normals
-        if refine and ok.sum() > 10:
-            min_px = int(0.002 * H * W if min_component is None else min_component)
-            # Wrong labels (a few labels off or worse) must not move the surface.
-            anchor = 2.0 * float(depths[1] - depths[0]) / float(np.median(depths))
-            say(f"bayes: initial surface ({refine_passes} passes of normal integration)")
-            z, nrm, ok = initial_surface(
-                z,
-                nrm,
-                ok,
-                rays,
-                pix,
-                shape,
-                evaluate,
-                data_weight,
-                edge_m,
-                refine_passes,
-                link_m,
-                min_px,
-                anchor,
-            )
-            z, nrm, ok, weights, info["surface"] = _consistent_surface(
-                frame, z, ok, rays, ref, pairs, surface_iterations, spline_px, blur_px, say
-            )
-            conf = np.where(ok, weights, 0.0).astype(np.float32)
-        erode_px = max(1, round(W / 320)) if erode_px is None else erode_px
-        ok = _without_rims(ok, shape, erode_px)
+    solve = _ml_reconstruction if method == "ml" else _bayes_reconstruction
+    z, nrm, ok, conf = solve(
+        frame, evaluate, rays, pix, depths, ref, pairs, (H, W), opts, info, progress, say
+    )
     z[~ok] = np.nan
     nrm[~ok] = np.nan
     conf[~ok] = 0.0
@@ -290,6 +271,80 @@ def reconstruct(
         ok.reshape(H, W),
         info | {"valid_pixels": int(ok.sum())},
     )
+
+
+def _ml_reconstruction(
+    frame, evaluate, rays, pix, depths, ref, pairs, shape, opts, info, progress, say
+):
+    """ML HS of the foreground ``pix``: the cost volume (no normals: ML HS takes its
+    normals from its own minima), then :func:`_ml_solution`. Returns (H*W,) depth,
+    (H*W, 3) normal, validity and confidence; ``info`` is not changed."""
+    cost = np.empty((len(pix), len(depths)), np.float32)
+    evaluate(rays[pix], depths, show=progress, out=(cost, None, np.arange(len(pix))))
+    return _ml_solution(
+        frame, cost, depths, pix, rays, ref, pairs, shape, opts.max_cost, opts.blur_px, say
+    )
+
+
+def _bayes_reconstruction(
+    frame, evaluate, rays, pix, depths, ref, pairs, shape, opts, info, progress, say
+):
+    """Bayesian HS of the foreground ``pix`` (paper section III-E, then beyond it):
+    the data term written into the MRF box's volumes, the MAP labelling
+    (:func:`_bayes_labelling`), the initial surface
+    (:func:`colourhs.reconstruct.integrate.initial_surface`) and the consistent
+    surface (:func:`_consistent_surface`), the rims eroded. Returns (H*W,) depth,
+    (H*W, 3) normal, validity and confidence; adds the MRF's and the surface's
+    figures to ``info``."""
+    H, W = shape
+    box, local = _mrf_box(pix, shape)
+    h, w = box[1] - box[0], box[3] - box[2]
+    # The volumes over the MRF's box, the data term written into them directly.
+    cost = np.full((h * w, len(depths)), INVALID_COST, np.float32)
+    normals = np.zeros((h * w, len(depths), 3), np.float16)
+    evaluate(rays[pix], depths, np.float16, progress, out=(cost, normals, local))
+    say(f"bayes: MRF labelling over {h} x {w} pixels")
+    labels, frac = _bayes_labelling(
+        cost, normals, local, box, rays, depths, shape, opts.alpha, opts.tau, info, opts.cost_scale
+    )
+    z, nrm, ok, conf = _labelled_surface(
+        cost[local, labels], normals[local, labels], frac, depths, pix, shape, opts.max_cost
+    )
+    del cost, normals
+    if opts.refine and ok.sum() > 10:
+        # Wrong labels (a few labels off or worse) must not move the surface.
+        anchor = 2.0 * float(depths[1] - depths[0]) / float(np.median(depths))
+        say(f"bayes: initial surface ({opts.refine_passes} passes of normal integration)")
+        z, nrm, ok = initial_surface(
+            z,
+            nrm,
+            ok,
+            rays,
+            pix,
+            shape,
+            evaluate,
+            opts.data_weight,
+            opts.edge_m,
+            opts.refine_passes,
+            opts.link_m,
+            min_component_px(opts.min_component, shape),
+            anchor,
+        )
+        z, nrm, ok, weights, info["surface"] = _consistent_surface(
+            frame,
+            z,
+            ok,
+            rays,
+            ref,
+            pairs,
+            opts.surface_iterations,
+            opts.spline_px,
+            opts.blur_px,
+            say,
+        )
+        conf = np.where(ok, weights, 0.0).astype(np.float32)
+    erode_px = max(1, round(W / 320)) if opts.erode_px is None else opts.erode_px
+    return z, nrm, _without_rims(ok, shape, erode_px), conf
 
 
 def depth_hypotheses(
