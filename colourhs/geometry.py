@@ -173,11 +173,26 @@ def backproject(
     origin : (3,) camera centre, metres.
     direction : (..., 3) unit ray directions in the world frame.
     """
-    xy = normalised_coordinates(uv, K, dist)
+    return camera_centre(R, t), ray_directions(normalised_coordinates(uv, K, dist), R)
+
+
+def ray_directions(xy: np.ndarray, R: np.ndarray, unit_length: bool = True) -> np.ndarray:
+    """World directions (..., 3) of the rays through normalised camera coordinates
+    ``xy`` (..., 2): R^T (x, y, 1), of unit length, or (``unit_length`` False) scaled
+    to unit z-depth (a point at z-depth z lies at the centre + z d)."""
+    xy = np.asarray(xy, float)
     d = np.concatenate([xy, np.ones(xy.shape[:-1] + (1,))], axis=-1)
     d = d @ np.asarray(R, float)  # R^T d for row vectors
-    d /= np.linalg.norm(d, axis=-1, keepdims=True)
-    return camera_centre(R, t), d
+    if unit_length:
+        d /= np.linalg.norm(d, axis=-1, keepdims=True)
+    return d
+
+
+def axial_cosine(directions: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """Cosine (...,) of unit world ``directions`` (..., 3) to the camera's optical axis
+    (their z in the camera frame): the z-depth of a point at distance s along a ray is
+    s times it."""
+    return np.asarray(directions, float) @ np.asarray(R, float)[2]
 
 
 def pixel_grid(width: int, height: int, supersample: int = 1) -> np.ndarray:

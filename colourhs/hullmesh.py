@@ -17,7 +17,13 @@ import numpy as np
 
 from colourhs.capture import Camera
 from colourhs.carving import any_inside, in_slabs
-from colourhs.geometry import backproject, outward_triangles, pixel_grid, vertex_normals
+from colourhs.geometry import (
+    axial_cosine,
+    backproject,
+    outward_triangles,
+    pixel_grid,
+    vertex_normals,
+)
 from colourhs.raycast import raycasting_scene
 
 __all__ = [
@@ -204,7 +210,7 @@ def depth_bounds(
     back = np.hstack([o + span * d, -d]).astype(np.float32)
     t_back = scene.cast_rays(o3d.core.Tensor(back))["t_hit"].numpy().astype(float)
     t_in = t_in.numpy().astype(float)
-    cos = d @ np.asarray(camera.R, float)[2]  # z of the unit ray in the camera frame
+    cos = axial_cosine(d, camera.R)
     hit = np.isfinite(t_in) & np.isfinite(t_back)
     near = np.where(hit, t_in * cos, np.nan)
     far = np.where(hit, (span - t_back) * cos, np.nan)

@@ -32,7 +32,7 @@ import open3d as o3d
 from scipy.spatial import cKDTree
 
 from colourhs.depthfile import DepthMap, as_depth_map
-from colourhs.geometry import backproject, pixel_grid
+from colourhs.geometry import axial_cosine, backproject, pixel_grid
 from colourhs.ply import load_mesh, write_ply
 from colourhs.progress import stage
 
@@ -93,7 +93,7 @@ def oriented_points(depth_map: DepthMap) -> tuple[np.ndarray, np.ndarray]:
     ok = (np.isfinite(depth) & (depth > 0)).ravel() & np.isfinite(norm) & (norm > 0)
     uv = pixel_grid(depth_map.width, depth_map.height).reshape(-1, 2)[ok]
     origin, dirs = backproject(uv, depth_map.K, depth_map.dist, depth_map.R, depth_map.t)
-    cos_axis = dirs @ np.asarray(depth_map.R, float)[2]  # z of R d
+    cos_axis = axial_cosine(dirs, depth_map.R)
     points = origin + dirs * (depth.ravel()[ok] / cos_axis)[:, None]
     n = normal[ok] / norm[ok, None]
     facing = np.sum(n * (origin - points), axis=1)

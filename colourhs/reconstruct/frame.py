@@ -29,7 +29,12 @@ from colourhs.capture import (
     Rig,
 )
 from colourhs.depthfile import DepthResult, write_depth
-from colourhs.geometry import fixation_point, normalised_coordinates, pixel_grid
+from colourhs.geometry import (
+    fixation_point,
+    normalised_coordinates,
+    pixel_grid,
+    ray_directions,
+)
 from colourhs.io import sha256_files
 from colourhs.progress import bar, stage
 from colourhs.reconstruct.dataterm import INVALID_COST, data_term, pair_arrays, prepare_images
@@ -57,7 +62,7 @@ A scene beyond it is reconstructed only where the hull gives the range
 def reference_rays(camera: Camera, width: int, height: int) -> np.ndarray:
     """World rays (H*W, 3) of a camera's pixel centres, scaled to unit z-depth."""
     xy = normalised_coordinates(pixel_grid(width, height).reshape(-1, 2), camera.K, camera.dist)
-    return np.concatenate([xy, np.ones((len(xy), 1))], axis=1) @ np.asarray(camera.R, float)
+    return ray_directions(xy, camera.R, unit_length=False)
 
 
 def working_depth(rig: Rig, ref: Camera) -> float:

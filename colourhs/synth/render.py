@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 import open3d as o3d
 
-from colourhs.geometry import normalised_coordinates, pixel_grid
+from colourhs.geometry import normalised_coordinates, pixel_grid, ray_directions
 from colourhs.synth.brdf import albedo_factors, evaluate_materials_bands
 from colourhs.synth.rig import COLOURS, CameraModel
 from colourhs.synth.scenes import SceneGeometry
@@ -81,8 +81,7 @@ def camera_rays(camera: CameraModel, width: int, height: int, supersample: int =
     """Rays through an s x s grid of samples in every pixel (see ``pixel_grid``)."""
     grid = pixel_grid(width, height, supersample).reshape(-1, 2)
     xy = normalised_coordinates(grid, camera.K, camera.dist)
-    d = np.concatenate([xy, np.ones((len(xy), 1))], axis=1) @ camera.R
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    d = ray_directions(xy, camera.R)
     return CameraRays((height, width, supersample**2), camera.centre, d, xy)
 
 
