@@ -130,6 +130,11 @@ def _camera_distance(Xc, cam, sdf, box):
     image interpolated bilinearly at the projection, times the pixel
     footprint z / f at the point's depth. A point is seen when it lies in
     front of the camera and projects onto a pixel of the image.
+
+    Its own bilinear lerp, not :func:`colourhs.sampling.sample_bilinear`: it runs
+    in float32 on blocks of millions of voxels (the hull's memory bound), and a
+    silhouette's distance extends half a pixel beyond the image's outer pixel
+    centres (clamped), where ``sample_bilinear`` gives NaN. Same weights.
     """
     H, W = sdf.shape
     z = Xc[2]
