@@ -209,14 +209,18 @@ def run_job(job: dict, work: Path) -> dict:
     return {k: v for k, v in job.items() if k not in ("inputs", "outputs")} | result
 
 
-def run_jobs(jobs: list[dict], work: Path, parallel: int = 1) -> list[dict]:
+def run_jobs(
+    jobs: list[dict], work: Path, parallel: int = 1, partial: Path | None = None
+) -> list[dict]:
     """Every job of ``jobs`` (in plan order) measured by :func:`run_job`, up to
     ``parallel`` at once as ``snakemake --cores N`` runs the workflow's 1-thread
     jobs: a job starts once every job that writes one of its inputs has finished.
     Each job's peak memory is its own process tree's; its wall time includes what
     the jobs beside it take from the machine. Returns the measurements in plan order,
     with each job's ``start_s`` and ``end_s`` (seconds since the first started) and
-    ``after`` (the plan indices of the jobs it waited for)."""
+    ``after`` (the plan indices of the jobs it waited for). With ``partial``, the jobs
+    measured so far are written there (JSON) as each finishes, so a run stopped early
+    still leaves its figures (``--from-partial`` summarises them)."""
     writer = {path: i for i, job in enumerate(jobs) for path in job["outputs"]}
     needs = [
         {writer[p] for p in job["inputs"] if writer.get(p, i) != i} for i, job in enumerate(jobs)
@@ -244,6 +248,8 @@ def run_jobs(jobs: list[dict], work: Path, parallel: int = 1) -> list[dict]:
             for future in finished:
                 i = running.pop(future)
                 done[i] = future.result() | {"after": sorted(needs[i])}
+            if partial is not None:
+                partial.write_text(json.dumps([done[i] for i in sorted(done)], indent=1))
     return [done[i] for i in range(len(jobs))]
 
 
@@ -446,6 +452,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument("--results", type=Path, default=ROOT / "benchmarks" / "results")
     ap.add_argument("--workers", type=int, default=CORES, help="render processes (2)")
     ap.add_argument(
+        "--from-partial",
+        type=Path,
+        default=None,
+        help="summarise the jobs a stopped run measured (its RESULTS/<preset>_slice.partial.json)",
+    )
+    ap.add_argument(
         "--parallel", type=int, default=1, help="jobs at once, as snakemake --cores N (1)"
     )
     return ap.parse_args(argv)
@@ -482,9 +494,26 @@ def main(argv: list[str] | None = None) -> dict:
     plan_s = time.perf_counter() - t
     check = [on_threads(j, 2) for j in jobs if j["rule"] == "reconstruct_frame"]
     check = [j for j in check if j is not None and j["frame"] in frames[: args.check_frames]]
-    t = time.perf_counter()
-    measured = run_jobs(jobs, work, args.parallel)
-    jobs_wall_s = time.perf_counter() - t
+    args.results.mkdir(parents=True, exist_ok=True)
+    out = args.results / f"{args.preset}_slice"
+    if args.from_partial is not None:
+        # A run stopped early: the frames all of whose jobs finished, and the rest.
+        measured = json.loads(args.from_partial.read_text())
+        ended = {j["frame"] for j in measured if j["rule"] in AFTER or not j["frame"]}
+        by_frame: dict[str, int] = {}
+        for j in measured:
+            by_frame[j["frame"]] = by_frame.get(j["frame"], 0) + 1
+        planned: dict[str, int] = {}
+        for j in jobs:
+            planned[j["frame"]] = planned.get(j["frame"], 0) + 1
+        frames = [f for f in frames if by_frame.get(f) == planned[f]]
+        measured = [j for j in measured if j["frame"] in frames or j["frame"] in ended]
+        jobs_wall_s = max(j["end_s"] for j in measured) - min(j["start_s"] for j in measured)
+        check = []
+    else:
+        t = time.perf_counter()
+        measured = run_jobs(jobs, work, args.parallel, out.with_suffix(".partial.json"))
+        jobs_wall_s = time.perf_counter() - t
     measured_check = []
     for job in check:
         print(f"{rule_key(job)} {job['frame']} on 2 threads", flush=True)
@@ -513,8 +542,6 @@ def main(argv: list[str] | None = None) -> dict:
         "targets": targets(measured, measured_check),
         "jobs": measured,
     }
-    args.results.mkdir(parents=True, exist_ok=True)
-    out = args.results / f"{args.preset}_slice"
     out.with_suffix(".json").write_text(json.dumps(result, indent=1))
     out.with_suffix(".md").write_text(markdown(result))
     print(markdown(result))
