@@ -69,7 +69,7 @@ def test_solve_recovers_known_chromaticity(known):
     assert est.dtype == np.float32 and est.shape == p.shape
     np.testing.assert_allclose(est, 3 * p / p.sum(axis=-1, keepdims=True), rtol=1e-5)
     np.testing.assert_allclose(est.sum(axis=-1), 3.0, rtol=1e-6)
-    assert np.nanmax(chromaticity_error(est, p)) < 1e-6
+    assert np.nanmax(chromaticity_error(est, p)) < 1e-7  # float32: measured 3.8e-8
 
 
 def test_solve_small_cases():
@@ -217,7 +217,8 @@ def test_without_silhouettes_a_threshold_finds_the_object(tiny_dataset, tmp_path
     a = np.isfinite(with_masks[..., 0])
     b = np.isfinite(maps["cam1"][..., 0])
     assert (a & b).sum() > 0.95 * a.sum()
-    assert (b & ~a).sum() < 0.05 * a.sum()  # partly covered edge pixels only
+    # partly covered edge pixels only: measured 12 of 2042 (0.6 %)
+    assert (b & ~a).sum() < 0.012 * a.sum()
     np.testing.assert_allclose(maps["cam1"][a & b], with_masks[a & b])
 
 
