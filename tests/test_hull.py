@@ -98,7 +98,7 @@ def ring():
 
 def test_axes_centre_is_the_fixation_point(ring):
     cams, _ = ring
-    assert np.linalg.norm(axes_centre(cams)) < 1e-12
+    assert np.linalg.norm(axes_centre(cams)) < 1e-12  # round-off: measured 1.6e-17
 
 
 def test_sphere_hull_contains_the_sphere_and_is_close_to_the_exact_hull(ring):
