@@ -67,15 +67,16 @@ def test_solve_recovers_known_chromaticity(known):
     p, obj, white = known
     est = solve_chromaticity(chromaticity_ratios(obj, white))
     assert est.dtype == np.float32 and est.shape == p.shape
-    np.testing.assert_allclose(est, 3 * p / p.sum(axis=-1, keepdims=True), rtol=1e-5)
-    np.testing.assert_allclose(est.sum(axis=-1), 3.0, rtol=1e-6)
-    assert np.nanmax(chromaticity_error(est, p)) < 1e-6
+    # float32: measured 5.5e-8 and 8e-8 relative; bounds about two ulps
+    np.testing.assert_allclose(est, 3 * p / p.sum(axis=-1, keepdims=True), rtol=2e-7)
+    np.testing.assert_allclose(est.sum(axis=-1), 3.0, rtol=2e-7)
+    assert np.nanmax(chromaticity_error(est, p)) < 1e-7  # float32: measured 3.8e-8
 
 
 def test_solve_small_cases():
     # p = (4, 2, 1): R/G = 2, R/B = 4, G/B = 2; white is (1, 1, 1).
     got = solve_chromaticity(np.array([[2.0, 4.0, 2.0], [1.0, 1.0, 1.0]]))
-    np.testing.assert_allclose(got, [[12 / 7, 6 / 7, 3 / 7], [1, 1, 1]], rtol=1e-6)
+    np.testing.assert_allclose(got, [[12 / 7, 6 / 7, 3 / 7], [1, 1, 1]], rtol=2e-7)  # f32: 1e-8
     # Inconsistent ratios still give a positive triplet of sum 3.
     got = solve_chromaticity(np.array([2.0, 3.0, 2.0]))
     assert got.sum() == pytest.approx(3.0) and np.all(got > 0)
@@ -173,7 +174,8 @@ def test_tiny_maps_match_ground_truth(tiny_dataset, tmp_path, obj):
             np.testing.assert_array_equal(stored, p)
             assert f[cam].attrs["mask"] == f"scenes/{obj}/masks/000000/{cam}.png"
             valid = np.isfinite(p).all(axis=-1)
-            np.testing.assert_allclose(p[valid].sum(axis=-1), 3.0, rtol=1e-5)
+            # float32 sums: measured 8e-8 relative
+            np.testing.assert_allclose(p[valid].sum(axis=-1), 3.0, rtol=2e-7)
             silhouette = read_mask(object_silhouette(ds, obj, cam), ds.rig.image)
             assert not (valid & ~silhouette).any()
             truth = g[cam][...]
@@ -217,7 +219,8 @@ def test_without_silhouettes_a_threshold_finds_the_object(tiny_dataset, tmp_path
     a = np.isfinite(with_masks[..., 0])
     b = np.isfinite(maps["cam1"][..., 0])
     assert (a & b).sum() > 0.95 * a.sum()
-    assert (b & ~a).sum() < 0.05 * a.sum()  # partly covered edge pixels only
+    # partly covered edge pixels only: measured 12 of 2042 (0.6 %)
+    assert (b & ~a).sum() < 0.012 * a.sum()
     np.testing.assert_allclose(maps["cam1"][a & b], with_masks[a & b])
 
 

@@ -118,7 +118,7 @@ def test_exact_data_exact_answers(exact_rigs, scene):
         m_mm, m_deg = m_mm[np.isfinite(m_mm)], m_deg[np.isfinite(m_deg)]
         assert len(m_mm) == len(ML_SEEDS)
         assert np.median(m_mm) < 0.1 and m_mm.max() < 0.15  # measured 0.063, 0.108
-        assert m_deg.max() < 0.1  # measured 0.046
+        assert m_deg.max() < 0.07  # measured 0.032 (0.046 before)
 
 
 @pytest.fixture(scope="module")
@@ -172,7 +172,7 @@ def test_exact_curved_object(exact_statue):
     cov = m.sum() / np.isfinite(gd).sum()
     print(f"statue: {np.median(np.abs(err)):.3f} {np.median(err):+.3f} mm {np.median(ang):.3f} deg")
     assert np.median(np.abs(err)) < 0.2  # measured 0.098 (0.61 before)
-    assert abs(np.median(err)) < 0.1  # measured -0.026 (-0.61 before)
+    assert abs(np.median(err)) < 0.05  # measured -0.025 (-0.026, -0.61 before)
     assert np.median(ang) < 0.7  # measured 0.42 deg (1.19 before)
     assert cov > 0.88  # measured 0.91
 
@@ -202,7 +202,8 @@ def _term_pair(root, scene, chroma=False):
 def test_compiled_data_term_equals_the_numpy_reference(exact_rigs, tiny_dataset):
     """The numba kernel against the plain NumPy one (colourhs.reconstruct.reference),
     on seed 5's skewed rational thin-prism lenses and on a chromatic toy.
-    Measured: costs within 4.3e-7 and normals within 3e-6 where both are valid
+    Measured: costs within 4.3e-7 and normals within 3e-6 (1.7e-6 now; bound
+    6e-6) where both are valid
     (the toy's costs above 0.5 differ more: the kernel's Halley iteration is
     exact to float32 below 0.6 only, by design); validity differs on 0.5 % of
     the lens rig's hypotheses (footprints that touch an unusable pixel with a
@@ -216,4 +217,4 @@ def test_compiled_data_term_equals_the_numpy_reference(exact_rigs, tiny_dataset)
         assert v1.sum() > 5000 and np.mean(v1 != v2) * v1.size / v1.sum() < share
         good = v1 & v2 & (c1 < 0.5)
         assert np.abs(c1[good] - c2[good]).max() < 1e-6
-        assert np.abs(n1[good] - n2[good]).max() < 1e-5
+        assert np.abs(n1[good] - n2[good]).max() < 6e-6

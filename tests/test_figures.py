@@ -54,7 +54,7 @@ def test_shaded_render_sphere_area_and_brightness():
     fg = np.any(img < 255, axis=-1)
     # Silhouette of a sphere on the optical axis: a disc of radius f r / sqrt(D^2 - r^2).
     rho = F * RADIUS / np.sqrt(DISTANCE**2 - RADIUS**2)
-    assert fg.sum() == pytest.approx(np.pi * rho**2, rel=0.04)
+    assert fg.sum() == pytest.approx(np.pi * rho**2, rel=0.02)  # measured 1.0 % (13 px)
     grey = img.astype(float).mean(axis=-1)
     centre = grey[H // 2 - 1 : H // 2 + 1, W // 2 - 1 : W // 2 + 1].mean()
     assert grey[fg].max() == pytest.approx(centre, abs=2.0)
@@ -69,7 +69,7 @@ def test_shaded_render_vertex_colours():
     red = np.tile([1.0, 0.0, 0.0], (len(v), 1))
     img = _render(vertex_rgb=red).astype(int)
     fg = np.any(img < 255, axis=-1)
-    assert fg.sum() > 100
+    assert fg.sum() > 650  # measured 1296
     assert np.all(img[fg, 0] > img[fg, 1] + 20)
     assert np.all(img[fg, 1] == 0) and np.all(img[fg, 2] == 0)
     # uint8 colours too, and a left/right split comes through in the right halves.

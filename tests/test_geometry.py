@@ -1,4 +1,9 @@
-"""Projection, back-projection, planes and triangulation against known answers."""
+"""Projection, back-projection, planes and triangulation against known answers.
+
+Bounds of 1e-9 and below check exact formulas: they sit far above the measured
+round-off (1e-13 px, 1e-16 m) on purpose, as libm, BLAS and OpenCV builds differ
+in the last bits; they would still catch any error in the maths.
+"""
 
 from __future__ import annotations
 
@@ -127,10 +132,11 @@ def test_project_backproject_round_trip():
     # Every point lies on its ray (distance below 1 nm).
     dist = np.linalg.norm(np.cross(X - origin, d), axis=1)
     assert dist.max() < 1e-9
-    # And pixel -> ray -> pixel returns the pixel over the whole image.
+    # And pixel -> ray -> pixel returns the pixel over the whole image, within
+    # the undistortion's own tolerance (measured 2.3e-13 px; bound 1e-9 px).
     grid = g.pixel_grid(640, 480).reshape(-1, 2)[::97]
     o, d = g.backproject(grid, K, DIST, R, t)
-    assert np.abs(g.project(o + 0.8 * d, K, DIST, R, t) - grid).max() < 1e-6
+    assert np.abs(g.project(o + 0.8 * d, K, DIST, R, t) - grid).max() < g.UNDISTORT_TOL_PX
 
 
 def test_points_behind_the_camera_are_nan():

@@ -66,13 +66,13 @@ def test_white_board_mask_excludes_markers_and_edges(tiny_dataset):
 
 
 def test_crosstalk_matrix_matches_truth(tiny_dataset):
-    """M[c, b] = g_c X[c, b] / (g_b X[b, b]) at the image centre; measured error < 0.002."""
+    """M[c, b] = g_c X[c, b] / (g_b X[b, b]) at the image centre; measured error 0.00066."""
     est = calibrate_crosstalk(tiny_dataset)["cameras"]
     model = json.loads((tiny_dataset / "gt" / "rig_model.json").read_text())
     for cam in model["cameras"]:
         X, g = np.array(cam["crosstalk"]), np.array(cam["gains"])
         truth = (g[:, None] * X) / (g[None, :] * np.diag(X)[None, :])
-        assert np.abs(np.array(est[cam["name"]]["M"]) - truth).max() < 0.004
+        assert np.abs(np.array(est[cam["name"]]["M"]) - truth).max() < 0.0013
 
 
 def test_crosstalk_known_answer_and_unmix():
@@ -117,14 +117,16 @@ def test_both_pairs_of_a_camera_are_needed(tiny_calibration):
     both = mu_map_errors(calibrate(rig, views, **TINY), truth, rig)
     worst_alone = alone[alone.method == "calibrated"].rms_log_error.max()
     worst_both = both[both.method == "calibrated"].rms_log_error.max()
-    assert worst_alone > 2 * worst_both  # measured: 8 % against 1 %
+    # Measured 11.6 against 0.0036 (8 % against 1 % before): the ill-posed map's
+    # error follows round-off and solver details, so the bound keeps a wide margin.
+    assert worst_alone > 100 * worst_both
 
 
 def test_crosstalk_unmixing_is_needed(tiny_dataset, tiny_calibration):
     rig, _, truth, poses, _ = tiny_calibration
     _, raw = load_views(tiny_dataset, poses, None)
     mixed = mu_map_errors(calibrate(rig, raw, **TINY), truth, rig)
-    assert mixed[mixed.method == "calibrated"].rms_log_error.max() > 0.02  # measured 3-5 %
+    assert mixed[mixed.method == "calibrated"].rms_log_error.max() > 0.02  # measured 4.4 %
 
 
 def test_photometric_file_follows_the_contract(tiny_calibration, tiny_dataset, tmp_path):

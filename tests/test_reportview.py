@@ -53,7 +53,7 @@ def test_mesh_payload_simplifies_and_keeps_colours(tmp_path):
     assert 900 <= small["nt"] <= 1000  # measured 1000
     _, c, _ = _unpack(small)
     assert np.abs(c.astype(int) - [51, 153, 102]).max() <= 1  # colours kept
-    assert small["size_m"] == pytest.approx(0.1, rel=0.02)
+    assert small["size_m"] == pytest.approx(0.1, rel=0.005)  # measured 2.7e-3 off
     views = scene_views(tmp_path, "plane", max_triangles=1000)
     assert list(views) == ["vh", "bayes_ph"]  # the paper's order
     assert views["bayes_ph"]["nt"] == small["nt"] and scene_views(tmp_path, "none") == {}

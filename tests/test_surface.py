@@ -40,7 +40,7 @@ def test_fill_holes_is_exact_on_a_plane():
     filled = fill_holes(z[graph.pix], graph, np.ones(H * W, bool), rays)
     hole = ~mask.ravel()
     assert np.all(np.isfinite(filled[hole])) and not np.isfinite(filled[~hole]).any()
-    assert np.abs(filled[hole] - z[hole]).max() < 1e-9
+    assert np.abs(filled[hole] - z[hole]).max() < 1e-9  # round-off: measured 1.9e-15
 
 
 def test_surface_normals_exact_on_planes_and_never_across_a_depth_edge():
@@ -58,7 +58,7 @@ def test_surface_normals_exact_on_planes_and_never_across_a_depth_edge():
     assert graph.n_surfaces == 2
     got = surface_normals(graph, z, rays, c)
     want = np.where(left[:, None], -n1, -n2)  # towards the camera (+z looks away from it)
-    assert np.abs(got - want).max() < 1e-9
+    assert np.abs(got - want).max() < 1e-9  # round-off: measured 5.6e-14
 
 
 def test_spline_reproduces_smooth_depths_and_numbers_surfaces():
@@ -68,7 +68,8 @@ def test_spline_reproduces_smooth_depths_and_numbers_surfaces():
     spline = SplineSurface(rows, cols, surface, 8.0)
     z = 0.8 + 1e-3 * rows + 2e-4 * cols + 1e-5 * rows * cols
     c = np.linalg.lstsq(spline.basis.toarray(), z, rcond=None)[0]
-    assert np.abs(spline.basis @ c - z).max() < 1e-12  # cubic B-splines hold bilinear maps
+    # cubic B-splines hold bilinear maps (round-off: measured 8e-15)
+    assert np.abs(spline.basis @ c - z).max() < 1e-12
     assert set(spline.surface_of) == {0, 1}
     D, prior_surface = spline.second_differences()
     assert D.shape[0] == len(prior_surface) and np.abs(D @ np.ones(spline.size)).max() < 1e-12
@@ -145,7 +146,8 @@ def test_whitened_kernel_matches_an_svd_of_the_whitened_rows():
     assert np.array_equal(np.isnan(chi2), ~ok)
     assert np.all(np.abs(chi2[ok] - ref[ok]) <= 1e-8 * ref[ok] + 1e-12)
     cos = np.abs(np.sum(n[ok] * ref_n[ok], axis=1))
-    assert np.degrees(np.arccos(np.minimum(cos.min(), 1.0))) < 1e-4
+    # arccos near 1 turns round-off into sqrt(eps): measured 2.1e-6 degree.
+    assert np.degrees(np.arccos(np.minimum(cos.min(), 1.0))) < 5e-6
     assert np.all(np.sum(n * R, axis=1) <= 0)  # towards -R
 
 
@@ -270,9 +272,10 @@ def test_cubic_sampling_reproduces_curved_images():
             sp, *_ = sample_sides(sides, R * (1 + h), R)
             sm, *_ = sample_sides(sides, R * (1 - h), R)
             numeric = (sp[:, 0, 0] - sm[:, 0, 0]) / (2 * h)
-            assert np.allclose(ds[:, 0, 0], numeric, rtol=1e-5, atol=1e-8)
+            # the central difference's own error: measured 2e-8 relative
+            assert np.allclose(ds[:, 0, 0], numeric, rtol=5e-8, atol=1e-8)
             # squared weights of 16 unit variances: a sample averages their noise
             v2 = var[:, 0, 0] * d2**2
-            assert 0.3 < v2.min() and v2.max() <= 1.0 + 1e-12  # measured 0.38, 0.98
+            assert 0.3 < v2.min() and v2.max() <= 1.0 + 1e-12  # measured 0.41, 0.9995
     assert errors[3] < 1e-9  # measured 4e-14: quadratics are reproduced
     assert errors[1] > 0.005  # measured 0.0062 = (J_uu + J_vv) / 8 at t = 1/2

@@ -77,10 +77,11 @@ def _residuals(root, scene, offset_m=0.0, rotate_deg=0.0, **kw):
 def test_hs_constraint_holds_at_ground_truth(clean_dataset, scene):
     """Eq. (5) with the true mu and p: median |w.n|/|w| < 1e-3 (noise, cross-talk off).
 
-    Measured (640x480): plane 8e-5, statue 1.4e-4, toy 6e-4, sheet 3e-5.
+    Measured (640x480): plane 8e-5, statue 1.4e-4, toy 6e-4, sheet 3e-5 (issue 12
+    audit: 2.1e-5, 1.4e-4, 5.5e-4, 3.6e-5; pixels 99075, 58845, 36940, 132275).
     """
     r, n = _residuals(clean_dataset, scene)
-    assert n > 5000
+    assert n > 18000
     assert np.nanmedian(r) < 1e-3
 
 
@@ -90,13 +91,15 @@ def test_hs_constraint_discriminates_normals_and_depth(clean_dataset, scene):
 
     Measured factors (640x480), 10 degrees: plane 1700, statue 860, sheet 4700;
     5 mm along the reference camera's ray (true normal kept): plane 140,
-    statue 290, sheet 900. We require 10 and 5.
+    statue 290, sheet 900 (issue 12 audit: 6100, 860, 3400; 410, 290, 620).
+    The base is the rendering's rounding floor (plane 8e-5 before, 2e-5 now),
+    so we require half the smallest factor ever measured: 400 and 70.
     """
     base = np.nanmedian(_residuals(clean_dataset, scene)[0])
     rotated = np.nanmedian(_residuals(clean_dataset, scene, rotate_deg=10.0)[0])
     moved = np.nanmedian(_residuals(clean_dataset, scene, offset_m=0.005)[0])
-    assert rotated > 10 * base
-    assert moved > 5 * base
+    assert rotated > 400 * base
+    assert moved > 70 * base
 
 
 def test_calibration_is_needed(clean_dataset):
@@ -105,8 +108,8 @@ def test_calibration_is_needed(clean_dataset):
     no_mu = np.nanmedian(_residuals(clean_dataset, "statue", mu=None)[0])
     toy_good = np.nanmedian(_residuals(clean_dataset, "toy")[0])
     toy_white = np.nanmedian(_residuals(clean_dataset, "toy", chromaticity=None)[0])
-    assert no_mu > 20 * good
-    assert toy_white > 100 * toy_good
+    assert no_mu > 80 * good  # measured 161x
+    assert toy_white > 500 * toy_good  # measured 1120x
 
 
 def test_every_marker_detected_in_demo_board_images(plane_calibrated):
@@ -143,18 +146,19 @@ def test_every_marker_detected_in_demo_board_images(plane_calibrated):
     assert len(n_images) == 3 * PRESETS["demo"].n_poses
     err = np.concatenate(errors)
     # No global shift (a half-pixel convention error would show here): measured
-    # mean (0.011, -0.006) px. ArUco's sub-pixel corners sit ~0.2 px inside the
-    # true convex corner (a detector bias; the rendered edges are unbiased, see
-    # test_rendered_marker_edges_are_unbiased): median distance 0.29 px.
-    assert np.linalg.norm(err.mean(axis=0)) < 0.05
+    # mean (0.011, -0.006) px before, 0.0022 px in the issue 12 audit (the change
+    # not traced); bound 0.025, twice the worst. ArUco's sub-pixel corners sit
+    # ~0.2 px inside the true convex corner (a detector bias; the rendered edges
+    # are unbiased, see test_rendered_marker_edges_are_unbiased): median 0.29 px.
+    assert np.linalg.norm(err.mean(axis=0)) < 0.025
     assert np.median(np.linalg.norm(err, axis=1)) < 0.5
 
 
 def test_rendered_marker_edges_are_unbiased(clean_dataset):
     """The 50 % crossing of each marker edge lies on its true projection.
 
-    Measured on 640x480 with 2x2 supersampling: mean offset below 0.01 px,
-    spread 0.1 px.
+    Measured on 640x480 with 2x2 supersampling: mean offset below 0.01 px
+    (0.0012 px in the issue 12 audit; bound 0.0025), spread 0.1 px (0.127).
     """
     rig = load_rig(clean_dataset)
     board = rig.board
@@ -182,7 +186,7 @@ def test_rendered_marker_edges_are_unbiased(clean_dataset):
                     )
                     offsets.append(tc * np.linalg.norm(uv[-1] - uv[0]) / (ts[-1] - ts[0]))
     offsets = np.array(offsets)
-    assert abs(offsets.mean()) < 0.03
+    assert abs(offsets.mean()) < 0.0025
     assert offsets.std() < 0.25
 
 
@@ -242,7 +246,7 @@ def test_sensor_noise_is_about_one_percent():
     dn = sensor(signal, rng, Nuisances()).astype(float)
     rel = np.std(dn) / (np.mean(dn) - 0)
     assert 0.008 < rel < 0.015
-    assert abs(np.mean(dn) / 65535 - 0.5) < 1e-3
+    assert abs(np.mean(dn) / 65535 - 0.5) < 2e-5  # measured 8.7e-6 (seeded)
     clean = sensor(signal, rng, Nuisances.none())
     assert np.all(clean == np.rint(0.5 * 65535))
     assert sensor(np.array([1.7]), rng, Nuisances())[0] == 65535  # saturation clips

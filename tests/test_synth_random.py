@@ -352,7 +352,7 @@ def test_white_specular_breaks_separable_chromaticity():
     high = plastic.evaluate_bands(n, l, v, p)
     diffuse = plastic.evaluate_bands(n, l, off, p)
     assert diffuse[0] / diffuse[1] == pytest.approx(p[0] / p[1], rel=0.05)
-    assert high[0] / high[1] < 0.5 * p[0] / p[1]
+    assert high[0] / high[1] < 0.22 * p[0] / p[1]  # measured 1.56 against 14.2 (0.11)
     old = Material(kd=1.0, specular="ggx", ks=1.0, roughness=0.3, f0=0.04)
     sep = old.evaluate_bands(n, l, v, p)
     assert sep[0] / sep[1] == pytest.approx(p[0] / p[1], rel=1e-12)
@@ -394,10 +394,12 @@ CHECK = replace(TINY, name="check", width=320, height=240, supersample=2, sheet_
 
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_hs_constraint_holds_at_ground_truth(tmp_path, seed):
-    """Eq. (5) with the true mu: median |w.n|/|w| < 1e-3 on the plane and the sheet.
+    """Eq. (5) with the true mu: median |w.n|/|w| on the plane and the sheet.
 
     Noise and cross-talk off, 16 bit (``exact``). Measured (320x240): plane
-    5e-5, sheet 8e-5..1.4e-4; at 640x480 plane 4e-5, sheet 5e-5 (seed 1).
+    5e-5, sheet 8e-5..1.4e-4 (issue 12 audit: at most 1.38e-4, pixels 16206 and
+    up); at 640x480 plane 4e-5, sheet 5e-5 (seed 1). Bound 3e-4 (the paper-level
+    1e-3 holds with room).
     """
     root = synthesise(
         tmp_path / "d",
@@ -413,7 +415,7 @@ def test_hs_constraint_holds_at_ground_truth(tmp_path, seed):
     for scene in ("plane", "sheet"):
         r, n = _residuals(root, scene)
         assert n > 5000, scene
-        assert np.nanmedian(r) < 1e-3, (scene, np.nanmedian(r))
+        assert np.nanmedian(r) < 3e-4, (scene, np.nanmedian(r))
 
 
 def test_lens_preset_draws_skewed_cameras_with_rational_and_thin_prism_terms():
