@@ -410,8 +410,13 @@ def markdown(result: dict) -> str:
             if result.get("parallel", 1) == 1
             else f"Jobs ran {result['parallel']} at once here."
         ),
-        f"- measured: every job of the {len(frames)} frames, calibration to report, "
-        f"{result.get('jobs_wall_s', '-')} s wall",
+        f"- measured: every job of the {len(frames)} frames, calibration to "
+        + (
+            "the last frame (a run stopped early: no closing jobs), "
+            if result.get("partial")
+            else "report, "
+        )
+        + f"{result.get('jobs_wall_s', '-')} s wall",
         f"- one core: {hours('one_core_s')}, {p['per_frame_s']} s per frame",
         f"- 2 cores: {hours('cores_2_s')}; one job at a time with the reconstructions on 2 "
         f"threads: {hours('one_at_a_time_2_threads_s')}",
@@ -532,6 +537,7 @@ def main(argv: list[str] | None = None) -> dict:
         "frames_rendered": args.frames,
         "parallel": args.parallel,
         "jobs_wall_s": round(jobs_wall_s, 1),
+        "partial": args.from_partial is not None,
         "cpu_count": os.cpu_count(),
         "plan_s": round(plan_s, 1),
         "render": render,

@@ -213,7 +213,7 @@ class _Problem:
         return c * factor[self.ctrl_surface]
 
 
-def depth_search(problem: _Problem, c, step=SEARCH_STEP, max_steps=SEARCH_STEPS):
+def depth_search(problem: _Problem, c, step=SEARCH_STEP, max_steps=SEARCH_STEPS, say=None):
     """Each surface's depth from the minimum of E along its family of shapes.
 
     Beyond the paper. Under noise E has a long, nearly flat valley: at each
@@ -230,13 +230,15 @@ def depth_search(problem: _Problem, c, step=SEARCH_STEP, max_steps=SEARCH_STEPS)
     give the minimum.
 
     Returns the control points at each surface's best depth (shape re-fitted)
-    and the factors (n_surfaces,) applied.
+    and the factors (n_surfaces,) applied. ``say(text)``, if given, reports each
+    trial depth (each is ``SEARCH_FITS`` LM steps: 10-25 s at 1280 x 960).
     """
     n = problem.n
     sc = problem.scale(c)
     mine = [problem.ctrl_surface == k for k in range(n)]
     pixels = [problem.graph.surface == k for k in range(n)]
     tried = [{} for _ in range(n)]  # surface -> offset -> (rho, prior, control points)
+    trials = [0]  # how many trial depths so far (progress)
 
     def key(delta) -> float:
         return round(float(delta), 9)
@@ -255,6 +257,10 @@ def depth_search(problem: _Problem, c, step=SEARCH_STEP, max_steps=SEARCH_STEPS)
         return np.concatenate([tried[k][key(deltas[k])][2] for k in range(n)])
 
     def trial(base, base_delta, new_delta, record) -> None:
+        trials[0] += 1
+        if say is not None:
+            shown = ", ".join(f"{100 * d:+.2f}" for d in new_delta[record][:4])
+            say(f"refinement: depth search, trial {trials[0]} at {shown} % (first surfaces)")
         cc = problem.scaled(base, (1.0 + new_delta) / (1.0 + base_delta))
         cc, _ = problem.lm(cc, SEARCH_FITS, scale=sc)
         rho, prior = problem.state(cc, sc)
@@ -391,7 +397,7 @@ def refine_surface(
     factors = np.ones(graph.n_surfaces)
     if search:
         say("refinement: depth search along E's valley")
-        c, factors = depth_search(problem, c)
+        c, factors = depth_search(problem, c, say=say)
     say(f"refinement: {iterations} final LM steps")
     c, more = problem.lm(c, iterations)
     z = B @ c
