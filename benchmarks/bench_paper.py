@@ -44,6 +44,7 @@ import statistics
 import subprocess
 import sys
 import time
+from collections import Counter
 from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 from pathlib import Path
 
@@ -504,15 +505,11 @@ def main(argv: list[str] | None = None) -> dict:
     if args.from_partial is not None:
         # A run stopped early: the frames all of whose jobs finished, and the rest.
         measured = json.loads(args.from_partial.read_text())
-        ended = {j["frame"] for j in measured if j["rule"] in AFTER or not j["frame"]}
-        by_frame: dict[str, int] = {}
-        for j in measured:
-            by_frame[j["frame"]] = by_frame.get(j["frame"], 0) + 1
-        planned: dict[str, int] = {}
-        for j in jobs:
-            planned[j["frame"]] = planned.get(j["frame"], 0) + 1
-        frames = [f for f in frames if by_frame.get(f) == planned[f]]
-        measured = [j for j in measured if j["frame"] in frames or j["frame"] in ended]
+        have = Counter(j["frame"] for j in measured)
+        want = Counter(j["frame"] for j in jobs)
+        frames = [f for f in frames if have[f] == want[f]]
+        # The once-only jobs have no frame.
+        measured = [j for j in measured if j["frame"] in frames or not j["frame"]]
         jobs_wall_s = max(j["end_s"] for j in measured) - min(j["start_s"] for j in measured)
         check = []
     else:
