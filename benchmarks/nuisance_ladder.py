@@ -4,7 +4,9 @@ Run: ``.venv/bin/python benchmarks/nuisance_ladder.py [--seeds 1-3] [--size 320x
 
 For every seed (a random rig of the ``random-tiny`` ranges at ``--size``) it
 renders the plane and one frame of the sheet once per rung of a ladder and
-reconstructs them with ML HS (``ml_full``) and Bayesian HS (``bayes_ph``):
+reconstructs them with ML HS (``ml_full``) and Bayesian HS (``bayes_ph``;
+``--variants`` adds e.g. ``bayes_nocalib``, the paper's Bayesian HS without
+photometric calibration, to see which effect moves it):
 
 - ``exact``: noise and cross-talk off, 16 bit, exact masks, the TRUE
   calibration (``gt/photometric.h5``; no cross-talk to undo): the same as
@@ -24,7 +26,8 @@ reconstructs them with ML HS (``ml_full``) and Bayesian HS (``bayes_ph``):
 A rung that adds error beyond its neighbours names the stage to look at.
 Writes ``benchmarks/results/nuisance_ladder.csv`` (one row per seed x rung x
 scene x variant: depth median, RMS, signed median (mm), normal median (deg),
-coverage; mu RMS log error of the pipeline's maps against the truth) and
+coverage; mu RMS log error of the pipeline's maps against the truth, and of
+mu = 1, what ``bayes_nocalib`` assumes, against the truth) and
 prints a median-over-seeds table. Nothing in the pipeline sees the seed, the
 rung or ``gt/`` (except the ``exact`` rung's calibration, on purpose).
 """
@@ -42,6 +45,7 @@ import pandas as pd
 from generalisation import calibrate, calibration_errors, evaluate_variant
 
 from colourhs.commands import frame_indices as _seeds
+from colourhs.variants import parse_variants
 
 HERE = Path(__file__).parent
 SCENES = ("plane", "sheet")
@@ -64,7 +68,7 @@ def rungs() -> list[tuple[str, object]]:
     return out + [("all", full)]
 
 
-def run_rung(seed: int, preset, name: str, nuisances, root: Path) -> list[dict]:
+def run_rung(seed: int, preset, name: str, nuisances, root: Path, variants=VARIANTS) -> list[dict]:
     """One seed x rung: render, calibrate (or take the truth), reconstruct, evaluate."""
     from colourhs.synth.dataset import synthesise
 
@@ -80,12 +84,13 @@ def run_rung(seed: int, preset, name: str, nuisances, root: Path) -> list[dict]:
         progress=False,
     )
     files = calibrate(data, root / name / "calib")
-    mu = calibration_errors(data, files)["mu_rms_log_worst"]
+    cal = calibration_errors(data, files)
+    mu, mu_none = cal["mu_rms_log_worst"], cal["mu_uncalibrated_rms_log_worst"]
     if exact:
         files = {"photometric": data / "gt" / "photometric.h5", "crosstalk": None, "noise": None}
     rows = []
     for scene in SCENES:
-        for variant in VARIANTS:
+        for variant in variants:
             m = evaluate_variant(
                 data, scene, ["000000"], variant, files, None, root / name / "work"
             )
@@ -96,13 +101,14 @@ def run_rung(seed: int, preset, name: str, nuisances, root: Path) -> list[dict]:
                     "scene": scene,
                     "variant": variant,
                     "mu_rms_log_worst": mu,
+                    "mu_uncalibrated_rms_log_worst": mu_none,
                     **m,
                 }
             )
             print(
                 f"seed {seed} {name:13s} {scene:6s} {variant:9s} depth {m['depth_median_mm']:.3f}"
                 f" mm (signed {m['depth_signed_median_mm']:+.3f}) coverage {m['coverage']:.3f}"
-                f" mu {mu:.4f} ({time.time() - t0:.0f} s)",
+                f" mu {mu:.4f} (uncalibrated {mu_none:.4f}) ({time.time() - t0:.0f} s)",
                 flush=True,
             )
     return rows
@@ -115,7 +121,14 @@ def main(argv=None) -> pd.DataFrame:
     p.add_argument("--seeds", default="1-3", help="seeds, e.g. 1-5 (default 1-3)")
     p.add_argument("--size", default="320x240", help="image size WxH (default 320x240)")
     p.add_argument("--rungs", default=None, help="comma-separated subset of the rungs")
+    p.add_argument(
+        "--variants",
+        default=",".join(VARIANTS),
+        help="comma-separated variants (default ml_full,bayes_ph; bayes_nocalib shows"
+        " which effect breaks the ablation link ml_full > bayes_nocalib)",
+    )
     args = p.parse_args(argv)
+    variants = parse_variants(args.variants)
     w, h = (int(v) for v in args.size.lower().split("x"))
     preset = replace(PRESETS["random-tiny"], name="ladder", width=w, height=h, sheet_frames=1)
     chosen = [r for r in rungs() if args.rungs is None or r[0] in args.rungs.split(",")]
@@ -126,7 +139,7 @@ def main(argv=None) -> pd.DataFrame:
         root = Path(tempfile.mkdtemp(prefix=f"colourhs-ladder-{seed}-"))
         try:
             for name, nuisances in chosen:
-                rows += run_rung(seed, preset, name, nuisances, root)
+                rows += run_rung(seed, preset, name, nuisances, root, variants)
                 pd.DataFrame(rows).to_csv(out, index=False)  # a partial run counts
         finally:
             shutil.rmtree(root, ignore_errors=True)
