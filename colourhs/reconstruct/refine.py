@@ -12,6 +12,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from colourhs.linalg import solve_spd
+from colourhs.reconstruct.gram import SplineGram
 from colourhs.reconstruct.sides import HelmholtzSides
 from colourhs.reconstruct.spline import SplineSurface, default_spacing
 from colourhs.reconstruct.surface import (
@@ -101,6 +102,8 @@ class _Problem:
         self.graph, self.R, self.sides, self.c_ref = graph, R, sides, c_ref
         self.B, self.Dw, self.robust = spline.basis, Dw, robust
         self.Bt = spline.basis.T.tocsr()  # B^T, once: every step multiplies by it
+        self.gram = SplineGram(spline.basis, spline.grid_coords, graph.neighbours, sides.pairs)
+        self.DtD = (Dw.T @ Dw).tocsr()  # the prior's normal matrix at level 1
         self.ctrl_surface = spline.surface_of
         self.prior_surface = prior_surface
         self.n = graph.n_surfaces
@@ -174,7 +177,8 @@ class _Problem:
             sc = info["scale"]
             s0 = self.state(c, sc, info)
             Dw = self.prior(sc)
-            A = self.Bt @ ((Jz.T @ Jz) @ self.B) + Dw.T @ Dw
+            level = sc / (self.robust**2 * self.sides.pairs)  # Dw = self.Dw sqrt(level)
+            A = self.gram.matrix(info["jacobian_values"]) + self.DtD * level
             g = self.Bt @ (Jz.T @ r) + Dw.T @ (Dw @ c)
             diag = A.diagonal() + 1e-12 * max(A.diagonal().mean(), 1e-300)
             pending = np.ones(self.n, bool)

@@ -66,7 +66,7 @@ class SplineSurface:
     def __init__(self, rows, cols, surface, spacing_px: float):
         self.spacing = float(spacing_px)
         self.grids = []  # (row0, col0, ni, nj, remap) per surface
-        owner = []
+        owner, coords = [], []
         m = 0
         for k in range(int(surface.max()) + 1 if len(surface) else 0):
             sel = surface == k
@@ -82,9 +82,12 @@ class SplineSurface:
             remap[used] = m + np.arange(used.sum())
             self.grids.append((r0, c0, ni, nj, remap))
             owner.append(np.full(int(used.sum()), k))
+            coords.append(np.divmod(np.flatnonzero(used), nj))
             m += int(used.sum())
         self.size = m
         self.surface_of = np.concatenate(owner) if owner else np.zeros(0, int)
+        #: (2, m) each control point's row and column in its surface's grid.
+        self.grid_coords = np.concatenate(coords, axis=1) if coords else np.zeros((2, 0), int)
         self.basis = self.rows_for(rows, cols, surface)[0]
 
     def rows_for(self, rows, cols, surfaces) -> tuple[sp.csr_matrix, np.ndarray]:

@@ -295,7 +295,9 @@ def hs_residuals(
     J : sparse (M, n) Jacobian, r : (M,) IRLS-weighted residuals (r . r is
     the quadratic model of the robust energy), info : dict with ``valid``
     (n,) rows usable, ``weights`` (n,), ``chi2`` (n,) summed squared
-    normalised residual of the pixel's P rows, ``scale``.
+    normalised residual of the pixel's P rows, ``scale`` and, with the
+    Jacobian, ``jacobian_values`` (M, 5): row ``p P + k``'s entries at p and
+    its east, south, west and north neighbours (J's values in that order).
     """
     n = graph.n
     X = c_ref + R * z[:, None]
@@ -330,7 +332,7 @@ def hs_residuals(
     _pixel_rows(X, R, s, var, v, ds, dv, valid, nbr, w, res, cols, vals)
     indptr = np.arange(0, 5 * len(res) + 1, 5)
     J = sp.csr_matrix((vals.ravel(), cols.ravel(), indptr), shape=(len(res), n))
-    info = {"valid": usable, "weights": w, "chi2": chi2, "scale": scale}
+    info = {"valid": usable, "weights": w, "chi2": chi2, "scale": scale, "jacobian_values": vals}
     return J, res, info
 
 
