@@ -70,13 +70,19 @@ def neighbour_residuals(channel: np.ndarray) -> np.ndarray:
     return c[1:-1, 1:-1] - mean4
 
 
-def fit_affine_noise(signal: np.ndarray, residual: np.ndarray) -> tuple[float, float]:
+def fit_affine_noise(
+    signal: np.ndarray, residual: np.ndarray, floor: float = 0.0
+) -> tuple[float, float]:
     """Fit ``var = gain * signal + offset`` to neighbour residuals, robustly.
 
     Parameters
     ----------
     signal : (N,) signal level of each pixel (fraction of full scale).
     residual : (N,) its :func:`neighbour_residuals`.
+    floor : least variance a bin can have (full scale^2): the quantisation's
+        (:func:`quantisation_variance`). Without it a capture with no visible
+        noise (a 16-bit synthetic one, noise off) has bins of variance 0 and
+        no fit.
 
     Returns
     -------
@@ -105,9 +111,14 @@ def fit_affine_noise(signal: np.ndarray, residual: np.ndarray) -> tuple[float, f
             continue
         rk = r[sel]
         mad = np.median(np.abs(rk - np.median(rk)))
+        v = max((MAD_TO_SIGMA * mad) ** 2 / RESIDUAL_VARIANCE, floor)
+        if v <= 0:
+            continue
         level.append(np.median(s[sel]))
-        var.append((MAD_TO_SIGMA * mad) ** 2 / RESIDUAL_VARIANCE)
+        var.append(v)
         count.append(sel.sum())
+    if not level:
+        raise ValueError("noise estimate: no measurable noise (every bin's spread is 0)")
     if len(level) == 1:
         return float(var[0] / level[0]), 0.0
     level, var, w = np.array(level), np.array(var), np.array(count, float)
@@ -118,13 +129,20 @@ def fit_affine_noise(signal: np.ndarray, residual: np.ndarray) -> tuple[float, f
     return float(gain), float(offset)
 
 
-def estimate_noise(images: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """Per-channel ``gain`` and ``offset`` (3,) from images (H, W, 3) of one camera."""
+def quantisation_variance(black_level: float, white_level: float) -> float:
+    """Variance (full scale^2) of rounding to the raw values: one raw step
+    ``1 / (white - black)`` of full scale, uniform error, so step^2 / 12."""
+    return 1.0 / (12.0 * (float(white_level) - float(black_level)) ** 2)
+
+
+def estimate_noise(images: list[np.ndarray], floor: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Per-channel ``gain`` and ``offset`` (3,) from images (H, W, 3) of one camera;
+    ``floor``: see :func:`fit_affine_noise`."""
     gain, offset = np.zeros(3), np.zeros(3)
     for ch in range(3):
         sig = np.concatenate([im[1:-1, 1:-1, ch].ravel() for im in images])
         res = np.concatenate([neighbour_residuals(im[..., ch]).ravel() for im in images])
-        gain[ch], offset[ch] = fit_affine_noise(sig, res)
+        gain[ch], offset[ch] = fit_affine_noise(sig, res, floor)
     return gain, offset
 
 
@@ -147,7 +165,8 @@ def calibrate_noise(dataset_dir, out_json=None, progress: bool = True) -> NoiseM
                 for colour in COLOURS
             ]
         try:
-            gains[cam], offsets[cam] = estimate_noise(images)
+            floor = quantisation_variance(ds.rig.image.black_level, ds.rig.image.white_level)
+            gains[cam], offsets[cam] = estimate_noise(images, floor)
         except ValueError as err:
             raise ValueError(f"{ds.root / 'photometric'}: camera {cam}: {err}") from None
         full_well = [1.0 / g if g > 0 else None for g in gains[cam]]

@@ -49,3 +49,25 @@ def test_variance_of_the_model():
     m = NoiseModel({"a": np.array([1e-4, 2e-4, 3e-4])}, {"a": np.array([1e-6, 0, 0])})
     img = np.full((2, 2, 3), 0.5)
     assert np.allclose(m.variance("a", img)[0, 0], [0.5e-4 + 1e-6, 1e-4, 1.5e-4])
+
+
+def test_noise_free_captures_give_the_quantisation_floor():
+    """Images with no noise but rounding, evenly lit (a synthetic capture with
+    noise, vignetting and light fall-off off: the nuisance ladder's 'none'
+    rung): every bin's spread is 0, and the fit failed with a NaN in its least
+    squares. With the quantisation's variance as a floor the model is that
+    floor; without one it is a clear error."""
+    from colourhs.noise import quantisation_variance
+
+    white = 255.0
+    y, x = np.mgrid[0:240, 0:320]
+    levels = np.where(x < 100, 0.2, np.where(x < 200, 0.45, 0.7))  # three flat panels
+    clean = np.stack([levels * f for f in (1.0, 0.9, 0.8)], axis=-1)
+    images = [np.round(clean * white) / white] * 2
+    floor = quantisation_variance(0.0, white)
+    assert floor == pytest.approx(1 / (12 * white**2))
+    with pytest.raises(ValueError, match="no measurable noise"):
+        estimate_noise(images)
+    gain, offset = estimate_noise(images, floor)
+    for i in (0.2, 0.7):
+        assert np.allclose(gain * i + offset, floor, rtol=1e-6)
