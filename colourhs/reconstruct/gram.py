@@ -129,9 +129,11 @@ class SplineGram:
         surface's control grid.
     neighbours : (4, n) the pixel graph's east, south, west, north links.
     pairs : P, the rows per pixel.
+    pixels : (n,) bool, the pixels whose rows count (default all; the
+        others' rows are taken as zero).
     """
 
-    def __init__(self, B: sp.csr_matrix, grid_coords, neighbours, pairs: int):
+    def __init__(self, B: sp.csr_matrix, grid_coords, neighbours, pairs: int, pixels=None):
         B = sp.csr_matrix(B)
         B.sort_indices()
         n, m = B.shape
@@ -143,10 +145,11 @@ class SplineGram:
         self.nbr = np.ascontiguousarray(neighbours, np.int64)
         self.P, self.m = int(pairs), m
         # The pixels cell by cell: a pixel's cell is its patch's first control point.
-        self.order = np.argsort(self.bcols[:, 0], kind="stable")
+        sel = np.arange(n) if pixels is None else np.flatnonzero(pixels)
+        self.order = sel[np.argsort(self.bcols[sel, 0], kind="stable")]
         cell_of = self.bcols[self.order, 0]
         self.starts = np.flatnonzero(np.r_[True, cell_of[1:] != cell_of[:-1], True])
-        if n == 0:
+        if len(sel) == 0:
             self.starts = np.zeros(1, np.int64)
         cols = np.full((m, SPAN * SPAN), -1, np.int64)
         self.pos = np.zeros((0, SPAN * SPAN), np.int64)

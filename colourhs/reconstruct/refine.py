@@ -8,6 +8,8 @@ valley (:func:`depth_search`); holes are filled (:func:`~colourhs.reconstruct.su
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 import scipy.sparse as sp
 
@@ -34,6 +36,7 @@ SEARCH_FITS = 3  # LM steps that re-fit the shape at each depth of the search
 SEARCH_PARABOLAS = (1.0, 0.25, 0.05)  # half-widths of the parabolas through E, in steps
 COARSE = 8.0  # the first fit's control spacing, in units of the final spacing
 CONVERGED = 1e-6  # predicted decrease of E (chi2 units) below which a surface has converged
+SEARCH_CELL_PX = 5.0  # the depth search keeps at least this many pixels across a control cell
 """Why these values hold on any rig:
 
 - ``CURVATURE_TOL_PER_M``: the prior's unit is a curvature (1/m) times the
@@ -82,7 +85,25 @@ CONVERGED = 1e-6  # predicted decrease of E (chi2 units) below which a surface h
   0.012, 0.020 mm with two parabolas, 0.008, 0.011, 0.013, 0.016 with
   three; under noise (random rigs 0, 1, 5, every nuisance, pipeline
   calibration; plane, sheet, statue, toy) within 0.07 mm either way.
+- ``SEARCH_CELL_PX``: in pixels of the spline's own spacing, which is a
+  fixed fraction of the image width, so the subsampling
+  (:func:`search_stride`) is the same on any rig at a given resolution:
+  none below 1200 pixels wide (spacing < 10 px: the demo and random presets),
+  every 2nd pixel in rows and columns from 1200 to 1799 (the paper preset's
+  1280: 28 of a cell's 114 pixels, 85 rows, kept).
 """
+
+
+def search_stride(spacing: float) -> int:
+    """Pixel stride of the depth search: ``floor(spacing / SEARCH_CELL_PX)``, at least 1.
+
+    Beyond the paper (speed). The search fits each trial depth's shape and
+    compares E along the valley; both rest on many pixels per control cell
+    (``spacing^2``), so at high resolution a subsample decides them as well
+    and each trial costs a ``stride^2``-th of the pixels' work; the final
+    Levenberg-Marquardt steps use every pixel.
+    """
+    return max(1, int(spacing // SEARCH_CELL_PX))
 
 
 def _problem(graph, R, sides, c_ref, spacing, footprint, robust) -> _Problem:
@@ -100,26 +121,62 @@ class _Problem:
 
     def __init__(self, graph, R, sides, c_ref, spline, Dw, prior_surface, robust):
         self.graph, self.R, self.sides, self.c_ref = graph, R, sides, c_ref
-        self.B, self.Dw, self.robust = spline.basis, Dw, robust
+        self.spline, self.B, self.Dw, self.robust = spline, spline.basis, Dw, robust
         self.Bt = spline.basis.T.tocsr()  # B^T, once: every step multiplies by it
         self.gram = SplineGram(spline.basis, spline.grid_coords, graph.neighbours, sides.pairs)
         self.DtD = (Dw.T @ Dw).tocsr()  # the prior's normal matrix at level 1
         self.ctrl_surface = spline.surface_of
         self.prior_surface = prior_surface
         self.n = graph.n_surfaces
+        self.active = None  # every pixel's rows count
+        self.pixel_weight = None
+
+    def subsampled(self, stride: int) -> _Problem:
+        """The same E over every ``stride``-th pixel in rows and columns.
+
+        Beyond the paper (speed). Each kept pixel's robust energy, rows and
+        Jacobian count ``n_k / kept_k`` times (its surface's pixels over those
+        kept), so the data keep their weight against the prior and E its
+        scale; the kept pixels' normals still come from their four
+        neighbours. A surface that would keep fewer pixels than one control
+        cell holds at full resolution keeps all of its pixels.
+        """
+        if stride <= 1:
+            return self
+        g = self.graph
+        active = (g.rows % stride == 0) & (g.cols % stride == 0)
+        kept = np.bincount(g.surface[active], minlength=self.n)
+        small = kept < self.spline.spacing**2
+        active |= small[g.surface]
+        kept = np.bincount(g.surface[active], minlength=self.n)
+        total = np.bincount(g.surface, minlength=self.n)
+        out = copy.copy(self)
+        out.active = active
+        out.pixel_weight = np.where(active, total[g.surface] / np.maximum(kept[g.surface], 1), 0)
+        out.gram = SplineGram(
+            self.B, self.spline.grid_coords, g.neighbours, self.sides.pairs, pixels=active
+        )
+        return out
+
+    def _residuals(self, c, **kw):
+        """:func:`hs_residuals` at control points ``c`` over the counted pixels."""
+        return hs_residuals(
+            self.B @ c, self.graph, self.R, self.sides, self.c_ref, active=self.active, **kw
+        )
+
+    def _weighted(self, rho):
+        return rho if self.pixel_weight is None else rho * self.pixel_weight
 
     def state(self, c, scale, info=None) -> tuple[np.ndarray, np.ndarray]:
         """Each pixel's robust energy rho (NaN where unusable) and each surface's
         prior energy (n_surfaces,), at Geman-McClure ``scale``; ``info`` from
         :func:`hs_residuals` at ``c`` saves sampling the images again."""
         if info is None:
-            _, rho, _ = hs_residuals(
-                self.B @ c, self.graph, self.R, self.sides, self.c_ref, jacobian=False, scale=scale
-            )
+            _, rho, _ = self._residuals(c, jacobian=False, scale=scale)
         else:
             rho = robust_energy(info["chi2"], info["valid"], scale)
         prior = self.prior(scale) @ c
-        return rho, np.bincount(self.prior_surface, prior * prior, self.n)
+        return self._weighted(rho), np.bincount(self.prior_surface, prior * prior, self.n)
 
     def prior(self, scale) -> sp.csr_matrix:
         """The prior's rows in the data's units at Geman-McClure ``scale``.
@@ -153,9 +210,7 @@ class _Problem:
 
     def scale(self, c) -> float:
         """The Geman-McClure scale of the residuals at ``c`` (see :func:`hs_residuals`)."""
-        return hs_residuals(
-            self.B @ c, self.graph, self.R, self.sides, self.c_ref, self.robust, jacobian=False
-        )[2]["scale"]
+        return self._residuals(c, robust=self.robust, jacobian=False)[2]["scale"]
 
     def lm(self, c, iterations: int, scale=None, lam=LM_START):
         """``iterations`` Levenberg-Marquardt steps, each kept per surface where it
@@ -171,14 +226,16 @@ class _Problem:
         lam = np.full(self.n, float(lam))
         history = []
         for _ in range(iterations):
-            Jz, r, info = hs_residuals(
-                self.B @ c, self.graph, self.R, self.sides, self.c_ref, self.robust, scale=scale
-            )
+            Jz, r, info = self._residuals(c, robust=self.robust, scale=scale)
             sc = info["scale"]
             s0 = self.state(c, sc, info)
             Dw = self.prior(sc)
             level = sc / (self.robust**2 * self.sides.pairs)  # Dw = self.Dw sqrt(level)
-            A = self.gram.matrix(info["jacobian_values"]) + self.DtD * level
+            vals = info["jacobian_values"]
+            if self.pixel_weight is not None:  # rows and residuals times sqrt(weight)
+                w = np.repeat(self.pixel_weight, self.sides.pairs)
+                vals, r = vals * np.sqrt(w)[:, None], r * w
+            A = self.gram.matrix(vals) + self.DtD * level
             g = self.Bt @ (Jz.T @ r) + Dw.T @ (Dw @ c)
             diag = A.diagonal() + 1e-12 * max(A.diagonal().mean(), 1e-300)
             pending = np.ones(self.n, bool)
@@ -400,8 +457,9 @@ def refine_surface(
     energies += more
     factors = np.ones(graph.n_surfaces)
     if search:
-        say("refinement: depth search along E's valley")
-        c, factors = depth_search(problem, c, say=say)
+        stride = search_stride(spacing)
+        say(f"refinement: depth search along E's valley (pixel stride {stride})")
+        c, factors = depth_search(problem.subsampled(stride), c, say=say)
     say(f"refinement: {iterations} final LM steps")
     c, more = problem.lm(c, iterations)
     z = B @ c

@@ -186,8 +186,12 @@ def _pixel_chi2(X, R, s, var, v, valid, nbr, chi2, count):
     for p in nb.prange(n):
         d = np.empty((5, 3))
         c = 0.0
+        if not valid[p]:
+            chi2[p] = 0.0
+            count[p] = 0
+            continue
         nx, ny, nz, m = _pixel_normal(X, R, nbr, p, d)
-        if valid[p] and m > 0:
+        if m > 0:
             for k in range(P):
                 r = _sampson(s, var, v, p, k, nx, ny, nz)[0]
                 c += r * r
@@ -274,6 +278,7 @@ def hs_residuals(
     weights=None,
     jacobian: bool = True,
     scale: float | None = None,
+    active: np.ndarray | None = None,
 ):
     """Residuals of E (see the module docstring) and their Jacobian over the depths.
 
@@ -289,6 +294,9 @@ def hs_residuals(
         residuals (``robust^2 P`` times the larger of 1 and their median
         over its noise-only value), returned in ``info`` so that energies
         of several depth maps can be compared at one scale.
+    active : (n,) bool, the pixels whose rows are evaluated (default all);
+        the others' rows are zero and unusable (their depths still give the
+        active pixels' normals).
 
     Returns
     -------
@@ -301,7 +309,13 @@ def hs_residuals(
     """
     n = graph.n
     X = c_ref + R * z[:, None]
-    s, var, v, ds, dv = sample_sides(sides, X, R)
+    if active is None:
+        s, var, v, ds, dv = sample_sides(sides, X, R)
+    else:
+        sub = sample_sides(sides, X[active], R[active])
+        s, var, v, ds, dv = (np.full((n, *a.shape[1:]), np.nan) for a in sub)
+        for full, part in zip((s, var, v, ds, dv), sub, strict=True):
+            full[active] = part
     P = s.shape[1]
     valid = np.all(np.isfinite(s), axis=(1, 2)) & np.all(np.isfinite(ds), axis=(1, 2))
     valid &= np.all(var > 0, axis=(1, 2))
