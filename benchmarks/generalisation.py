@@ -60,6 +60,20 @@ TARGETS = {  # issue 11: median over seeds (worst seed within 2x)
 }
 
 
+def seeds_in_temp(seeds, prefix: str, run, out_csv: Path) -> list[dict]:
+    """``run(seed, root)`` (rows) for each seed in its own temporary folder, removed
+    after it; the rows so far go to ``out_csv`` after each seed (a partial run counts)."""
+    rows = []
+    for seed in seeds:
+        root = Path(tempfile.mkdtemp(prefix=f"{prefix}-{seed}-"))
+        try:
+            rows += run(seed, root)
+            pd.DataFrame(rows).to_csv(out_csv, index=False)
+        finally:
+            shutil.rmtree(root, ignore_errors=True)
+    return rows
+
+
 def calibrate(data: Path, calib: Path) -> dict:
     """The workflow's calibration stages on one dataset; returns the files by name."""
     from colourhs.capture import open_dataset

@@ -35,14 +35,12 @@ rung or ``gt/`` (except the ``exact`` rung's calibration, on purpose).
 from __future__ import annotations
 
 import argparse
-import shutil
-import tempfile
 import time
 from dataclasses import replace
 from pathlib import Path
 
 import pandas as pd
-from generalisation import calibrate, calibration_errors, evaluate_variant
+from generalisation import calibrate, calibration_errors, evaluate_variant, seeds_in_temp
 
 from colourhs.commands import frame_indices as _seeds
 from colourhs.variants import parse_variants
@@ -134,15 +132,15 @@ def main(argv=None) -> pd.DataFrame:
     chosen = [r for r in rungs() if args.rungs is None or r[0] in args.rungs.split(",")]
     out = HERE / "results" / "nuisance_ladder.csv"
     out.parent.mkdir(exist_ok=True)
-    rows = []
-    for seed in _seeds(args.seeds):
-        root = Path(tempfile.mkdtemp(prefix=f"colourhs-ladder-{seed}-"))
-        try:
-            for name, nuisances in chosen:
-                rows += run_rung(seed, preset, name, nuisances, root, variants)
-                pd.DataFrame(rows).to_csv(out, index=False)  # a partial run counts
-        finally:
-            shutil.rmtree(root, ignore_errors=True)
+
+    def run(seed, root):
+        return [
+            row
+            for name, nuisances in chosen
+            for row in run_rung(seed, preset, name, nuisances, root, variants)
+        ]
+
+    rows = seeds_in_temp(_seeds(args.seeds), "colourhs-ladder", run, out)
     table = pd.DataFrame(rows)
     order = {name: i for i, (name, _) in enumerate(rungs())}
     summary = (
