@@ -80,9 +80,9 @@ def fit_affine_noise(
     signal : (N,) signal level of each pixel (fraction of full scale).
     residual : (N,) its :func:`neighbour_residuals`.
     floor : least variance a bin can have (full scale^2): the quantisation's
-        (:func:`quantisation_variance`). Without it a capture with no visible
-        noise (a 16-bit synthetic one, noise off) has bins of variance 0 and
-        no fit.
+        (:func:`quantisation_variance`). Without it an evenly lit capture
+        without noise (a synthetic one with noise, vignetting and light
+        fall-off off) has bins of variance 0 and no fit.
 
     Returns
     -------
