@@ -215,7 +215,6 @@ def _pixel_rows(X, R, s, var, v, ds, dv, valid, nbr, weights, res, cols, vals):
     for p in nb.prange(n):
         d = np.empty((5, 3))
         wt = np.sqrt(weights[p])
-        nx, ny, nz, m = _pixel_normal(X, R, nbr, p, d)
         for k in range(P):
             row = p * P + k
             res[row] = 0.0
@@ -225,7 +224,10 @@ def _pixel_rows(X, R, s, var, v, ds, dv, valid, nbr, weights, res, cols, vals):
                 q = nbr[j, p]
                 cols[row, 1 + j] = q if q >= 0 else p
                 vals[row, 1 + j] = 0.0
-        if not (valid[p] and m > 0):
+        if not valid[p]:  # no normal needed (most pixels of a subsampled search)
+            continue
+        nx, ny, nz, m = _pixel_normal(X, R, nbr, p, d)
+        if m == 0:
             continue
         for k in range(P):
             r, sd, sd2, ca, cb, wx, wy, wz = _sampson(s, var, v, p, k, nx, ny, nz)
@@ -261,6 +263,12 @@ def _pixel_rows(X, R, s, var, v, ds, dv, valid, nbr, weights, res, cols, vals):
             for j in range(4):
                 if nbr[j, p] >= 0:
                     vals[row, 1 + j] = (gx * d[1 + j, 0] + gy * d[1 + j, 1] + gz * d[1 + j, 2]) * wt
+
+
+def _usable_samples(s, var, ds) -> np.ndarray:
+    """(N,) points whose every side's sample, derivative and variance are usable."""
+    ok = np.all(np.isfinite(s), axis=(1, 2)) & np.all(np.isfinite(ds), axis=(1, 2))
+    return ok & np.all(var > 0, axis=(1, 2))
 
 
 def robust_energy(chi2, usable, scale):
@@ -311,14 +319,15 @@ def hs_residuals(
     X = c_ref + R * z[:, None]
     if active is None:
         s, var, v, ds, dv = sample_sides(sides, X, R)
-    else:
+        valid = _usable_samples(s, var, ds)
+    else:  # inactive pixels' samples are left unset: nothing reads an unusable pixel's
         sub = sample_sides(sides, X[active], R[active])
-        s, var, v, ds, dv = (np.full((n, *a.shape[1:]), np.nan) for a in sub)
+        s, var, v, ds, dv = (np.empty((n, *a.shape[1:])) for a in sub)
         for full, part in zip((s, var, v, ds, dv), sub, strict=True):
             full[active] = part
+        valid = np.zeros(n, bool)
+        valid[active] = _usable_samples(sub[0], sub[1], sub[3])
     P = s.shape[1]
-    valid = np.all(np.isfinite(s), axis=(1, 2)) & np.all(np.isfinite(ds), axis=(1, 2))
-    valid &= np.all(var > 0, axis=(1, 2))
     nbr = graph.neighbours
     chi2 = np.empty(n)
     count = np.empty(n)
