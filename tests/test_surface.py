@@ -313,3 +313,17 @@ def test_spline_gram_equals_the_sparse_products():
         got = SplineGram(spline.basis, spline.grid_coords, graph.neighbours, P).matrix(vals)
         err = np.abs(got.toarray() - ref).max() / np.abs(ref).max()
         assert err < 1e-13  # round-off: measured 6.7e-16 and 1.2e-15
+
+
+def test_spline_gram_refuses_a_spacing_under_one_pixel():
+    """Its kernel writes a pixel's rows into a 6 x 6 block without checking
+    indices: a spacing under one pixel would write outside it."""
+    from colourhs.reconstruct.gram import SplineGram
+
+    mask = np.ones((6, 8), bool)
+    graph = SurfaceGraph(mask.ravel(), (6, 8), np.ones(48), np.full(48, 1e-3), 3.0)
+    spline = SplineSurface(graph.rows, graph.cols, graph.surface, 0.5)
+    with pytest.raises(ValueError, match="under one pixel"):
+        SplineGram(spline.basis, spline.grid_coords, graph.neighbours, 3)
+    spline = SplineSurface(graph.rows, graph.cols, graph.surface, 1.0)
+    SplineGram(spline.basis, spline.grid_coords, graph.neighbours, 3)  # one pixel: fine

@@ -124,7 +124,8 @@ class SplineGram:
 
     Parameters
     ----------
-    B : (n, m) sparse basis, 16 entries per row (every pixel on its grid).
+    B : (n, m) sparse basis, 16 entries per row (every pixel on its grid), of a
+        spline whose control spacing is at least one pixel (ValueError otherwise).
     grid_coords : (2, m) each control point's row and column in its
         surface's control grid.
     neighbours : (4, n) the pixel graph's east, south, west, north links.
@@ -144,6 +145,15 @@ class SplineGram:
         self.gi, self.gj = (np.ascontiguousarray(g, np.int64) for g in grid_coords)
         self.nbr = np.ascontiguousarray(neighbours, np.int64)
         self.P, self.m = int(pairs), m
+        # The 6 x 6 block holds a pixel's rows only if its neighbours' patches are
+        # shifted by at most one control point (a spacing of at least one pixel);
+        # the kernel does not check its indices, so refuse anything else here.
+        top = self.bcols[:, 0]
+        for q in self.nbr:
+            has = q >= 0
+            for g in (self.gi, self.gj):
+                if np.any(np.abs(g[top[q[has]]] - g[top[has]]) > 1):
+                    raise ValueError("spline control spacing under one pixel: use 1 px or more")
         # The pixels cell by cell: a pixel's cell is its patch's first control point.
         sel = np.arange(n) if pixels is None else np.flatnonzero(pixels)
         self.order = sel[np.argsort(self.bcols[sel, 0], kind="stable")]
