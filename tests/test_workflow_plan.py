@@ -287,3 +287,14 @@ def test_config_yaml_states_the_package_defaults():
     hull = parse(["hull", "data", "scene", "000000", "h.ply"])
     assert (hull.threshold, hull.voxel_m) == (DEFAULT_THRESHOLD, None)
     assert parse(["chromaticity", "data", "toy", "c.h5"]).min_signal == MIN_SIGNAL
+
+
+def test_schema_refuses_a_spline_spacing_under_one_pixel(data):
+    """The refinement's Gram kernel needs a control spacing of at least one pixel
+    (colourhs.reconstruct.gram): the config is refused before any stage runs."""
+    ok = {"datasets": {"d": {"path": str(data)}}, "reconstruction": {"params": {"spline_px": 1}}}
+    plan_of(ok)
+    bad = {"datasets": {"d": {"path": str(data)}}, "reconstruction": {"params": {"spline_px": 0.5}}}
+    with pytest.raises(Exception, match="less than the minimum of 1") as err:
+        plan_of(bad)
+    assert "spline_px" in str(err.value)
