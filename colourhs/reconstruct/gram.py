@@ -14,9 +14,11 @@ pixels' links and patches, not on the values), and each step fills its
 values in one pass over the pixels: a pixel's rows touch at most a 6 x 6
 block of its surface's control grid (its own patch and its neighbours',
 which are shifted by at most one control point for a spacing of at least
-one pixel), so each pixel adds the Gram matrix of its ``P`` rows, expressed
-on that block, to ``A`` stored as a band of 11 x 11 control-grid offsets
-per control point. Each thread fills its own band (no races); the bands
+one pixel, checked), so each pixel adds the Gram matrix of its ``P`` rows,
+expressed on that block, to a dense 36 x 36 block per cell (the pixels of
+one patch), which is added to ``A``'s values once per cell through a map
+from (control point, grid offset within 11 x 11) to the value's index.
+Each thread adds into its own copy of the values (no races); the copies
 are summed. The result equals the sparse products' to rounding (the sums
 run in another order).
 """
