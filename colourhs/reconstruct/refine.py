@@ -463,7 +463,7 @@ def refine_surface(
     say(f"refinement: {iterations} final LM steps")
     c, more = problem.lm(c, iterations)
     z = B @ c
-    _, _, info = hs_residuals(z, graph, R, sides, c_ref, robust)
+    _, _, info = hs_residuals(z, graph, R, sides, c_ref, robust, jacobian=False)
     out_z = np.full(H * W, np.nan)
     out_z[graph.pix] = z
     # Every pixel of the surface keeps the spline's depth; those whose rows
