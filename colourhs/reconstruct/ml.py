@@ -12,8 +12,12 @@ tangent plane; the candidate whose plane also explains the rows of the
 pixel's 8 neighbours (their points on that plane, eq. 5 residuals in noise
 units against the plane's normal) wins. On the true surface every
 neighbour agrees to second order in the pixel spacing; at a false root the
-neighbours' rows disagree with its normal. Then the depth is the root's
-continuous minimum (:func:`refine_ml`).
+neighbours' rows disagree with its normal. The depth is the root's
+continuous minimum (:func:`refine_ml`): each candidate takes ``PRESELECT``
+of its rounds before the window chooses, the chosen one the rest (measured
+on a 640 px random rig's sheet and plane under noise: depth medians 40.31
+-> 40.28 and 39.38 -> 39.22 mm, 27-36 % less time than refining every
+candidate fully; exact planes unchanged, 0.064 / 0.106 / 0.025 mm).
 """
 
 from __future__ import annotations
@@ -25,6 +29,9 @@ import numpy as np
 from colourhs.reconstruct.sides import HelmholtzSides, sample_sides, whitened_cost
 
 CANDIDATES = 4  # local minima of the per-pixel cost kept as candidate roots
+CONVERGED_STEPS = 1e-3  # refine_ml: a move under this many labels has converged
+ROUNDS = 6  # refine_ml's parabola rounds per pixel
+PRESELECT = 2  # of them, the rounds before the window chooses among the candidates
 WINDOW = ((-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1))
 
 
@@ -57,7 +64,14 @@ def _candidates(cost, max_cost, k):
     return np.where(np.isfinite(np.take_along_axis(best, order, axis=1)), idx, -1)
 
 
-def refine_ml(z: np.ndarray, cost, step_m: float, iterations: int = 6) -> np.ndarray:
+def refine_ml(
+    z: np.ndarray,
+    cost,
+    step_m: float,
+    iterations: int = ROUNDS,
+    tol: float = CONVERGED_STEPS,
+    h: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
     """Continuous per-pixel ML depth: the minimum of each pixel's own cost near ``z``.
 
     Beyond the paper (whose ML HS picks the best hypothesis): ``cost`` is the
@@ -66,26 +80,48 @@ def refine_ml(z: np.ndarray, cost, step_m: float, iterations: int = 6) -> np.nda
     data), so three evaluations at z - h, z, z + h give the vertex, and
     ``iterations`` Newton-like rounds from h = half a label converge to it.
 
+    Also beyond the paper, for speed: a pixel leaves the rounds once its cost
+    is unusable at its own depth (it could never move again) or once a
+    parabola's vertex moved it by at most ``tol`` labels (measured on a
+    640 px random rig's sheet: the median move is 39 um after 3 rounds,
+    0.26 um after 5, with a label of 2.5 mm), so later rounds evaluate the
+    cost only where it still changes anything.
+
     Parameters
     ----------
     z : (N,) starting depths (a candidate label plus its parabola), metres.
-    cost : callable (N,) depths -> (N,) cost (NaN where unusable).
+    cost : callable (depths (M,), pixels (M,) indices into z) -> (M,) cost
+        of those pixels at those depths (NaN where unusable).
     step_m : the label spacing, metres.
+    tol : the move, in labels, under which a pixel has converged.
+    h : (N,) half-widths to start from (default half a label), e.g. those
+        an earlier call returned, to go on where it stopped.
+
+    Returns
+    -------
+    z : (N,) depths, metres; h : (N,) the half-widths the next round would use.
     """
-    h = np.full(len(z), step_m / 2.0)
+    z = np.array(z, float)
+    h = np.full(len(z), step_m / 2.0) if h is None else np.array(h, float)
+    todo = np.arange(len(z))
     for _ in range(iterations):
-        c = np.stack([cost(z - h), cost(z), cost(z + h)], axis=1)
-        ok = np.all(np.isfinite(c), axis=1)
-        cm, c0, cp = np.where(ok, c.T, 0.0)
-        den = cm - 2 * c0 + cp
+        if not len(todo):
+            break
+        zt, ht = z[todo], h[todo]
+        c = cost(np.concatenate([zt - ht, zt, zt + ht]), np.tile(todo, 3))
+        cm, c0, cp = c.reshape(3, -1)
+        ok = np.isfinite(cm) & np.isfinite(c0) & np.isfinite(cp)
+        den = np.where(ok, cm - 2 * c0 + cp, 0.0)
         with np.errstate(invalid="ignore", divide="ignore"):
             off = np.where(den > 0, 0.5 * (cm - cp) / den, 0.0)
         # The vertex of a parabola through the cost; at most two half-widths per
         # step, and the next half-width follows the step (a Newton iteration).
         off = np.clip(np.nan_to_num(off), -2.0, 2.0)
-        z = np.where(ok, z + off * h, z)
-        h = np.clip(np.abs(off) * h, h / 8.0, h)
-    return z
+        z[todo] = np.where(ok, zt + off * ht, zt)
+        h[todo] = np.clip(np.abs(off) * ht, ht / 8.0, ht)
+        settled = ok & (den > 0) & (np.abs(off) * ht <= tol * step_m)
+        todo = todo[~(settled | np.isnan(c0))]
+    return z, h
 
 
 def plane_chi2(sides: HelmholtzSides, X: np.ndarray, R: np.ndarray, n: np.ndarray) -> np.ndarray:
@@ -176,34 +212,44 @@ def ml_depth(
     R = rays[pix]
     N, K = labels.shape
     best_z = np.full(N, np.nan)
-    best_n = np.full((N, 3), np.nan)
+    best_h = np.full(N, np.nan)
     best_s = np.full(N, np.inf)
 
-    def own_cost(depth):
-        return whitened_cost(sides, c_ref + R * depth[:, None], R)[0]
+    def own_cost(at):
+        """refine_ml's cost of the pixels ``at`` (indices into pix)."""
+        return lambda depth, i: whitened_cost(sides, c_ref + R[at[i]] * depth[:, None], R[at[i]])[0]
 
-    idx = np.arange(N)
     for k in range(K):
-        lab = labels[:, k]
-        has = lab >= 0
-        if not has.any():
+        on = np.flatnonzero(labels[:, k] >= 0)
+        if not len(on):
             break
         if say is not None:
-            say(f"ml: candidate {k + 1} of {K} ({int(has.sum())} pixels)")
-        lab = np.where(has, lab, 0)
+            say(f"ml: candidate {k + 1} of {K} ({len(on)} pixels)")
+        lab = labels[on, k]
         lm = np.clip(lab - 1, 0, len(depths) - 1)
         lp = np.clip(lab + 1, 0, len(depths) - 1)
-        cm, c0, cp = cost[idx, lm], cost[idx, lab], cost[idx, lp]
+        cm, c0, cp = cost[on, lm], cost[on, lab], cost[on, lp]
         den = cm - 2 * c0 + cp
         with np.errstate(invalid="ignore", divide="ignore"):
             off = np.where(den > 0, 0.5 * (cm - cp) / den, 0.0)
         z0 = depths[lab] + np.clip(np.nan_to_num(off), -0.5, 0.5) * step
-        z = refine_ml(z0, own_cost, step)
-        chi2, n = whitened_cost(sides, c_ref + R * z[:, None], R)
-        score = window_score(sides, c_ref, rays, pix, z, n, shape)
-        score = np.where(has & np.isfinite(chi2), score, np.inf)
-        take = score < best_s
-        best_z = np.where(take, z, best_z)
-        best_n = np.where(take[:, None], n, best_n)
-        best_s = np.where(take, score, best_s)
-    return best_z, best_n, np.isfinite(best_s)
+        z, h = refine_ml(z0, own_cost(on), step, PRESELECT)
+        chi2, n = whitened_cost(sides, c_ref + R[on] * z[:, None], R[on])
+        score = window_score(sides, c_ref, rays, pix[on], z, n, shape)
+        score = np.where(np.isfinite(chi2), score, np.inf)
+        take = score < best_s[on]
+        best_z[on[take]], best_h[on[take]], best_s[on[take]] = z[take], h[take], score[take]
+    # Beyond the paper, for speed: the window chooses after PRESELECT rounds
+    # (a candidate is then within a few per cent of a label of its minimum),
+    # and only the chosen candidate takes the remaining rounds.
+    win = np.flatnonzero(np.isfinite(best_s))
+    if say is not None:
+        say(f"ml: {ROUNDS - PRESELECT} more rounds on the {len(win)} chosen roots")
+    z, _ = refine_ml(best_z[win], own_cost(win), step, ROUNDS - PRESELECT, h=best_h[win])
+    chi2, n = whitened_cost(sides, c_ref + R[win] * z[:, None], R[win])
+    best_z[win] = z
+    best_n = np.full((N, 3), np.nan)
+    best_n[win] = n
+    valid = np.zeros(N, bool)
+    valid[win] = np.isfinite(chi2)
+    return best_z, best_n, valid
