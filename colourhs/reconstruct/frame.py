@@ -334,6 +334,7 @@ def _bayes_reconstruction(
             opts.link_m,
             min_component_px(opts.min_component, shape),
             anchor,
+            say,
         )
         z, nrm, ok, weights, info["surface"] = _consistent_surface(
             frame,

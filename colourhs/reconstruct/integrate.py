@@ -164,19 +164,23 @@ def initial_surface(
     link_m,
     min_px,
     anchor_scale,
+    say=None,
 ):
     """A smooth surface from the labelling: the HS normals integrated (:func:`refine_depth`).
 
     Each pass re-evaluates the HS normals at the refined depths; pieces the
     tangent-plane links do not join to a surface of ``min_px`` pixels are
     left out. Its depth is still the labelling's: it only starts
-    :func:`_consistent_surface`.
+    :func:`_consistent_surface`. ``say``, if given, is called with a line of
+    text per pass (progress: about 8 s each at 1280 x 960 on one thread).
     """
     H, W = shape
     ok &= large_components(ok.reshape(H, W), min_px).ravel()
     z = np.nan_to_num(z)
     solver = NearbySolver()
     for i in range(passes):
+        if say is not None:
+            say(f"bayes: normal integration, pass {i + 1} of {passes}")
         z = refine_depth(z, nrm, rays, ok, (H, W), data_weight, edge_m, anchor_scale, solver)
         if i == passes - 1:
             links = surface_links(z, nrm, rays, ok, (H, W), link_m)
