@@ -61,6 +61,28 @@ def test_surface_normals_exact_on_planes_and_never_across_a_depth_edge():
     assert np.abs(got - want).max() < 1e-9  # round-off: measured 5.6e-14
 
 
+def test_surface_links_go_both_ways_and_never_join_two_surfaces():
+    """A depth step at the edge threshold, judged from each end with its own
+    footprint, was linked one way only: the pixel on the far side kept a link
+    into another surface (found on the demo's toy, where the spline Gram then
+    refused the frame). Every link now has its reverse, within one surface."""
+    H, W = 4, 6
+    z = np.where(np.arange(W) < 3, 1.0, 1.0025)[None, :].repeat(H, 0).ravel()
+    fp = np.where(np.arange(W) < 3, 0.8e-3, 0.9e-3)[None, :].repeat(H, 0).ravel()
+    # the step is 2.5 mm: over 3 footprints of the near side (2.4 mm), under 3 of
+    # the far side's (2.7 mm)
+    graph = SurfaceGraph(np.ones(H * W, bool), (H, W), z, fp, 3.0)
+    assert graph.n_surfaces == 2
+    east, south, west, north = graph.neighbours
+    for fwd, back in ((east, west), (south, north)):
+        has = np.flatnonzero(fwd >= 0)
+        assert np.array_equal(back[fwd[has]], has)
+        assert np.all(back[np.setdiff1d(np.arange(graph.n), fwd[has])] == -1)
+    for q in graph.neighbours:
+        has = q >= 0
+        assert np.array_equal(graph.surface[q[has]], graph.surface[has])
+
+
 def test_spline_reproduces_smooth_depths_and_numbers_surfaces():
     rows, cols = np.mgrid[0:40, 0:50]
     rows, cols = rows.ravel(), cols.ravel()

@@ -93,8 +93,16 @@ class SurfaceGraph:
             out[has[np.abs(zz[out[has]] - zz[has]) > edge_footprints * fp[has]]] = -1
             return out
 
-        east, west = neighbour(0, 1), neighbour(0, -1)
-        south, north = neighbour(1, 0), neighbour(-1, 0)
+        # West and north are the inverse links of east and south, so that every
+        # link goes both ways: judged from each end with its own footprint, a
+        # pair at the threshold could be linked one way only, and a one-way
+        # link joins two surfaces (measured: one link on the demo's toy,
+        # where the spline's two surfaces then shared a pixel's rows).
+        east, south = neighbour(0, 1), neighbour(1, 0)
+        west, north = np.full(n, -1), np.full(n, -1)
+        for fwd, back in ((east, west), (south, north)):
+            has = np.flatnonzero(fwd >= 0)
+            back[fwd[has]] = has
         self.neighbours = np.stack([east, south, west, north])
         p = np.concatenate([np.flatnonzero(east >= 0), np.flatnonzero(south >= 0)])
         q = np.concatenate([east[east >= 0], south[south >= 0]])
