@@ -61,6 +61,24 @@ def test_surface_normals_exact_on_planes_and_never_across_a_depth_edge():
     assert np.abs(got - want).max() < 1e-9  # round-off: measured 5.6e-14
 
 
+def test_ml_depth_without_any_candidate():
+    """Every hypothesis over max_cost: no root, no pixel valid, and no cost
+    evaluated (``sides`` is never touched)."""
+    from colourhs.reconstruct.ml import ml_depth
+
+    z, n, ok = ml_depth(
+        np.full((5, 4), 10.0),
+        np.linspace(1.0, 2.0, 4),
+        np.arange(5),
+        np.zeros((5, 3)),
+        np.zeros(3),
+        None,
+        (1, 5),
+        max_cost=1.0,
+    )
+    assert not ok.any() and np.all(np.isnan(z)) and np.all(np.isnan(n))
+
+
 def test_surface_links_go_both_ways_and_never_join_two_surfaces():
     """A depth step at the edge threshold, judged from each end with its own
     footprint, was linked one way only: the pixel on the far side kept a link

@@ -242,16 +242,18 @@ def ml_depth(
         take = score < best_s[on]
         best_z[on[take]], best_h[on[take]], best_s[on[take]] = z[take], h[take], score[take]
     # Beyond the paper, for speed: the window chooses after PRESELECT rounds
-    # (a candidate is then within a few per cent of a label of its minimum),
+    # (the median candidate is then within 2 % of a label of its minimum),
     # and only the chosen candidate takes the remaining rounds.
     win = np.flatnonzero(np.isfinite(best_s))
+    best_n = np.full((N, 3), np.nan)
+    valid = np.zeros(N, bool)
+    if not len(win):
+        return best_z, best_n, valid
     if say is not None:
         say(f"ml: {ROUNDS - PRESELECT} more rounds on the {len(win)} chosen roots")
     z, _ = refine_ml(best_z[win], own_cost(win), step, ROUNDS - PRESELECT, h=best_h[win])
     chi2, n = whitened_cost(sides, c_ref + R[win] * z[:, None], R[win])
     best_z[win] = z
-    best_n = np.full((N, 3), np.nan)
     best_n[win] = n
-    valid = np.zeros(N, bool)
     valid[win] = np.isfinite(chi2)
     return best_z, best_n, valid
