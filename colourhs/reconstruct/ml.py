@@ -219,7 +219,12 @@ def ml_depth(
 
     def own_cost(at):
         """refine_ml's cost of the pixels ``at`` (indices into pix)."""
-        return lambda depth, i: whitened_cost(sides, c_ref + R[at[i]] * depth[:, None], R[at[i]])[0]
+
+        def cost_of(depth, i):
+            Ri = R[at[i]]
+            return whitened_cost(sides, c_ref + Ri * depth[:, None], Ri)[0]
+
+        return cost_of
 
     for k in range(K):
         on = np.flatnonzero(labels[:, k] >= 0)
