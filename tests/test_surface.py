@@ -367,3 +367,24 @@ def test_spline_gram_refuses_a_spacing_under_one_pixel():
         SplineGram(spline.basis, spline.grid_coords, graph.neighbours, 3)
     spline = SplineSurface(graph.rows, graph.cols, graph.surface, 1.0)
     SplineGram(spline.basis, spline.grid_coords, graph.neighbours, 3)  # one pixel: fine
+
+
+def test_spline_gram_refuses_a_link_between_two_surfaces():
+    """Two surfaces' control grids both start at (0, 0): a link from one into
+    the other passes the spacing test, and the kernel would write its rows
+    into the wrong columns (the one-way link fixed in 28da2f3 did so)."""
+    from colourhs.reconstruct.gram import SplineGram
+
+    mask = np.ones((6, 13), bool)
+    mask[:, 6] = False  # two surfaces, columns 0-5 and 7-12
+    graph = SurfaceGraph(mask.ravel(), (6, 13), np.ones(78), np.full(78, 1e-3), 3.0)
+    assert graph.n_surfaces == 2
+    spline = SplineSurface(graph.rows, graph.cols, graph.surface, 2.0)
+    SplineGram(spline.basis, spline.grid_coords, graph.neighbours, 3)  # symmetric: fine
+    nbr = graph.neighbours.copy()
+    a = int(np.flatnonzero((graph.rows == 0) & (graph.cols == 0))[0])
+    b = int(np.flatnonzero((graph.rows == 0) & (graph.cols == 7))[0])
+    assert graph.surface[a] != graph.surface[b]
+    nbr[0, a] = b  # east of the first surface's corner: the second's
+    with pytest.raises(ValueError, match=f"links pixel {a} to another surface"):
+        SplineGram(spline.basis, spline.grid_coords, nbr, 3)

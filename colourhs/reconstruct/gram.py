@@ -121,6 +121,60 @@ def _fill(vals, P, nbr, bcols, bvals, gi, gj, order, starts, pos, out, cols):
             ids[:] = -1
 
 
+def check_links(bcols, gi, gj, neighbours) -> None:
+    """Refuse a pixel graph whose rows :func:`_fill` cannot place in a 6 x 6 block.
+
+    Every link must join two pixels of one surface whose patches are shifted
+    by at most one control point (a spacing of at least one pixel). Two such
+    4 x 4 patches share the control point at the larger of their first rows
+    and columns; a link into another surface (its own control grid, perhaps
+    at the same grid coordinates) shares none, so it shows as two different
+    columns there.
+
+    Parameters
+    ----------
+    bcols : (n, 16) each pixel's patch columns, in row-major grid order.
+    gi, gj : (m,) each control point's row and column in its surface's grid.
+    neighbours : (4, n) the pixel graph's links (-1: none).
+
+    Raises
+    ------
+    ValueError
+        Naming the problem: a spacing under one pixel, or a link between two
+        surfaces (a pixel graph whose links are not symmetric, for example).
+    """
+    kind, bad = _bad_link(bcols, gi, gj, neighbours)
+    if kind == 1:
+        raise ValueError("spline control spacing under one pixel: use 1 px or more")
+    if kind == 2:
+        raise ValueError(
+            f"pixel graph links pixel {bad} to another surface's pixel: every link "
+            "must join two pixels of one surface, both ways"
+        )
+
+
+@nb.njit(cache=True)
+def _bad_link(bcols, gi, gj, neighbours):
+    """The first link :func:`check_links` refuses: (kind, pixel), kind 0 for
+    none, 1 for patches more than one control point apart, 2 for patches
+    that do not share their common control point."""
+    for j in range(neighbours.shape[0]):
+        for i in range(neighbours.shape[1]):
+            q = neighbours[j, i]
+            if q < 0:
+                continue
+            a, b = bcols[i, 0], bcols[q, 0]
+            di, dj = gi[b] - gi[a], gj[b] - gj[a]
+            if abs(di) > 1 or abs(dj) > 1:
+                return 1, i
+            # The shared control point's place in each patch (row-major 4 x 4).
+            own = 4 * max(di, 0) + max(dj, 0)
+            other = 4 * max(-di, 0) + max(-dj, 0)
+            if bcols[i, own] != bcols[q, other]:
+                return 2, i
+    return 0, -1
+
+
 class SplineGram:
     """``A = B^T J^T J B`` for one spline and pixel graph (see the module docstring).
 
@@ -150,12 +204,7 @@ class SplineGram:
         # The 6 x 6 block holds a pixel's rows only if its neighbours' patches are
         # shifted by at most one control point (a spacing of at least one pixel);
         # the kernel does not check its indices, so refuse anything else here.
-        top = self.bcols[:, 0]
-        for q in self.nbr:
-            has = q >= 0
-            for g in (self.gi, self.gj):
-                if np.any(np.abs(g[top[q[has]]] - g[top[has]]) > 1):
-                    raise ValueError("spline control spacing under one pixel: use 1 px or more")
+        check_links(self.bcols, self.gi, self.gj, self.nbr)
         # The pixels cell by cell: a pixel's cell is its patch's first control point.
         sel = np.arange(n) if pixels is None else np.flatnonzero(pixels)
         self.order = sel[np.argsort(self.bcols[sel, 0], kind="stable")]
