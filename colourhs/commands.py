@@ -109,7 +109,7 @@ def _synth(args) -> int:
 def _validate(args) -> int:
     from colourhs.capture import validate
 
-    summary = validate(args.dataset, args.summary)
+    summary = validate(args.dataset, args.summary, progress=True)  # stderr: the log
     print(json.dumps(summary, indent=2))
     return 0
 

@@ -152,18 +152,26 @@ def calibrate_noise(dataset_dir, out_json=None, progress: bool = True) -> NoiseM
     Writes ``{"cameras": {name: {"gain": [3], "offset": [3]}}, ...}``
     atomically when ``out_json`` is given. The raw images are used (before
     cross-talk unmixing, which changes the variance by well under 1 %).
-    ``progress``: a bar over the cameras on stderr (:mod:`colourhs.progress`;
-    about 5 s per camera at 1280 x 960).
+    ``progress``: a bar over the images read on stderr (:mod:`colourhs.progress`).
     """
     ds = open_dataset(dataset_dir, check_images=False, scenes=())
     gains, offsets, out = {}, {}, {"cameras": {}, "units": "full scale; var = gain * i + offset"}
-    for cam in bar(ds.rig.camera_names, "noise model", enabled=progress, unit="camera"):
-        images = [read_image(ds.photometric_image(p, cam), ds.rig.image)[0] for p in ds.poses]
-        if "white" in ds.chromatic_objects:
-            images += [
-                read_image(ds.chromatic_image("white", colour, cam), ds.rig.image)[0]
-                for colour in COLOURS
-            ]
+    paths = {
+        cam: [ds.photometric_image(p, cam) for p in ds.poses]
+        + (
+            [ds.chromatic_image("white", colour, cam) for colour in COLOURS]
+            if "white" in ds.chromatic_objects
+            else []
+        )
+        for cam in ds.rig.camera_names
+    }
+    total = sum(map(len, paths.values()))
+    shown = bar(desc="noise model", total=total, enabled=progress, unit="image")
+    for cam in ds.rig.camera_names:
+        images = []
+        for path in paths[cam]:
+            images.append(read_image(path, ds.rig.image)[0])
+            shown.update()
         try:
             floor = quantisation_variance(ds.rig.image.black_level, ds.rig.image.white_level)
             gains[cam], offsets[cam] = estimate_noise(images, floor)
@@ -175,6 +183,7 @@ def calibrate_noise(dataset_dir, out_json=None, progress: bool = True) -> NoiseM
             "offset": offsets[cam].tolist(),
             "full_well_e": full_well,
         }
+    shown.close()
     if out_json is not None:
         write_json(out_json, out)
     return NoiseModel(gains, offsets)

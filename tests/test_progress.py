@@ -43,13 +43,16 @@ def _run_out(argv, capsys) -> tuple[str, str]:
 
 
 def test_calibration_stages_show_progress(tiny_dataset, tmp_path, capsys):
-    """markers (7 s at paper scale), noise (16 s) and photometric (21 s): bars over the
-    poses, cameras and pairs, a line per later step (6.1-6.7 s here)."""
+    """validate (10 s at paper scale), markers (7 s), noise (16 s) and photometric (21 s):
+    bars over the images, poses, images and pairs, a line per later step (6.1-6.7 s here)."""
     poses = tmp_path / "poses.csv"
     err = _run(["markers", tiny_dataset, poses], capsys)
     assert "markers: board poses: 100%" in err and "| 7/7 [" in err  # 7 poses
+    err = _run(["validate", tiny_dataset], capsys)
+    assert "validating images: 100%" in err
     err = _run(["noise", tiny_dataset, tmp_path / "noise.json"], capsys)
-    assert "noise model: 100%" in err and "| 3/3 [" in err  # 3 cameras
+    # 3 cameras x (7 poses + the white object under 3 colours)
+    assert "noise model: 100%" in err and "| 30/30 [" in err
     err = _run(["photometric", tiny_dataset, poses, tmp_path / "ph.h5"], capsys)
     lines = _lines(err)
     assert "photometric: reading the board poses: 100%" in err

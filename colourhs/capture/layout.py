@@ -26,6 +26,7 @@ from colourhs.capture.png import (
     read_mask,
 )
 from colourhs.capture.rigjson import load_rig
+from colourhs.progress import bar
 
 _FRAME = re.compile(r"[0-9]{6}")
 _STATIC_FRAME = "000000"
@@ -257,7 +258,9 @@ def all_images(ds: Dataset) -> list[Path]:
     return paths
 
 
-def validate(dataset: str | Path, summary_json: str | Path | None = None) -> dict:
+def validate(
+    dataset: str | Path, summary_json: str | Path | None = None, progress: bool = False
+) -> dict:
     """Validate a whole dataset, decoding every image, and summarise it.
 
     Parameters
@@ -265,6 +268,7 @@ def validate(dataset: str | Path, summary_json: str | Path | None = None) -> dic
     dataset : the dataset folder (capture format, version 1).
     summary_json : optional path of a JSON summary to write (written only
         when the dataset is valid, atomically).
+    progress : a bar over the images decoded, on stderr (:mod:`colourhs.progress`).
 
     Returns
     -------
@@ -286,7 +290,7 @@ def validate(dataset: str | Path, summary_json: str | Path | None = None) -> dic
     }
     n_pixels = n_saturated = 0
     paths = all_images(ds)
-    for path in paths:
+    for path in bar(paths, "validating images", enabled=progress, unit="image"):
         if path in masks:
             read_mask(path, ds.rig.image)
             continue
