@@ -75,14 +75,35 @@ def legendre_basis(uv: np.ndarray, width: int, height: int, degree: int) -> np.n
     nb = (degree + 1)(degree + 2) / 2; column 0 is the constant 1.
     """
     uv = np.asarray(uv, float)
-    x = 2.0 * uv[..., 0] / max(width - 1, 1) - 1.0
-    y = 2.0 * uv[..., 1] / max(height - 1, 1) - 1.0
-    px = np.polynomial.legendre.legvander(x, degree)
-    py = np.polynomial.legendre.legvander(y, degree)
-    cols = [
-        px[..., i] * py[..., j] for n in range(degree + 1) for j in range(n + 1) for i in (n - j,)
-    ]
-    return np.stack(cols, axis=-1)
+    px = _legendre_1d(uv[..., 0], width, degree)
+    py = _legendre_1d(uv[..., 1], height, degree)
+    return np.stack([px[..., i] * py[..., j] for i, j in _legendre_terms(degree)], axis=-1)
+
+
+def _legendre_1d(t: np.ndarray, size: int, degree: int) -> np.ndarray:
+    """P_0 .. P_degree (..., degree + 1) at pixel coordinates ``t`` mapped to [-1, 1]."""
+    return np.polynomial.legendre.legvander(2.0 * t / max(size - 1, 1) - 1.0, degree)
+
+
+def _legendre_terms(degree: int) -> list[tuple[int, int]]:
+    """(i, j) of each column of :func:`legendre_basis`, in its order."""
+    return [(n - j, j) for n in range(degree + 1) for j in range(n + 1)]
+
+
+def legendre_grid(width: int, height: int, degree: int) -> np.ndarray:
+    """:func:`legendre_basis` on every pixel centre, (height, width, nb), the same numbers.
+
+    Beyond the paper (speed). Each column is the outer product of two 1-D
+    polynomials, so only those are evaluated (the 2-D recurrences over every
+    pixel took 1 s of a 640 x 480 reconstruction's 3 cameras).
+    """
+    px = _legendre_1d(np.arange(width, dtype=float), width, degree)
+    py = _legendre_1d(np.arange(height, dtype=float), height, degree)
+    terms = _legendre_terms(degree)
+    out = np.empty((height, width, len(terms)))
+    for k, (i, j) in enumerate(terms):
+        np.multiply(py[:, None, j], px[None, :, i], out=out[..., k])
+    return out
 
 
 class MixingField:
@@ -118,8 +139,8 @@ class MixingField:
     def dense(self) -> np.ndarray:
         """M on every pixel centre, (height, width, 3, 3)."""
         if self._dense is None:
-            v, u = np.mgrid[0 : self.height, 0 : self.width].astype(float)
-            self._dense = self.at(np.stack([u, v], axis=-1))
+            phi = legendre_grid(self.width, self.height, self.degree)
+            self._dense = np.einsum("...j,cbj->...cb", phi, self.coefficients)
         return self._dense
 
     def inverse(self) -> np.ndarray:

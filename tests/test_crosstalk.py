@@ -439,3 +439,14 @@ def test_calibration_reports_progress_on_stderr(random_tiny, capsys):
     assert "cross-talk: fitting F to " in err
     calibrate_crosstalk(data, spatial=True, progress=False)
     assert capsys.readouterr() == ("", "")
+
+
+@pytest.mark.parametrize("size", [(1, 1), (7, 5), (640, 480)])
+def test_legendre_grid_is_the_basis_on_every_pixel(size):
+    """The separable grid (MixingField.dense's) gives legendre_basis's numbers to the bit."""
+    from colourhs.crosstalk_field import legendre_grid
+
+    W, H = size
+    v, u = np.mgrid[0:H, 0:W].astype(float)
+    want = legendre_basis(np.stack([u, v], axis=-1), W, H, 3)
+    assert np.array_equal(legendre_grid(W, H, 3), want)
