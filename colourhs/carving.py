@@ -320,7 +320,10 @@ def carve_field(
     # Per camera, at the block centres: the camera's field and whether it sees the centre.
     centre = np.indices(nb, np.float32).reshape(3, -1)
     d, seen = [], []
-    for cam, sdf, box, base, step in _views(silhouettes, cameras, lo, B * voxel_m, margin_px):
+    coarse_views = _views(silhouettes, cameras, lo, B * voxel_m, margin_px)
+    for cam, sdf, box, base, step in bar(
+        coarse_views, "carving: block centres", enabled=progress, unit="camera"
+    ):
         dc, sc = _camera_distance(base[:, None] + step @ centre, cam, sdf, box)
         d.append(dc)
         seen.append(sc)
@@ -336,6 +339,7 @@ def carve_field(
     radius = 1.25 * _HALF_DIAGONAL * B * voxel_m + voxel_m + 3 * max(footprint, 0.0)
     # Cameras whose frustum boundary crosses a block see only part of it.
     points = (lo + (centre.T + 0.5) * B * voxel_m).T
+    label = "carving: blocks a frustum boundary crosses"
     crossing = np.array(
         [
             _frustum_clearance(
@@ -343,7 +347,9 @@ def carve_field(
                 *_image_boxes(c, sil.shape[1], sil.shape[0]),
             )
             <= radius
-            for sil, c in zip(silhouettes, cameras, strict=True)
+            for sil, c in bar(
+                list(zip(silhouettes, cameras, strict=True)), label, enabled=progress, unit="camera"
+            )
         ]
     )
     whole = seen & ~crossing  # cameras seeing the whole block
@@ -355,6 +361,11 @@ def carve_field(
     inside = ~crossing.any(0) & (coarse < -radius)
     near = ~(outside | inside).reshape(nb)
     del d, seen, crossing, whole, outside, inside, points, centre
+    stage(
+        f"carving: {int(near.sum())} of {near.size} blocks near the outline; "
+        f"the field's {int(np.prod(shape))} voxels",
+        enabled=progress,
+    )
     field = _empty_field(shape, pad)  # after the coarse pass's temporaries are gone
     _upsample_into(field, coarse.reshape(nb), B, shape, pad)
     views = _views(silhouettes, cameras, lo, voxel_m, margin_px)

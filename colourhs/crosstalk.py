@@ -185,8 +185,9 @@ def calibrate_crosstalk(
     errors, and those of M) join, with "led_fit" (the fit's diagnostics) at the
     top level.
 
-    ``progress``: a bar over the cameras' filter fields and the board poses,
-    and a line per stage of the LED factor (stderr, :mod:`colourhs.progress`).
+    ``progress``: a bar over the filter fields' fits (camera and light
+    colour), the board captures read and the board poses, and a line per
+    stage of the LED factor (stderr, :mod:`colourhs.progress`).
     """
     ds = open_dataset(dataset_dir, check_images=False, scenes=())
     if "white" not in ds.chromatic_objects:
@@ -195,7 +196,9 @@ def calibrate_crosstalk(
     out = {"cameras": {}, "method": "median of I_c / I_b under light b alone (white reference)"}
     fields = {}
     label = "cross-talk: filter mixing field"
-    for cam in bar(ds.rig.camera_names, label, enabled=progress and spatial, unit="camera"):
+    cams = ds.rig.camera_names
+    shown = bar(desc=label, total=3 * len(cams), enabled=progress and spatial, unit="fit")
+    for cam in cams:
         imgs, sats = {}, {}
         for colour in COLOURS:
             imgs[colour], sats[colour] = read_image(
@@ -205,7 +208,9 @@ def calibrate_crosstalk(
         out["cameras"][cam] = {"M": M.tolist(), "spread": spread.tolist()}
         if spatial:
             quantum = 1.0 / (ds.rig.image.white_level - ds.rig.image.black_level)
-            field, info = fit_mixing_field(imgs, sats, degree=degree, quantum=quantum)
+            field, info = fit_mixing_field(
+                imgs, sats, degree=degree, quantum=quantum, step=shown.update
+            )
             fields[cam] = field
             out["cameras"][cam] |= {
                 "M": field.median.tolist(),
@@ -214,6 +219,7 @@ def calibrate_crosstalk(
                 "field_rms": info["rms"].tolist(),
                 "field_quantised": info["quantised"].tolist(),
             }
+    shown.close()
     if spatial:
         out["method"] = (
             f"per-pixel I_c / I_b under light b alone (white reference), Legendre degree {degree}"

@@ -182,6 +182,7 @@ def fit_mixing_field(
     min_signal: float = 0.1,
     quantum: float | None = None,
     max_pixels: int = 40000,
+    step=None,
 ) -> tuple[MixingField, dict]:
     """Fit M(u) to single-colour white captures: ``I_c(u) = M[c, b](u) I_b(u)`` under light b.
 
@@ -208,6 +209,8 @@ def fit_mixing_field(
       camera whose filters pass no measurable leak): that likelihood has no
       maximum (it grows as the leak goes negative; a fit gave -0.94).
 
+    ``step``, if given, is called after each light colour's fit (progress).
+
     Returns
     -------
     field : the fitted :class:`MixingField`.
@@ -218,9 +221,8 @@ def fit_mixing_field(
     """
     first = next(iter(white.values()))
     H, W = first.shape[:2]
-    v, u = np.mgrid[0:H, 0:W]
-    uv_all = np.stack([u.ravel(), v.ravel()], axis=1).astype(float)
-    nb = (degree + 1) * (degree + 2) // 2
+    basis = legendre_grid(W, H, degree).reshape(H * W, -1)  # legendre_basis at every pixel
+    nb = basis.shape[1]
     coef = np.zeros((3, 3, nb))
     rms = np.zeros((3, 3))
     quantised = np.zeros((3, 3), bool)
@@ -231,7 +233,7 @@ def fit_mixing_field(
         sat = None if saturated is None else saturated[colour]
         lit = _lit(img, b, sat, min_signal, colour).ravel()
         sub = img.reshape(-1, 3)[lit].astype(float)
-        phi = legendre_basis(uv_all[lit], W, H, degree)
+        phi = basis[lit]
         pixels[b] = int(lit.sum())
         ib = sub[:, b]
         w0 = 1.0 / (ib + 0.01)
@@ -261,6 +263,8 @@ def fit_mixing_field(
                 quantised[c, b], noise[c, b] = True, s_r / quantum
             coef[c, b] = a
             rms[c, b] = float(np.sqrt(np.mean((ic / ib - phi @ a) ** 2)))
+        if step is not None:
+            step()
     info = {"rms": rms, "pixels": pixels, "quantised": quantised, "noise": noise}
     return MixingField(W, H, degree, coef), info
 

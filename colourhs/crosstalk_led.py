@@ -22,7 +22,7 @@ import numpy as np
 
 from colourhs.capture import read_image
 from colourhs.crosstalk_ledproblem import OFF_DIAGONAL, _build_led_problem, _LedProblem
-from colourhs.progress import stage
+from colourhs.progress import bar, stage
 
 
 @dataclass(frozen=True)
@@ -224,13 +224,16 @@ def led_factor(
     return {"factor": factor, "sd": sds, "diagnostics": diag}
 
 
-def read_board_shots(ds, poses_csv) -> list[BoardShot]:
-    """The board poses of a marker poses table with their raw images."""
+def read_board_shots(ds, poses_csv, progress: bool = False) -> list[BoardShot]:
+    """The board poses of a marker poses table with their raw images
+    (``progress``: a bar over the poses read, on stderr)."""
     import pandas as pd
 
     table = pd.read_csv(poses_csv, dtype={"pose": str}, keep_default_na=False)
     shots = []
-    for _, row in table.iterrows():
+    label = "cross-talk: reading the board captures"
+    rows = bar(table.iterrows(), label, len(table), progress, unit="pose")
+    for _, row in rows:
         pose = str(row["pose"])
         R = np.array([[float(row[f"R{i}{j}"]) for j in range(3)] for i in range(3)])
         t = np.array([float(row["t_x"]), float(row["t_y"]), float(row["t_z"])])
@@ -245,6 +248,5 @@ def read_board_shots(ds, poses_csv) -> list[BoardShot]:
 
 def led_factor_from_dataset(ds, poses_csv, fields: dict, progress: bool = False, **params) -> dict:
     """:func:`led_factor` on a dataset's board captures and a marker poses table."""
-    stage("cross-talk: reading the board captures", enabled=progress)
-    shots = read_board_shots(ds, poses_csv)
+    shots = read_board_shots(ds, poses_csv, progress)
     return led_factor(ds.rig, shots, fields, progress=progress, **params)

@@ -297,6 +297,7 @@ def visual_hull(
     say("visual hull: marching cubes")
     v, t = march_surface(field, lo, voxel_m, padded=True)
     del field  # before outward_mesh's temporaries (about 1 GB at paper scale)
+    say(f"visual hull: orienting {len(t)} triangles outwards")
     v, t, n = outward_mesh(v, t)
     info = {
         "voxel_m": voxel_m,

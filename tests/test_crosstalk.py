@@ -429,13 +429,15 @@ def test_no_leak_gives_identity_not_a_crash():
 
 def test_calibration_reports_progress_on_stderr(random_tiny, capsys):
     """Issue 13: the paper-scale cross-talk rule (60 s) printed nothing until it ended.
-    Bars over the cameras' filter fields and the board poses, a line per LED stage
-    (the fixture's calibration wrote its stderr to new.stderr)."""
+    Bars over the filter fields' fits (3 cameras x 3 light colours: 2.4-5.2 s apart at
+    1280 x 960, where a bar over the cameras was 14 s apart), the board captures read
+    and the board poses, a line per LED stage (the fixture's calibration wrote its
+    stderr to new.stderr)."""
     data, root, _, _ = random_tiny
     err = (root / "new.stderr").read_text()
-    assert "cross-talk: filter mixing field: 100%" in err and "| 3/3 " in err
+    assert "cross-talk: filter mixing field: 100%" in err and "| 9/9 " in err
     assert "cross-talk: board poses: 100%" in err
-    assert "cross-talk: reading the board captures\n" in err
+    assert "cross-talk: reading the board captures: 100%" in err
     assert "cross-talk: fitting F to " in err
     calibrate_crosstalk(data, spatial=True, progress=False)
     assert capsys.readouterr() == ("", "")
