@@ -19,7 +19,7 @@ rule reconstruct_frame:
     # One thread: two frames at once keep both cores busy (the solver and the
     # refinement are serial); raise with --set-threads reconstruct_frame=N.
     threads: 1
-    # Measured at 1280x960 (paper preset, benchmarks/bench_paper.py): bayes 2.40 GB, 115 s on 2 threads; ml 1.63 GB, 170 s.
+    # Measured at 1280x960 (paper preset, sheet frame 99, 2 threads): bayes 2.52 GB, 83 s; ml 2.33 GB, 73 s.
     resources:
         mem_mb=3000,
         runtime=10,
