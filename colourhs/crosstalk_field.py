@@ -94,8 +94,9 @@ def legendre_grid(width: int, height: int, degree: int) -> np.ndarray:
     """:func:`legendre_basis` on every pixel centre, (height, width, nb), the same numbers.
 
     Beyond the paper (speed). Each column is the outer product of two 1-D
-    polynomials, so only those are evaluated (the 2-D recurrences over every
-    pixel took 1 s of a 640 x 480 reconstruction's 3 cameras).
+    polynomials, so only those are evaluated, not the recurrences at every
+    pixel (measured: the cross-talk calibration of a 1280 x 960 dataset took
+    57-59 s against 70.7 s, its file byte for byte the same).
     """
     px = _legendre_1d(np.arange(width, dtype=float), width, degree)
     py = _legendre_1d(np.arange(height, dtype=float), height, degree)
