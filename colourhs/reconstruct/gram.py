@@ -34,10 +34,15 @@ HALF = SPAN // 2
 
 
 @nb.njit(parallel=True, cache=True)
-def _fill(vals, P, nbr, bcols, bvals, gi, gj, order, starts, pos, out, cols):
+def _fill(vals, rows, nbr, bcols, bvals, gi, gj, order, starts, pos, out, cols):
     """Add each pixel's rows' Gram matrix into ``out`` (chunks, nnz): A's values.
 
-    ``vals`` (n P, 5): row ``p P + k``'s entries at p and its east, south,
+    ``rows`` is any tuple of length P (the rows per pixel): a tuple's length
+    is part of its numba type, so P is a compile-time constant and the
+    loops over the rows unroll (one compiled kernel per P, cached). Measured
+    on the demo sheet's fine spline (126k pixels, 3 rows): 110 -> 63 ms a
+    call on one thread, the same values to the bit, against P passed as an
+    integer. ``vals`` (n P, 5): row ``p P + k``'s entries at p and its east, south,
     west and north neighbours (``nbr`` (4, n), -1 = none); ``bcols``,
     ``bvals`` (n, 16): each pixel's control points, row by row of its 4 x 4
     patch from the top left, and basis weights; ``gi``, ``gj`` (m,): each
@@ -50,6 +55,7 @@ def _fill(vals, P, nbr, bcols, bvals, gi, gj, order, starts, pos, out, cols):
     the pattern pass instead: ``cols`` receives the column (control point)
     of every slot touched.
     """
+    P = len(rows)
     chunks = out.shape[0]
     n_cells = len(starts) - 1
     pattern = cols.shape[0] > 0
@@ -224,7 +230,7 @@ class SplineGram:
     def _run(self, vals, out, cols):
         _fill(
             np.ascontiguousarray(vals, float),
-            self.P,
+            (0,) * self.P,
             self.nbr,
             self.bcols,
             self.bvals,
