@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba as nb
 import numpy as np
 import open3d as o3d
 
@@ -26,6 +27,49 @@ def raycasting_scene(vertices: np.ndarray, triangles: np.ndarray) -> o3d.t.geome
     return scene
 
 
+@nb.njit(cache=True, inline="always")
+def _closest_on_triangle(p, a, b, c, out):
+    """Closest point of triangle (a, b, c) to point p (3-vectors, float64),
+    written to ``out``; returns its squared distance. See
+    :func:`closest_on_triangles`."""
+    e0, e1, e2 = b[0] - a[0], b[1] - a[1], b[2] - a[2]
+    f0, f1, f2 = c[0] - a[0], c[1] - a[1], c[2] - a[2]
+    n0, n1, n2 = e1 * f2 - e2 * f1, e2 * f0 - e0 * f2, e0 * f1 - e1 * f0
+    nn = n0 * n0 + n1 * n1 + n2 * n2
+    best = np.inf
+    if nn > 0:
+        h = ((p[0] - a[0]) * n0 + (p[1] - a[1]) * n1 + (p[2] - a[2]) * n2) / nn
+        q0, q1, q2 = p[0] - h * n0, p[1] - h * n1, p[2] - h * n2
+        inside = True
+        for s, e in ((a, b), (b, c), (c, a)):
+            u0, u1, u2 = e[0] - s[0], e[1] - s[1], e[2] - s[2]
+            w0, w1, w2 = q0 - s[0], q1 - s[1], q2 - s[2]
+            x0, x1, x2 = u1 * w2 - u2 * w1, u2 * w0 - u0 * w2, u0 * w1 - u1 * w0
+            inside &= x0 * n0 + x1 * n1 + x2 * n2 >= 0
+        if inside:
+            d0, d1, d2 = p[0] - q0, p[1] - q1, p[2] - q2
+            best = d0 * d0 + d1 * d1 + d2 * d2
+            out[0], out[1], out[2] = q0, q1, q2
+    for s, e in ((a, b), (b, c), (c, a)):
+        u0, u1, u2 = e[0] - s[0], e[1] - s[1], e[2] - s[2]
+        ll = u0 * u0 + u1 * u1 + u2 * u2
+        t = ((p[0] - s[0]) * u0 + (p[1] - s[1]) * u1 + (p[2] - s[2]) * u2) / (ll if ll > 0 else 1.0)
+        t = min(max(t, 0.0), 1.0)
+        x0, x1, x2 = s[0] + t * u0, s[1] + t * u1, s[2] + t * u2
+        d0, d1, d2 = p[0] - x0, p[1] - x1, p[2] - x2
+        d2s = d0 * d0 + d1 * d1 + d2 * d2
+        if d2s < best:
+            best = d2s
+            out[0], out[1], out[2] = x0, x1, x2
+    return best
+
+
+@nb.njit(cache=True)
+def _closest_each(p, a, b, c, out):
+    for i in range(len(p)):
+        _closest_on_triangle(p[i], a[i], b[i], c[i], out[i])
+
+
 def closest_on_triangles(
     points: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray
 ) -> np.ndarray:
@@ -33,7 +77,8 @@ def closest_on_triangles(
 
     The nearer of the point's projection onto the triangle's plane (when it
     falls inside the triangle) and its closest points on the three edges;
-    degenerate (zero-area) triangles reduce to their edges.
+    degenerate (zero-area) triangles reduce to their edges. Compiled
+    (numba), one point at a time.
 
     Parameters
     ----------
@@ -45,25 +90,30 @@ def closest_on_triangles(
     ndarray, shape (N, 3)
         The closest points, metres.
     """
-    p, a, b, c = (np.asarray(x, np.float64).reshape(-1, 3) for x in (points, a, b, c))
-    n = np.cross(b - a, c - a)
-    nn = np.einsum("ij,ij->i", n, n)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        q = p - (np.einsum("ij,ij->i", p - a, n) / nn)[:, None] * n
-    inside = nn > 0
-    for s, e in ((a, b), (b, c), (c, a)):
-        inside &= np.einsum("ij,ij->i", np.cross(e - s, q - s), n) >= 0
-    best = np.where(inside[:, None], q, np.nan)
-    best_d2 = np.where(inside, np.einsum("ij,ij->i", p - q, p - q), np.inf)
-    for s, e in ((a, b), (b, c), (c, a)):
-        se = e - s
-        ll = np.einsum("ij,ij->i", se, se)
-        t = np.einsum("ij,ij->i", p - s, se) / np.where(ll > 0, ll, 1.0)
-        x = s + np.clip(t, 0.0, 1.0)[:, None] * se
-        d2 = np.einsum("ij,ij->i", p - x, p - x)
-        nearer = d2 < best_d2
-        best[nearer], best_d2[nearer] = x[nearer], d2[nearer]
-    return best
+    p, a, b, c = (np.ascontiguousarray(x, np.float64).reshape(-1, 3) for x in (points, a, b, c))
+    out = np.empty_like(p)
+    _closest_each(p, a, b, c, out)
+    return out
+
+
+@nb.njit(cache=True)
+def _closest_near(p, v, tri, first, start, around, out, dist):
+    """Per point: the closest point on the triangles around the corners of its
+    ``first`` triangle (``around[start[k]:start[k + 1]]``: the triangles at
+    vertex k, in increasing order), the first of the nearest on a tie."""
+    x = np.empty(3)
+    for i in range(len(p)):
+        best = np.inf
+        for corner in range(3):
+            k = tri[first[i], corner]
+            for j in range(start[k], start[k + 1]):
+                t = around[j]
+                d2 = _closest_on_triangle(p[i], v[tri[t, 0]], v[tri[t, 1]], v[tri[t, 2]], x)
+                d = np.sqrt(d2)
+                if d < best:
+                    best = d
+                    out[i, 0], out[i, 1], out[i, 2] = x[0], x[1], x[2]
+        dist[i] = best
 
 
 def closest_points(
@@ -74,9 +124,9 @@ def closest_points(
     open3d's bounding-volume search (``RaycastingScene.compute_closest_points``,
     single precision, in coordinates centred on the mesh) finds each point's
     closest triangle; the closest point is then recomputed in float64
-    (:func:`closest_on_triangles`) on that triangle and on every triangle
-    sharing a corner with it, where single precision can pick the wrong one of
-    two nearly equidistant neighbours.
+    (:func:`closest_on_triangles`' formulas, compiled) on that triangle and
+    on every triangle sharing a corner with it, where single precision can
+    pick the wrong one of two nearly equidistant neighbours.
 
     Parameters
     ----------
@@ -94,33 +144,19 @@ def closest_points(
     distances : ndarray, shape (N,)
         Their distances, metres.
     """
-    v = np.asarray(vertices, np.float64).reshape(-1, 3)
-    tri = np.asarray(triangles, np.int64).reshape(-1, 3)
-    p = np.asarray(points, np.float64).reshape(-1, 3)
+    v = np.ascontiguousarray(vertices, np.float64).reshape(-1, 3)
+    tri = np.ascontiguousarray(triangles, np.int64).reshape(-1, 3)
+    p = np.ascontiguousarray(points, np.float64).reshape(-1, 3)
     origin = 0.5 * (v.min(axis=0) + v.max(axis=0))
     scene = raycasting_scene(v - origin, tri)
     query = o3d.core.Tensor(np.ascontiguousarray(p - origin, np.float32))
     first = scene.compute_closest_points(query)["primitive_ids"].numpy().astype(np.int64)
-    # Candidates: the triangles around the corners of each point's first triangle,
-    # listed per corner vertex (CSR) over the triangles that touch one of them.
-    corners = tri[first].ravel()
-    needed = np.zeros(len(v), bool)
-    needed[corners] = True
-    near = np.flatnonzero(needed[tri].any(axis=1))
-    flat = tri[near].ravel()
-    at = np.flatnonzero(needed[flat])
-    at = at[np.argsort(flat[at], kind="stable")]
-    start = np.searchsorted(flat[at], np.arange(len(v) + 1))
-    count = start[corners + 1] - start[corners]
-    owner = np.repeat(np.repeat(np.arange(len(p)), 3), count)
-    offset = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
-    cand = near[at[np.repeat(start[corners], count) + offset] // 3]
-    x = closest_on_triangles(p[owner], *(v[tri[cand, k]] for k in range(3)))
-    d = np.linalg.norm(p[owner] - x, axis=1)
-    # The nearest candidate of each point (owner is sorted: first of each run after lexsort).
-    pick = np.lexsort((d, owner))
-    pick = pick[np.r_[True, owner[pick][1:] != owner[pick][:-1]]]
-    return x[pick], d[pick]
+    # The triangles at each vertex (CSR, in increasing triangle order).
+    around = np.argsort(tri.ravel(), kind="stable") // 3
+    start = np.searchsorted(np.sort(tri.ravel()), np.arange(len(v) + 1))
+    closest, d = np.empty_like(p), np.empty(len(p))
+    _closest_near(p, v, tri, first, start, around, closest, d)
+    return closest, d
 
 
 def pixel_rays(camera, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
