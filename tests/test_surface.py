@@ -247,9 +247,32 @@ def test_lm_stops_on_a_converged_surface(plane_sides, monkeypatch):
     solves = []
     real = rf.solve_spd
     monkeypatch.setattr(rf, "solve_spd", lambda A, b: solves.append(1) or real(A, b))
-    c, energy = problem.lm(problem.fit(z[graph.pix]), 4)
+    c, energy, _ = problem.lm(problem.fit(z[graph.pix]), 4)
     assert len(solves) <= 4 + 2, len(solves)
     assert np.all(np.isfinite(c)) and energy[-1] <= energy[0]
+
+
+def test_lm_returns_the_state_at_its_result(plane_sides):
+    """The depth search takes each trial's energies from lm's last state instead of
+    evaluating E again: they must be the very numbers :meth:`state` gives at the
+    returned control points, on several surfaces whose steps are kept separately."""
+    import colourhs.reconstruct.refine as rf
+
+    fr, ref, rays, gd, _, mask, sides = plane_sides
+    H, W = fr.rig.image.height, fr.rig.image.width
+    cols = np.arange(H * W) % W
+    split = mask & (np.abs(cols - W // 2) > 2)  # two halves (and the markers' own)
+    z = np.nan_to_num(gd)
+    graph = SurfaceGraph(split, (H, W), z, z / ref.K[0, 0])
+    assert graph.n_surfaces >= 2
+    problem = rf._problem(graph, rays[graph.pix], sides, ref.centre, 8.0, 1e-3, rf.ROBUST)
+    start = problem.fit(z[graph.pix] * 1.002)  # 0.2 % off: the steps have work to do
+    sc = problem.scale(start)
+    c, energy, (rho, prior) = problem.lm(start, 2, scale=sc)
+    again_rho, again_prior = problem.state(c, sc)
+    assert energy[-1] < energy[0]
+    assert np.array_equal(rho, again_rho, equal_nan=True)
+    assert np.array_equal(prior, again_prior)
 
 
 def test_blur_of_the_sides_is_a_parameter(plane_sides):

@@ -221,10 +221,14 @@ class _Problem:
         Beyond plain Gauss-Newton: the sampled intensities make E non-linear in
         the depth, and the damping keeps each step where the linear model holds.
         ``scale`` fixes the robust scale (default: from the residuals at each
-        step). Returns the control points and the total energy after each step.
+        step). Returns the control points, the total energy after each step
+        and :meth:`state` at the returned control points at the last step's
+        scale (the same numbers a new :meth:`state` call gives: a pixel's
+        energy depends on its own surface's control points alone; None
+        without steps).
         """
         lam = np.full(self.n, float(lam))
-        history = []
+        history, s0 = [], None
         for _ in range(iterations):
             Jz, r, info = self._residuals(c, robust=self.robust, scale=scale)
             sc = info["scale"]
@@ -261,7 +265,7 @@ class _Problem:
                 if not pending.any():
                     break
             history.append(float(np.nansum(s0[0]) + s0[1].sum()))
-        return c, history
+        return c, history, s0
 
     def fit(self, z) -> np.ndarray:
         """Control points whose spline is the least-squares fit to depths ``z`` (n,)."""
@@ -323,8 +327,7 @@ def depth_search(problem: _Problem, c, step=SEARCH_STEP, max_steps=SEARCH_STEPS,
             shown = ", ".join(f"{100 * d:+.2f}" for d in new_delta[record][:4])
             say(f"refinement: depth search, trial {trials[0]} at {shown} % (first surfaces)")
         cc = problem.scaled(base, (1.0 + new_delta) / (1.0 + base_delta))
-        cc, _ = problem.lm(cc, SEARCH_FITS, scale=sc)
-        rho, prior = problem.state(cc, sc)
+        cc, _, (rho, prior) = problem.lm(cc, SEARCH_FITS, scale=sc)
         for k in np.flatnonzero(record):
             tried[k][key(new_delta[k])] = (rho[pixels[k]], prior[k], cc[mine[k]])
 
@@ -449,11 +452,11 @@ def refine_surface(
     fp = float(np.median(footprint[graph.pix]))
     coarse = _problem(graph, R, sides, c_ref, spacing * COARSE, fp, robust)
     say(f"refinement: {graph.n_surfaces} surfaces, {iterations} LM steps on a coarse spline")
-    c, energies = coarse.lm(coarse.fit(z0[graph.pix]), iterations)
+    c, energies, _ = coarse.lm(coarse.fit(z0[graph.pix]), iterations)
     problem = _problem(graph, R, sides, c_ref, spacing, fp, robust)
     B = problem.B
     say(f"refinement: {iterations} LM steps on {B.shape[1]} control points")
-    c, more = problem.lm(problem.fit(coarse.B @ c), iterations)
+    c, more, _ = problem.lm(problem.fit(coarse.B @ c), iterations)
     energies += more
     factors = np.ones(graph.n_surfaces)
     if search:
@@ -461,7 +464,7 @@ def refine_surface(
         say(f"refinement: depth search along E's valley (pixel stride {stride})")
         c, factors = depth_search(problem.subsampled(stride), c, say=say)
     say(f"refinement: {iterations} final LM steps")
-    c, more = problem.lm(c, iterations)
+    c, more, _ = problem.lm(c, iterations)
     z = B @ c
     _, _, info = hs_residuals(z, graph, R, sides, c_ref, robust, jacobian=False)
     out_z = np.full(H * W, np.nan)
