@@ -131,3 +131,25 @@ def test_each_stage_imports_only_what_it_needs(tmp_path):
     ).stdout.split("\n")
     assert out[:4] == ["[]", "[]", "['numpy', 'pandas']", "['cv2', 'numpy', 'open3d', 'pandas']"]
     assert (tmp_path / "metrics.csv").read_text().count("\n") == 3  # header and two rows
+
+
+def test_importing_colourhs_first_turns_numpy_huge_page_advice_off():
+    """colourhs/__init__.py sets NUMPY_MADVISE_HUGEPAGE=0 unless the user set it: a
+    process that imports colourhs before NumPy (the command line, every workflow job)
+    gets NumPy without the huge-page advice, and a user's own setting wins."""
+    import os
+    import subprocess
+    import sys
+
+    probe = (
+        "import colourhs, numpy\n"
+        "from numpy._core.multiarray import _get_madvise_hugepage\n"
+        "print(_get_madvise_hugepage())"
+    )
+    env = {k: v for k, v in os.environ.items() if k != "NUMPY_MADVISE_HUGEPAGE"}
+    for setting, expected in ((None, "False"), ("1", "True")):
+        run_env = env if setting is None else {**env, "NUMPY_MADVISE_HUGEPAGE": setting}
+        out = subprocess.run(
+            [sys.executable, "-c", probe], env=run_env, capture_output=True, text=True, check=True
+        )
+        assert out.stdout.strip() == expected, (setting, out.stdout, out.stderr)
