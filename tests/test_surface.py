@@ -273,6 +273,20 @@ def test_lm_returns_the_state_at_its_result(plane_sides):
     assert energy[-1] < energy[0]
     assert np.array_equal(rho, again_rho, equal_nan=True)
     assert np.array_equal(prior, again_prior)
+    # The steps after the first reuse the kept tries' rows (_kept_rows): the
+    # same numbers as evaluating the rows at the mixed control points anew.
+    other = problem.fit(z[graph.pix] * 0.999)
+    take = np.arange(graph.n_surfaces) % 2 == 0
+    mixed = np.where(take[problem.ctrl_surface], other, c)
+    at_c = problem._residuals(c, robust=problem.robust, scale=sc)
+    at_other = problem._residuals(other, robust=problem.robust, scale=sc)
+    J, r, info = rf._kept_rows(at_c, at_other, take[graph.surface], sides.pairs)
+    J2, r2, info2 = problem._residuals(mixed, robust=problem.robust, scale=sc)
+    assert np.array_equal(r, r2) and np.array_equal(J.data, J2.data)
+    assert np.array_equal(J.indices, J2.indices) and np.array_equal(J.indptr, J2.indptr)
+    for key in ("valid", "weights", "chi2", "jacobian_values"):
+        assert np.array_equal(info[key], info2[key], equal_nan=True), key
+    assert not np.array_equal(r, at_c[1])  # the test mixes something
 
 
 def test_blur_of_the_sides_is_a_parameter(plane_sides):

@@ -228,9 +228,16 @@ class _Problem:
         without steps).
         """
         lam = np.full(self.n, float(lam))
-        history, s0 = [], None
-        for _ in range(iterations):
-            Jz, r, info = self._residuals(c, robust=self.robust, scale=scale)
+        history, s0, rows = [], None, None
+        for step in range(iterations):
+            if rows is None:
+                rows = self._residuals(c, robust=self.robust, scale=scale)
+            Jz, r, info = rows
+            # With the scale fixed, a pixel's rows depend on its own surface's
+            # control points alone: the next step's rows are, pixel by pixel,
+            # those of the try kept for its surface (or of this step), so the
+            # tries compute them and the next step does not sample E again.
+            reuse = scale is not None and step + 1 < iterations
             sc = info["scale"]
             s0 = self.state(c, sc, info)
             Dw = self.prior(sc)
@@ -247,9 +254,15 @@ class _Problem:
                 damp = sp.diags(lam[self.ctrl_surface] * diag)
                 h = solve_spd(A + damp, -g)
                 cc = c + h
-                s1 = self.state(cc, sc)
+                if reuse:
+                    tried = self._residuals(cc, robust=self.robust, scale=sc)
+                    s1 = self.state(cc, sc, tried[2])
+                else:
+                    s1 = self.state(cc, sc)
                 e0, e = self.compare([s0, s1])
                 better = pending & (e < e0)
+                if reuse and better.any():
+                    rows = _kept_rows(rows, tried, better[self.graph.surface], self.sides.pairs)
                 # A surface whose quadratic model predicts no decrease worth
                 # noticing has converged: more damping cannot make it improve.
                 predicted = np.bincount(self.ctrl_surface, -h * (g + 0.5 * (A @ h)), self.n)
@@ -265,6 +278,8 @@ class _Problem:
                 if not pending.any():
                     break
             history.append(float(np.nansum(s0[0]) + s0[1].sum()))
+            if not reuse:
+                rows = None
         return c, history, s0
 
     def fit(self, z) -> np.ndarray:
@@ -276,6 +291,24 @@ class _Problem:
     def scaled(self, c, factor) -> np.ndarray:
         """Control points with each surface k's depths multiplied by ``factor[k]``."""
         return c * factor[self.ctrl_surface]
+
+
+def _kept_rows(rows, tried, take, pairs: int):
+    """:func:`hs_residuals`' output ``(J, r, info)`` at the control points kept:
+    ``tried``'s rows for the pixels ``take`` (n,), ``rows``' for the others.
+
+    Exact: each pixel's rows, weight and chi2 depend only on its own
+    surface's control points (and, with the scale fixed, not on the others'
+    residuals), so they equal a new evaluation at the kept points.
+    """
+    J, r, info = rows
+    _, r1, info1 = tried
+    row = np.repeat(take, pairs)
+    vals = np.where(row[:, None], info1["jacobian_values"], info["jacobian_values"])
+    kept = {k: np.where(take, info1[k], info[k]) for k in ("valid", "weights", "chi2")}
+    kept.update(scale=info["scale"], jacobian_values=vals)
+    J = sp.csr_matrix((vals.ravel(), J.indices, J.indptr), shape=J.shape)
+    return J, np.where(row, r1, r), kept
 
 
 def depth_search(problem: _Problem, c, step=SEARCH_STEP, max_steps=SEARCH_STEPS, say=None):
