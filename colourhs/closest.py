@@ -20,8 +20,10 @@ import numpy as np
 @nb.njit(cache=True, inline="always")
 def closest_on_triangle(p, a, b, c, out):
     """Closest point of triangle (a, b, c) to point p (3-vectors, float64),
-    written to ``out``; returns its squared distance. See
+    written to ``out``; returns its squared distance. NaN (``out`` and the
+    distance) where an input is not finite. See
     :func:`colourhs.raycast.closest_on_triangles`."""
+    out[0], out[1], out[2] = np.nan, np.nan, np.nan
     e0, e1, e2 = b[0] - a[0], b[1] - a[1], b[2] - a[2]
     f0, f1, f2 = c[0] - a[0], c[1] - a[1], c[2] - a[2]
     n0, n1, n2 = e1 * f2 - e2 * f1, e2 * f0 - e0 * f2, e0 * f1 - e1 * f0
@@ -51,7 +53,7 @@ def closest_on_triangle(p, a, b, c, out):
         if d2s < best:
             best = d2s
             out[0], out[1], out[2] = x0, x1, x2
-    return best
+    return best if np.isfinite(out[0]) else np.nan
 
 
 @nb.njit(cache=True)
@@ -65,10 +67,15 @@ def closest_each(p, a, b, c, out):
 def closest_near(p, v, tri, first, start, around, out, dist):
     """Per point: the closest point on the triangles around the corners of its
     ``first`` triangle (``around[start[k]:start[k + 1]]``: the triangles at
-    vertex k, in increasing order), the first of the nearest on a tie."""
+    vertex k, in increasing order), the first of the nearest on a tie; NaN
+    where no candidate gives a finite distance or there is no first triangle."""
     x = np.empty(3)
     for i in range(len(p)):
         best = np.inf
+        out[i, 0], out[i, 1], out[i, 2] = np.nan, np.nan, np.nan
+        if not 0 <= first[i] < len(tri):  # no hit (open3d's invalid id: a point not finite)
+            dist[i] = np.nan
+            continue
         for corner in range(3):
             k = tri[first[i], corner]
             for j in range(start[k], start[k + 1]):
@@ -78,4 +85,4 @@ def closest_near(p, v, tri, first, start, around, out, dist):
                 if d < best:
                     best = d
                     out[i, 0], out[i, 1], out[i, 2] = x[0], x[1], x[2]
-        dist[i] = best
+        dist[i] = best if best < np.inf else np.nan

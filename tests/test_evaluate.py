@@ -132,6 +132,10 @@ def test_closest_points_are_the_nearest_of_all_triangles():
     assert closest_on_triangles(np.array([[0.2, 0.2, 1.0]]), a, b, y)[0] == pytest.approx(
         [0.2, 0.2, 0]
     )
+    # A point that is not finite has no closest point (NaN, not stale memory).
+    assert np.isnan(closest_on_triangles(np.array([[np.nan, 0.2, 1.0]]), a, b, y)).all()
+    x, d = closest_points(vb, tb, np.array([[np.nan, 0.0, 0.0], [0.0, 0.0, 0.2]]))
+    assert np.isnan(x[0]).all() and np.isnan(d[0]) and np.isfinite(d[1])
 
 
 def test_hausdorff_matches_meshlab():
