@@ -92,8 +92,10 @@ def closest_points(
     query = o3d.core.Tensor(np.ascontiguousarray(p - origin, np.float32))
     first = scene.compute_closest_points(query)["primitive_ids"].numpy().astype(np.int64)
     # The triangles at each vertex (CSR, in increasing triangle order).
-    around = np.argsort(tri.ravel(), kind="stable") // 3
-    start = np.searchsorted(np.sort(tri.ravel()), np.arange(len(v) + 1))
+    flat = tri.ravel()
+    order = np.argsort(flat, kind="stable")
+    around = order // 3
+    start = np.searchsorted(flat[order], np.arange(len(v) + 1))
     closest, d = np.empty_like(p), np.empty(len(p))
     closest_near(p, v, tri, first, start, around, closest, d)
     return closest, d
