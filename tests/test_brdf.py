@@ -465,3 +465,16 @@ def test_band_material_validation():
         Material(diffuse="minnaert")
     with pytest.raises(ValueError, match="evaluate_bands"):
         BAND_MATERIALS[2].evaluate(Z, Z, Z)
+
+
+def test_cross_norm2_is_bit_identical_to_np_cross():
+    """The geometry's |n x l + n x v|^2 without np.cross: the same bits (the
+    rendered datasets must not change)."""
+    from colourhs.synth.brdfmodels import _cross_norm2, _dot
+
+    rng = np.random.default_rng(3)
+    n, l, v = (rng.normal(size=(500, 3)) for _ in range(3))
+    c = np.cross(n, l) + np.cross(n, v)
+    assert np.array_equal(_cross_norm2(n, l, v), _dot(c, c))
+    c = np.cross(n, l[:1]) + np.cross(n, v)  # a light direction broadcast over points
+    assert np.array_equal(_cross_norm2(n, l[:1], v), _dot(c, c))
