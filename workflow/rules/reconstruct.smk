@@ -16,6 +16,9 @@ rule reconstruct_frame:
     wildcard_constraints:
         variant="ml_full|bayes_nocalib|bayes_ph|bayes_full",
         frame="[0-9]{6}",
+    # The longest jobs of the workflow start first (after the hulls they read),
+    # so the run does not end on one reconstruction with a core idle.
+    priority: 1
     # One thread: two frames at once keep both cores busy (the solver and the
     # refinement are serial); raise with --set-threads reconstruct_frame=N.
     threads: 1

@@ -15,6 +15,8 @@ rule visual_hull:
         "benchmarks/snakemake/visual_hull/{name}/{scene}/{frame}.tsv"
     wildcard_constraints:
         frame="[0-9]{6}",
+    # Before the reconstructions (priority 1) that read it.
+    priority: 2
     threads: 1
     # Measured at 1280x960 (paper preset, benchmarks/bench_paper.py): 2.39 GB, 40 s.
     resources:
