@@ -333,17 +333,23 @@ def sample_sides(sides: HelmholtzSides, X: np.ndarray, R: np.ndarray):
 
 
 @nb.njit(cache=True)
-def _smallest_singular(u, vt):
+def _smallest_singular(u, vt, warm=False):
     """The smallest singular value's right singular vector of the (P, 3) ``u``,
     by one-sided Jacobi rotations of its columns (Hestenes), in place: on
     return the columns of ``u`` are orthogonal and the rows of ``vt`` the
     right singular vectors. Works on W itself, not W^T W, so the small
     singular value keeps its relative accuracy. Returns the index of the
-    smallest column."""
+    smallest column.
+
+    ``warm``: ``u`` is already ``A @ vt.T`` for the matrix ``A`` whose SVD is
+    wanted and an orthogonal ``vt`` close to its right singular vectors (the
+    previous pass's); the rotations continue from there (fewer sweeps) instead
+    of from ``vt = I``, ``u = A``."""
     P = u.shape[0]
-    for i in range(3):
-        for j in range(3):
-            vt[i, j] = 1.0 if i == j else 0.0
+    if not warm:
+        for i in range(3):
+            for j in range(3):
+                vt[i, j] = 1.0 if i == j else 0.0
     for _ in range(30):
         rotated = False
         for j, k in ((0, 1), (0, 2), (1, 2)):
@@ -386,11 +392,18 @@ def _whitened_kernel(w, var, v, ok, R, passes, chi2, normal):
         u = np.empty((P, 3))
         vt = np.empty((3, 3))
         nx, ny, nz, lam = 1.0, 0.0, 0.0, 0.0
-        for _ in range(passes + 1):
+        for it in range(passes + 1):
+            # The reweighted rows in the previous pass's singular basis
+            # (u = W' vt^T): that pass's rotations are not repeated.
             for k in range(P):
                 for j in range(3):
-                    u[k, j] = w[i, k, j] / scale[k]
-            j = _smallest_singular(u, vt)
+                    if it == 0:
+                        u[k, j] = w[i, k, j] / scale[k]
+                    else:
+                        u[k, j] = (
+                            w[i, k, 0] * vt[j, 0] + w[i, k, 1] * vt[j, 1] + w[i, k, 2] * vt[j, 2]
+                        ) / scale[k]
+            j = _smallest_singular(u, vt, it > 0)
             nx, ny, nz = vt[j, 0], vt[j, 1], vt[j, 2]
             lam = 0.0
             for k in range(P):  # n' W' W n as a sum of squares: no cancellation
@@ -420,7 +433,12 @@ def whitened_cost(sides: HelmholtzSides, X: np.ndarray, R: np.ndarray, passes: i
     Compiled: the eigenvector is W's smallest right singular vector, by
     Jacobi rotations of W itself (:func:`_smallest_singular`; the
     eigenvalue, the sum of the squared whitened rows along it), where
-    numpy's batched ``eigh`` of W^T W squared W's condition number.
+    numpy's batched ``eigh`` of W^T W squared W's condition number. Each pass
+    after the first starts its rotations from the previous pass's singular
+    basis (the weights change the rows little): the kernel took 3.9 instead of
+    5.1 s in a demo ML job (sheet frame 5, one thread), and 63 of its 124,601
+    depths changed (ties between hypotheses; median error against the
+    Bayesian depth 5.4758 -> 5.4760 mm).
 
     Returns
     -------
