@@ -11,7 +11,7 @@ from colourhs.raycast import render_depth_normals
 from colourhs.reconstruct.dataterm import pair_arrays
 from colourhs.reconstruct.frame import foreground, load_frame, reference_rays
 from colourhs.reconstruct.ml import candidate_labels
-from colourhs.reconstruct.sides import helmholtz_sides, whitened_cost
+from colourhs.reconstruct.sides import helmholtz_sides, sample_sides, whitened_cost
 from colourhs.reconstruct.spline import SplineSurface
 from colourhs.reconstruct.surface import SurfaceGraph, fill_holes, hs_residuals, surface_normals
 
@@ -149,6 +149,19 @@ def test_whitened_normals_at_the_truth(plane_sides):
     ok = np.isfinite(chi2)
     ang = np.degrees(np.arccos(np.clip(np.sum(n[ok] * gn[pix][ok], axis=1), -1, 1)))
     assert ok.mean() > 0.87 and np.median(ang) < 0.9
+
+
+def test_sampling_without_derivatives_is_the_same_to_the_bit(plane_sides):
+    """The ML costs sample without the depth derivatives (two projections fewer
+    per sample): s, var and v must be exactly those of the full sampling."""
+    fr, ref, rays, gd, _, mask, sides = plane_sides
+    pix = np.flatnonzero(mask)
+    X = ref.centre + rays[pix] * (gd[pix, None] * 1.001)
+    full = sample_sides(sides, X, rays[pix])
+    lean = sample_sides(sides, X, rays[pix], derivatives=False)
+    for a, b in zip(full[:3], lean[:3], strict=True):
+        assert np.array_equal(a, b, equal_nan=True)
+    assert lean[3] is None and lean[4] is None and np.isfinite(full[0]).mean() > 0.8
 
 
 def test_whitened_kernel_matches_an_svd_of_the_whitened_rows():

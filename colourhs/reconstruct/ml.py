@@ -132,7 +132,7 @@ def plane_chi2(sides: HelmholtzSides, X: np.ndarray, R: np.ndarray, n: np.ndarra
     Sum over the pairs of ``(w_k . n)^2 / (var_a (v_a . n)^2 + var_b (v_b . n)^2)``
     (the Sampson form); NaN where a sample is unusable.
     """
-    s, var, v, _, _ = sample_sides(sides, X, R)
+    s, var, v, _, _ = sample_sides(sides, X, R, derivatives=False)
     w = s[..., 0, None] * v[:, :, 0] - s[..., 1, None] * v[:, :, 1]
     ca = np.einsum("npk,nk->np", v[:, :, 0], n)
     cb = np.einsum("npk,nk->np", v[:, :, 1], n)

@@ -197,11 +197,14 @@ def _cubic(maps, j, u, vv, blurred):
 
 
 @nb.njit(parallel=True, cache=True, fastmath=False)
-def _sample_kernel(X, R, Ks, dists, Rs, ts, light, maps, blurred, order, s, var, v, ds, dv):
+def _sample_kernel(
+    X, R, Ks, dists, Rs, ts, light, maps, blurred, order, derivatives, s, var, v, ds, dv
+):
     """Project every point into every side's camera (OpenCV model, with the
-    derivative of the pixel along the ray), sample the side's stack
-    bilinearly (``order`` 1) or by cubic convolution (3), and form the eq. (5)
-    terms (see :func:`sample_sides`)."""
+    derivative of the pixel along the ray where ``derivatives``), sample the
+    side's stack bilinearly (``order`` 1) or by cubic convolution (3), and form
+    the eq. (5) terms (see :func:`sample_sides`; ``ds`` and ``dv`` are not
+    written without ``derivatives``)."""
     N = X.shape[0]
     nside = Ks.shape[0]
     Hh, Ww = maps.shape[1], maps.shape[2]
@@ -224,8 +227,9 @@ def _sample_kernel(X, R, Ks, dists, Rs, ts, light, maps, blurred, order, s, var,
             du = 0.0
             dvv = 0.0
             if cz > 0.0:
-                eps = 1e-6 * cz
                 u, vv = to_pixel(cx / cz, cy / cz, Ks[j], dists[j])
+            if cz > 0.0 and derivatives:
+                eps = 1e-6 * cz
                 up, vp = to_pixel(
                     (cx + eps * dcx) / (cz + eps * dcz),
                     (cy + eps * dcy) / (cz + eps * dcz),
@@ -284,6 +288,8 @@ def _sample_kernel(X, R, Ks, dists, Rs, ts, light, maps, blurred, order, s, var,
             v[i, p, k, 2] = uz
             s[i, p, k] = J / d2
             var[i, p, k] = noise / (d2 * d2)
+            if not derivatives:
+                continue
             # dD/dz = -R, dd/dz = -u.R, du/dz = (-R + u (u.R)) / d
             dv[i, p, k, 0] = (-r0 + ux * ur) / d
             dv[i, p, k, 1] = (-r1 + uy * ur) / d
@@ -291,7 +297,7 @@ def _sample_kernel(X, R, Ks, dists, Rs, ts, light, maps, blurred, order, s, var,
             ds[i, p, k] = (gu * du + gv * dvv) / d2 + 2.0 * J * ur / (d2 * d)
 
 
-def sample_sides(sides: HelmholtzSides, X: np.ndarray, R: np.ndarray):
+def sample_sides(sides: HelmholtzSides, X: np.ndarray, R: np.ndarray, derivatives: bool = True):
     """Eq. (5) terms at points ``X`` (N, 3) and their derivative along rays ``R`` (dX/dz).
 
     Compiled (numba); the projection is the OpenCV model of
@@ -303,15 +309,18 @@ def sample_sides(sides: HelmholtzSides, X: np.ndarray, R: np.ndarray):
     s : (N, P, 2) ``J / |L - X|^2`` of each side (the row is s_a v_a - s_b v_b).
     var : (N, P, 2) noise variance of s.
     v : (N, P, 2, 3) unit vectors from X towards each side's light.
-    ds, dv : derivatives of s and v with respect to the depth z.
+    ds, dv : derivatives of s and v with respect to the depth z; None without
+        ``derivatives`` (the ML costs: two projections fewer per sample, and
+        s, var and v the same to the bit).
     NaN where a point leaves an image or lands on an unusable sample.
     """
     N, P = len(X), sides.pairs
     s = np.empty((N, P, 2))
     var = np.empty((N, P, 2))
     v = np.empty((N, P, 2, 3))
-    ds = np.empty((N, P, 2))
-    dv = np.empty((N, P, 2, 3))
+    nd = N if derivatives else 1  # not written without derivatives
+    ds = np.empty((nd, P, 2))
+    dv = np.empty((nd, P, 2, 3))
     _sample_kernel(
         np.ascontiguousarray(X, float),
         np.ascontiguousarray(R, float),
@@ -323,13 +332,14 @@ def sample_sides(sides: HelmholtzSides, X: np.ndarray, R: np.ndarray):
         sides.stack,
         sides.blurred,
         sides.order,
+        bool(derivatives),
         s,
         var,
         v,
         ds,
         dv,
     )
-    return s, var, v, ds, dv
+    return (s, var, v, ds, dv) if derivatives else (s, var, v, None, None)
 
 
 @nb.njit(cache=True)
@@ -444,7 +454,7 @@ def whitened_cost(sides: HelmholtzSides, X: np.ndarray, R: np.ndarray, passes: i
     -------
     chi2 : (N,) NaN where a sample is unusable. normal : (N, 3) towards -R.
     """
-    s, var, v, _, _ = sample_sides(sides, X, R)
+    s, var, v, _, _ = sample_sides(sides, X, R, derivatives=False)
     w = s[..., 0, None] * v[:, :, 0] - s[..., 1, None] * v[:, :, 1]
     ok = np.all(np.isfinite(w), axis=(1, 2)) & np.all(var > 0, axis=(1, 2))
     w = np.where(ok[:, None, None], w, 0.0)
