@@ -153,3 +153,28 @@ def test_importing_colourhs_first_turns_numpy_huge_page_advice_off():
             [sys.executable, "-c", probe], env=run_env, capture_output=True, text=True, check=True
         )
         assert out.stdout.strip() == expected, (setting, out.stdout, out.stderr)
+
+
+def test_open3d_plotly_viewer_is_imported_on_first_use():
+    """colourhs.deferred: importing colourhs, then open3d, does not import dash
+    (open3d's plotly viewer; 0.25 s of a job's start), the viewer still works (it
+    is imported on its first call), and COLOURHS_EAGER_OPEN3D=1 keeps open3d's
+    own import."""
+    import os
+    import subprocess
+    import sys
+
+    probe = (
+        "import sys, colourhs, open3d as o3d, numpy as np\n"
+        "print('dash' in sys.modules)\n"
+        "pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.eye(3)))\n"
+        "fig = o3d.visualization.get_plotly_fig([pcd])\n"
+        "print('dash' in sys.modules, type(fig).__name__)\n"
+    )
+    for eager, expected in ((None, ["False", "True Figure"]), ("1", ["True", "True Figure"])):
+        env = {k: v for k, v in os.environ.items() if k != "COLOURHS_EAGER_OPEN3D"}
+        env = env if eager is None else {**env, "COLOURHS_EAGER_OPEN3D": eager}
+        out = subprocess.run(
+            [sys.executable, "-c", probe], env=env, capture_output=True, text=True, check=True
+        )
+        assert out.stdout.split("\n")[:2] == expected, (eager, out.stdout, out.stderr)
