@@ -212,6 +212,21 @@ def test_float16_normals_same_as_float32():
     assert np.mean(l16 == l32) > 0.99
 
 
+def test_sgm_reports_its_three_sweeps_and_gives_the_same_labels():
+    """``say`` gets a line before each sweep (progress at 1280 x 960, where each
+    takes seconds); the result is the one without it."""
+    cost, normals, rays, depths = random_problem(np.random.default_rng(5), 9, 11, 8)
+    lines = []
+    labels, S = sgm_depth_normal(cost, normals, rays, depths, say=lines.append)
+    ref_labels, ref_S = sgm_depth_normal(cost, normals, rays, depths)
+    assert np.array_equal(labels, ref_labels) and np.array_equal(S, ref_S)
+    assert lines == [
+        "MRF: paths along the columns and diagonals, top to bottom",
+        "MRF: paths along the columns and diagonals, bottom to top",
+        "MRF: paths along the rows, both ways; the labels",
+    ]
+
+
 # ----------------------------------------------------------------------------------------------
 # Planes, energy, discontinuities.
 

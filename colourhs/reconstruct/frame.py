@@ -309,9 +309,7 @@ def _bayes_reconstruction(
     normals = np.zeros((h * w, len(depths), 3), np.float16)
     evaluate(rays[pix], depths, np.float16, progress, out=(cost, normals, local))
     say(f"bayes: MRF labelling over {h} x {w} pixels")
-    labels, frac = _bayes_labelling(
-        cost, normals, local, box, rays, depths, shape, opts.alpha, opts.tau, info, opts.cost_scale
-    )
+    labels, frac = _bayes_labelling(cost, normals, local, box, rays, depths, shape, opts, info, say)
     z, nrm, ok, conf = _labelled_surface(
         cost[local, labels], normals[local, labels], frac, depths, pix, shape, opts.max_cost
     )
@@ -470,14 +468,15 @@ def _mrf_box(pix, shape):
     return (int(r0), int(r1), int(c0), int(c1)), (rows - r0) * (c1 - c0) + (cols - c0)
 
 
-def _bayes_labelling(cost, normals, local, box, rays, depths, shape, alpha, tau, info, cost_scale):
+def _bayes_labelling(cost, normals, local, box, rays, depths, shape, opts, info, say=None):
     """MAP labels of the MRF (SGM with the depth-normal prior) over the box of :func:`_mrf_box`.
 
     ``cost`` (h*w, L) and ``normals`` (h*w, L, 3) are the data term over the
     box, the foreground at rows ``local`` (N,); the MRF's data cost is
-    ``cost / cost_scale``, ``INVALID_COST / cost_scale`` on the box's
-    background. Returns the foreground's labels (N,) and their sub-label
-    positions (a parabola through the aggregated cost).
+    ``cost / opts.cost_scale``, ``INVALID_COST / opts.cost_scale`` on the box's
+    background (``opts.alpha``, ``opts.tau``: the MRF's weights). Returns the
+    foreground's labels (N,) and their sub-label positions (a parabola through
+    the aggregated cost). ``say(text)``, if given, reports the SGM sweeps.
     """
     from colourhs.reconstruct.mrf import labelling_energy, sgm_depth_normal
 
@@ -485,16 +484,21 @@ def _bayes_labelling(cost, normals, local, box, rays, depths, shape, alpha, tau,
     n_labels = len(depths)
     r0, r1, c0, c1 = box
     h, w = r1 - r0, c1 - c0
-    scaled = cost / cost_scale
+    scaled = cost / opts.cost_scale
     background = np.ones(h * w, bool)
     background[local] = False
-    scaled[background] = INVALID_COST / cost_scale
+    scaled[background] = INVALID_COST / opts.cost_scale
     volumes = (scaled.reshape(h, w, n_labels), normals.reshape(h, w, n_labels, 3))
     box_rays = rays.reshape(H, W, 3)[r0:r1, c0:c1]
     lab, S = sgm_depth_normal(
-        *volumes, box_rays.astype(np.float32), depths.astype(np.float32), alpha, tau
+        *volumes,
+        box_rays.astype(np.float32),
+        depths.astype(np.float32),
+        opts.alpha,
+        opts.tau,
+        say=say,
     )
-    info["energy"] = float(labelling_energy(lab, *volumes, box_rays, depths, alpha, tau))
+    info["energy"] = float(labelling_energy(lab, *volumes, box_rays, depths, opts.alpha, opts.tau))
     info["mrf_box"] = [r0, r1, c0, c1]
     labels = lab.ravel()[local]
     return labels, _subpixel(S.reshape(h * w, n_labels), local, labels)
@@ -509,6 +513,8 @@ def _consistent_surface(
     from colourhs.reconstruct.sides import helmholtz_sides
 
     H, W = frame.rig.image.height, frame.rig.image.width
+    if say is not None:
+        say("refinement: each reciprocal pair's images and noise, resampled for E")
     sides = helmholtz_sides(frame, frame.variance, pairs, blur_px=blur_px)
     footprint = np.abs(z) / float(ref.K[0, 0])
     fill = object_mask(frame, frame.rig.camera_names.index(ref.name)).ravel()

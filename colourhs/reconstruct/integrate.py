@@ -189,6 +189,8 @@ def initial_surface(
             say(f"bayes: normal integration, pass {i + 1} of {passes}")
         z = refine_depth(z, nrm, rays, ok, (H, W), data_weight, edge_m, anchor_scale, solver)
         if i == passes - 1:
+            if say is not None:
+                say("bayes: the integrated depth's surfaces (links, components)")
             links = surface_links(z, nrm, rays, ok, (H, W), link_m)
             labels = surface_components(links[0], links[1], ok)
             sizes = np.bincount(labels[ok])

@@ -426,6 +426,7 @@ def sgm_depth_normal(
     alpha: float = 0.5,
     tau: float = 3.0,
     directions: int = 8,
+    say=None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Bayesian HS depth labelling by SGM with the depth-normal consistency prior.
 
@@ -452,6 +453,9 @@ def sgm_depth_normal(
         Truncation of the prior, in labels (finite, > 0).
     directions : {8, 4}
         8: rows, columns and both diagonals, both senses; 4: rows and columns.
+    say : callable, optional
+        Called with a line before each of the three sweeps (progress: 2-3 s
+        each at 1280 x 960 on one thread).
 
     Returns
     -------
@@ -478,8 +482,13 @@ def sgm_depth_normal(
     diag = directions == 8
     args = (cost, nrm, rays, dks32, off32, a32, w32, wtau, S)
     nchunks = min(W, 4 * numba.get_num_threads())
-    _sweep_vertical(*args, True, diag, True, nchunks)
-    _sweep_vertical(*args, False, diag, False, nchunks)
+    columns = "columns and diagonals" if diag else "columns"
+    for down, text in ((True, "top to bottom"), (False, "bottom to top")):
+        if say is not None:
+            say(f"MRF: paths along the {columns}, {text}")
+        _sweep_vertical(*args, down, diag, down, nchunks)
+    if say is not None:
+        say("MRF: paths along the rows, both ways; the labels")
     _sweep_horizontal(*args, labels, False)
     return labels, S
 
