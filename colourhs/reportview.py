@@ -105,7 +105,7 @@ def simplify(mesh, max_triangles: int = MAX_TRIANGLES):
     if len(mesh.triangles) > PRE_FACTOR * max_triangles:
         mesh = mesh.simplify_vertex_clustering(_cluster_voxel(mesh, PRE_FACTOR * max_triangles))
     mesh = mesh.simplify_quadric_decimation(target_number_of_triangles=max_triangles)
-    voxel = _cluster_voxel(mesh, max_triangles) if len(mesh.triangles) > max_triangles else 0.0
+    voxel = _cluster_voxel(mesh, max_triangles)
     while len(mesh.triangles) > max_triangles:
         mesh = mesh.simplify_vertex_clustering(voxel)
         voxel *= 1.25
