@@ -186,9 +186,11 @@ def _sampson(s, var, v, p, k, nx, ny, nz):
 
 
 @nb.njit(parallel=True, cache=True)
-def _pixel_chi2(X, R, s, var, v, valid, nbr, chi2, count):
+def _pixel_chi2(X, R, s, var, v, valid, nbr, slot, chi2, count):
     """Per pixel: the summed squared Sampson residuals of its rows against its
-    normal (:func:`_pixel_normal`), and the number of triangles that gave it."""
+    normal (:func:`_pixel_normal`), and the number of triangles that gave it.
+    Pixel p's samples are row ``slot[p]`` of ``s``, ``var`` and ``v`` (read
+    only where ``valid[p]``)."""
     n = X.shape[0]
     P = s.shape[1]
     for p in nb.prange(n):
@@ -201,7 +203,7 @@ def _pixel_chi2(X, R, s, var, v, valid, nbr, chi2, count):
         nx, ny, nz, m = _pixel_normal(X, R, nbr, p, d)
         if m > 0:
             for k in range(P):
-                r = _sampson(s, var, v, p, k, nx, ny, nz)[0]
+                r = _sampson(s, var, v, slot[p], k, nx, ny, nz)[0]
                 c += r * r
         else:
             m = 0
@@ -210,13 +212,14 @@ def _pixel_chi2(X, R, s, var, v, valid, nbr, chi2, count):
 
 
 @nb.njit(parallel=True, cache=True)
-def _pixel_rows(X, R, s, var, v, ds, dv, valid, nbr, weights, res, cols, vals):
+def _pixel_rows(X, R, s, var, v, ds, dv, valid, nbr, slot, weights, res, cols, vals):
     """The weighted Sampson residuals of E and their Jacobian entries.
 
     Row ``p * P + k`` is pair k against pixel p's normal, with entries at the
     depths of p and of its four neighbours (east, south, west, north; a
     missing one's entry is 0 at column p); rows of pixels without a normal
-    are zero.
+    are zero. Pixel p's samples are row ``slot[p]`` of ``s``, ``var``, ``v``,
+    ``ds`` and ``dv`` (read only where ``valid[p]``).
     """
     n = X.shape[0]
     P = s.shape[1]
@@ -237,31 +240,32 @@ def _pixel_rows(X, R, s, var, v, ds, dv, valid, nbr, weights, res, cols, vals):
         nx, ny, nz, m = _pixel_normal(X, R, nbr, p, d)
         if m == 0:
             continue
+        i = slot[p]
         for k in range(P):
-            r, sd, sd2, ca, cb, wx, wy, wz = _sampson(s, var, v, p, k, nx, ny, nz)
+            r, sd, sd2, ca, cb, wx, wy, wz = _sampson(s, var, v, i, k, nx, ny, nz)
             # d r / d N of (w . N) / sqrt(N' C N)
-            ga, gb = var[p, k, 0] * ca * r / sd2, var[p, k, 1] * cb * r / sd2
-            gx = wx / sd - ga * v[p, k, 0, 0] - gb * v[p, k, 1, 0]
-            gy = wy / sd - ga * v[p, k, 0, 1] - gb * v[p, k, 1, 1]
-            gz = wz / sd - ga * v[p, k, 0, 2] - gb * v[p, k, 1, 2]
-            sa, sb, dsa, dsb = s[p, k, 0], s[p, k, 1], ds[p, k, 0], ds[p, k, 1]
+            ga, gb = var[i, k, 0] * ca * r / sd2, var[i, k, 1] * cb * r / sd2
+            gx = wx / sd - ga * v[i, k, 0, 0] - gb * v[i, k, 1, 0]
+            gy = wy / sd - ga * v[i, k, 0, 1] - gb * v[i, k, 1, 1]
+            gz = wz / sd - ga * v[i, k, 0, 2] - gb * v[i, k, 1, 2]
+            sa, sb, dsa, dsb = s[i, k, 0], s[i, k, 1], ds[i, k, 0], ds[i, k, 1]
             dwx = (
-                dsa * v[p, k, 0, 0]
-                + sa * dv[p, k, 0, 0]
-                - dsb * v[p, k, 1, 0]
-                - sb * dv[p, k, 1, 0]
+                dsa * v[i, k, 0, 0]
+                + sa * dv[i, k, 0, 0]
+                - dsb * v[i, k, 1, 0]
+                - sb * dv[i, k, 1, 0]
             )
             dwy = (
-                dsa * v[p, k, 0, 1]
-                + sa * dv[p, k, 0, 1]
-                - dsb * v[p, k, 1, 1]
-                - sb * dv[p, k, 1, 1]
+                dsa * v[i, k, 0, 1]
+                + sa * dv[i, k, 0, 1]
+                - dsb * v[i, k, 1, 1]
+                - sb * dv[i, k, 1, 1]
             )
             dwz = (
-                dsa * v[p, k, 0, 2]
-                + sa * dv[p, k, 0, 2]
-                - dsb * v[p, k, 1, 2]
-                - sb * dv[p, k, 1, 2]
+                dsa * v[i, k, 0, 2]
+                + sa * dv[i, k, 0, 2]
+                - dsb * v[i, k, 1, 2]
+                - sb * dv[i, k, 1, 2]
             )
             row = p * P + k
             res[row] = r * wt
@@ -328,18 +332,19 @@ def hs_residuals(
     if active is None:
         s, var, v, ds, dv = sample_sides(sides, X, R)
         valid = _usable_samples(s, var, ds)
-    else:  # inactive pixels' samples are left unset: nothing reads an unusable pixel's
-        sub = sample_sides(sides, X[active], R[active])
-        s, var, v, ds, dv = (np.empty((n, *a.shape[1:])) for a in sub)
-        for full, part in zip((s, var, v, ds, dv), sub, strict=True):
-            full[active] = part
+        slot = np.arange(n)
+    else:  # the active pixels' samples only, pixel p's at row slot[p] (-1: none)
+        idx = np.flatnonzero(active)
+        s, var, v, ds, dv = sample_sides(sides, X[idx], R[idx])
         valid = np.zeros(n, bool)
-        valid[active] = _usable_samples(sub[0], sub[1], sub[3])
+        valid[idx] = _usable_samples(s, var, ds)
+        slot = np.full(n, -1)
+        slot[idx] = np.arange(len(idx))
     P = s.shape[1]
     nbr = graph.neighbours
     chi2 = np.empty(n)
     count = np.empty(n)
-    _pixel_chi2(X, R, s, var, v, valid, nbr, chi2, count)
+    _pixel_chi2(X, R, s, var, v, valid, nbr, slot, chi2, count)
     usable = valid & (count > 0)
     if scale is None:
         # The robust scale: the noise model's, or the residuals' own where the
@@ -364,7 +369,7 @@ def hs_residuals(
     index = np.int32 if 5 * n * P < np.iinfo(np.int32).max else np.int64
     cols = np.empty((n * P, 5), index)
     vals = np.empty((n * P, 5))
-    _pixel_rows(X, R, s, var, v, ds, dv, valid, nbr, w, res, cols, vals)
+    _pixel_rows(X, R, s, var, v, ds, dv, valid, nbr, slot, w, res, cols, vals)
     indptr = np.arange(0, 5 * len(res) + 1, 5, dtype=index)
     J = sp.csr_matrix((vals.ravel(), cols.ravel(), indptr), shape=(len(res), n))
     info = {"valid": usable, "weights": w, "chi2": chi2, "scale": scale, "jacobian_values": vals}
