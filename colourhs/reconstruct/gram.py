@@ -34,7 +34,7 @@ HALF = SPAN // 2
 
 
 @nb.njit(parallel=True, cache=True)
-def _fill(vals, rows, nbr, bcols, bvals, gi, gj, order, starts, pos, out, cols):
+def _fill(vals, rows, nbr, bcols, bvals, gi, gj, order, starts, row_of, pos, out, cols):
     """Add each pixel's rows' Gram matrix into ``out`` (chunks, nnz): A's values.
 
     ``rows`` is any tuple of length P (the rows per pixel): a tuple's length
@@ -42,8 +42,8 @@ def _fill(vals, rows, nbr, bcols, bvals, gi, gj, order, starts, pos, out, cols):
     loops over the rows unroll (one compiled kernel per P, cached). Measured
     on the demo sheet's fine spline (126k pixels, 3 rows): 110 -> 63 ms a
     call on one thread, the same values to the bit, against P passed as an
-    integer. ``vals`` (n P, 5): row ``p P + k``'s entries at p and its east, south,
-    west and north neighbours (``nbr`` (4, n), -1 = none); ``bcols``,
+    integer. ``vals`` (M P, 5): row ``row_of[p] P + k``'s entries at pixel p and
+    its east, south, west and north neighbours (``nbr`` (4, n), -1 = none); ``bcols``,
     ``bvals`` (n, 16): each pixel's control points, row by row of its 4 x 4
     patch from the top left, and basis weights; ``gi``, ``gj`` (m,): each
     control point's coordinates in its surface's grid. ``order`` lists the
@@ -77,7 +77,7 @@ def _fill(vals, rows, nbr, bcols, bvals, gi, gj, order, starts, pos, out, cols):
                     if q < 0:
                         continue
                     for k in range(P):
-                        v[k] = vals[p * P + k, j]
+                        v[k] = vals[row_of[p] * P + k, j]
                     top = bcols[q, 0]
                     loc0 = (gi[top] - bi) * 6 + (gj[top] - bj)
                     for a in range(4):
@@ -193,7 +193,9 @@ class SplineGram:
     neighbours : (4, n) the pixel graph's east, south, west, north links.
     pairs : P, the rows per pixel.
     pixels : (n,) bool, the pixels whose rows count (default all; the
-        others' rows are taken as zero).
+        others' rows are taken as zero). :meth:`matrix`'s ``vals`` then
+        hold their rows only, in pixel order (as
+        :func:`~colourhs.reconstruct.surface.hs_residuals` gives them with ``active``).
     """
 
     def __init__(self, B: sp.csr_matrix, grid_coords, neighbours, pairs: int, pixels=None):
@@ -213,6 +215,8 @@ class SplineGram:
         check_links(self.bcols, self.gi, self.gj, self.nbr)
         # The pixels cell by cell: a pixel's cell is its patch's first control point.
         sel = np.arange(n) if pixels is None else np.flatnonzero(pixels)
+        self.row_of = np.zeros(n, np.int64)  # pixel p's rows in vals: row_of[p] P + k
+        self.row_of[sel] = np.arange(len(sel))
         self.order = sel[np.argsort(self.bcols[sel, 0], kind="stable")]
         cell_of = self.bcols[self.order, 0]
         self.starts = np.flatnonzero(np.r_[True, cell_of[1:] != cell_of[:-1], True])
@@ -220,7 +224,7 @@ class SplineGram:
             self.starts = np.zeros(1, np.int64)
         cols = np.full((m, SPAN * SPAN), -1, np.int64)
         self.pos = np.zeros((0, SPAN * SPAN), np.int64)
-        self._run(np.zeros((n * self.P, 5)), np.zeros((1, 0)), cols)
+        self._run(np.zeros((len(sel) * self.P, 5)), np.zeros((1, 0)), cols)
         has = cols >= 0
         self.pos = np.full((m, SPAN * SPAN), -1, np.int64)
         self.pos[has] = np.arange(int(has.sum()))
@@ -238,13 +242,15 @@ class SplineGram:
             self.gj,
             self.order,
             self.starts,
+            self.row_of,
             self.pos,
             out,
             cols,
         )
 
     def matrix(self, vals: np.ndarray) -> sp.csr_matrix:
-        """``B^T J^T J B`` (m, m) for the Jacobian entries ``vals`` (n P, 5)."""
+        """``B^T J^T J B`` (m, m) for the Jacobian entries ``vals`` (M P, 5) of the
+        pixels whose rows count (all n, or ``pixels``), in pixel order."""
         out = np.zeros((nb.get_num_threads(), len(self.indices)))
         self._run(vals, out, np.empty((0, SPAN * SPAN), np.int64))
         return sp.csr_matrix((out.sum(axis=0), self.indices, self.indptr), shape=(self.m,) * 2)

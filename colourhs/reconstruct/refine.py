@@ -244,7 +244,7 @@ class _Problem:
             level = sc / (self.robust**2 * self.sides.pairs)  # Dw = self.Dw sqrt(level)
             vals = info["jacobian_values"]
             if self.pixel_weight is not None:  # rows and residuals times sqrt(weight)
-                w = np.repeat(self.pixel_weight, self.sides.pairs)
+                w = np.repeat(self.pixel_weight[self.active], self.sides.pairs)
                 vals, r = vals * np.sqrt(w)[:, None], r * w
             A = self.gram.matrix(vals) + self.DtD * level
             g = self.Bt @ (Jz.T @ r) + Dw.T @ (Dw @ c)
@@ -262,7 +262,9 @@ class _Problem:
                 e0, e = self.compare([s0, s1])
                 better = pending & (e < e0)
                 if reuse and better.any():
-                    rows = _kept_rows(rows, tried, better[self.graph.surface], self.sides.pairs)
+                    rows = _kept_rows(
+                        rows, tried, better[self.graph.surface], self.sides.pairs, self.active
+                    )
                 # A surface whose quadratic model predicts no decrease worth
                 # noticing has converged: more damping cannot make it improve.
                 predicted = np.bincount(self.ctrl_surface, -h * (g + 0.5 * (A @ h)), self.n)
@@ -293,9 +295,10 @@ class _Problem:
         return c * factor[self.ctrl_surface]
 
 
-def _kept_rows(rows, tried, take, pairs: int):
+def _kept_rows(rows, tried, take, pairs: int, active=None):
     """:func:`hs_residuals`' output ``(J, r, info)`` at the control points kept:
-    ``tried``'s rows for the pixels ``take`` (n,), ``rows``' for the others.
+    ``tried``'s rows for the pixels ``take`` (n,), ``rows``' for the others
+    (both evaluated over the pixels ``active``, default all).
 
     Exact: each pixel's rows, weight and chi2 depend only on its own
     surface's control points (and, with the scale fixed, not on the others'
@@ -303,7 +306,7 @@ def _kept_rows(rows, tried, take, pairs: int):
     """
     J, r, info = rows
     _, r1, info1 = tried
-    row = np.repeat(take, pairs)
+    row = np.repeat(take if active is None else take[active], pairs)
     vals = np.where(row[:, None], info1["jacobian_values"], info["jacobian_values"])
     kept = {k: np.where(take, info1[k], info[k]) for k in ("valid", "weights", "chi2")}
     kept.update(scale=info["scale"], jacobian_values=vals)

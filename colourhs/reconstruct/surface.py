@@ -186,14 +186,14 @@ def _sampson(s, var, v, p, k, nx, ny, nz):
 
 
 @nb.njit(parallel=True, cache=True)
-def _pixel_chi2(X, R, s, var, v, valid, nbr, slot, chi2, count):
-    """Per pixel: the summed squared Sampson residuals of its rows against its
-    normal (:func:`_pixel_normal`), and the number of triangles that gave it.
-    Pixel p's samples are row ``slot[p]`` of ``s``, ``var`` and ``v`` (read
-    only where ``valid[p]``)."""
-    n = X.shape[0]
+def _pixel_chi2(X, R, s, var, v, valid, nbr, idx, chi2, count):
+    """For each pixel ``p = idx[i]``: the summed squared Sampson residuals of its
+    rows against its normal (:func:`_pixel_normal`), and the number of
+    triangles that gave it, into ``chi2[p]`` and ``count[p]``. Its samples are
+    row i of ``s``, ``var`` and ``v`` (read only where ``valid[p]``)."""
     P = s.shape[1]
-    for p in nb.prange(n):
+    for i in nb.prange(len(idx)):
+        p = idx[i]
         d = np.empty((5, 3))
         c = 0.0
         if not valid[p]:
@@ -203,7 +203,7 @@ def _pixel_chi2(X, R, s, var, v, valid, nbr, slot, chi2, count):
         nx, ny, nz, m = _pixel_normal(X, R, nbr, p, d)
         if m > 0:
             for k in range(P):
-                r = _sampson(s, var, v, slot[p], k, nx, ny, nz)[0]
+                r = _sampson(s, var, v, i, k, nx, ny, nz)[0]
                 c += r * r
         else:
             m = 0
@@ -212,22 +212,22 @@ def _pixel_chi2(X, R, s, var, v, valid, nbr, slot, chi2, count):
 
 
 @nb.njit(parallel=True, cache=True)
-def _pixel_rows(X, R, s, var, v, ds, dv, valid, nbr, slot, weights, res, cols, vals):
+def _pixel_rows(X, R, s, var, v, ds, dv, valid, nbr, idx, weights, res, cols, vals):
     """The weighted Sampson residuals of E and their Jacobian entries.
 
-    Row ``p * P + k`` is pair k against pixel p's normal, with entries at the
-    depths of p and of its four neighbours (east, south, west, north; a
-    missing one's entry is 0 at column p); rows of pixels without a normal
-    are zero. Pixel p's samples are row ``slot[p]`` of ``s``, ``var``, ``v``,
-    ``ds`` and ``dv`` (read only where ``valid[p]``).
+    Row ``i * P + k`` is pair k against the normal of pixel ``p = idx[i]``,
+    with entries at the depths of p and of its four neighbours (east, south,
+    west, north; a missing one's entry is 0 at column p); rows of pixels
+    without a normal are zero. Pixel p's samples are row i of ``s``, ``var``,
+    ``v``, ``ds`` and ``dv`` (read only where ``valid[p]``).
     """
-    n = X.shape[0]
     P = s.shape[1]
-    for p in nb.prange(n):
+    for i in nb.prange(len(idx)):
+        p = idx[i]
         d = np.empty((5, 3))
         wt = np.sqrt(weights[p])
         for k in range(P):
-            row = p * P + k
+            row = i * P + k
             res[row] = 0.0
             cols[row, 0] = p
             vals[row, 0] = 0.0
@@ -235,12 +235,11 @@ def _pixel_rows(X, R, s, var, v, ds, dv, valid, nbr, slot, weights, res, cols, v
                 q = nbr[j, p]
                 cols[row, 1 + j] = q if q >= 0 else p
                 vals[row, 1 + j] = 0.0
-        if not valid[p]:  # no normal needed (most pixels of a subsampled search)
+        if not valid[p]:
             continue
         nx, ny, nz, m = _pixel_normal(X, R, nbr, p, d)
         if m == 0:
             continue
-        i = slot[p]
         for k in range(P):
             r, sd, sd2, ca, cb, wx, wy, wz = _sampson(s, var, v, i, k, nx, ny, nz)
             # d r / d N of (w . N) / sqrt(N' C N)
@@ -267,7 +266,7 @@ def _pixel_rows(X, R, s, var, v, ds, dv, valid, nbr, slot, weights, res, cols, v
                 - dsb * v[i, k, 1, 2]
                 - sb * dv[i, k, 1, 2]
             )
-            row = p * P + k
+            row = i * P + k
             res[row] = r * wt
             vals[row, 0] = (
                 (dwx * nx + dwy * ny + dwz * nz) / sd + gx * d[0, 0] + gy * d[0, 1] + gz * d[0, 2]
@@ -314,9 +313,12 @@ def hs_residuals(
         residuals (``robust^2 P`` times the larger of 1 and their median
         over its noise-only value), returned in ``info`` so that energies
         of several depth maps can be compared at one scale.
-    active : (n,) bool, the pixels whose rows are evaluated (default all);
-        the others' rows are zero and unusable (their depths still give the
-        active pixels' normals).
+    active : (n,) bool, the pixels whose rows are evaluated (default all):
+        J, r and ``jacobian_values`` hold their rows only, in pixel order
+        (M = P times their number; the depth search's subsample, where the
+        others' rows were zeros at 1280x960: three quarters of every array);
+        the others are unusable (their depths still give the active pixels'
+        normals).
 
     Returns
     -------
@@ -324,27 +326,26 @@ def hs_residuals(
     the quadratic model of the robust energy), info : dict with ``valid``
     (n,) rows usable, ``weights`` (n,) (also without the Jacobian),
     ``chi2`` (n,) summed squared normalised residual of the pixel's P rows,
-    ``scale`` and, with the Jacobian, ``jacobian_values`` (M, 5): row ``p P + k``'s entries at p and
-    its east, south, west and north neighbours (J's values in that order).
+    ``scale`` and, with the Jacobian, ``jacobian_values`` (M, 5): row
+    ``i P + k``'s entries at the i-th evaluated pixel p and its east, south,
+    west and north neighbours (J's values in that order).
     """
     n = graph.n
     X = c_ref + R * z[:, None]
     if active is None:
         s, var, v, ds, dv = sample_sides(sides, X, R)
         valid = _usable_samples(s, var, ds)
-        slot = np.arange(n)
-    else:  # the active pixels' samples only, pixel p's at row slot[p] (-1: none)
+        idx = np.arange(n)
+    else:  # the active pixels' samples and rows only
         idx = np.flatnonzero(active)
         s, var, v, ds, dv = sample_sides(sides, X[idx], R[idx])
         valid = np.zeros(n, bool)
         valid[idx] = _usable_samples(s, var, ds)
-        slot = np.full(n, -1)
-        slot[idx] = np.arange(len(idx))
     P = s.shape[1]
     nbr = graph.neighbours
-    chi2 = np.empty(n)
-    count = np.empty(n)
-    _pixel_chi2(X, R, s, var, v, valid, nbr, slot, chi2, count)
+    chi2 = np.zeros(n)
+    count = np.zeros(n)
+    _pixel_chi2(X, R, s, var, v, valid, nbr, idx, chi2, count)
     usable = valid & (count > 0)
     if scale is None:
         # The robust scale: the noise model's, or the residuals' own where the
@@ -362,14 +363,14 @@ def hs_residuals(
             robust_energy(chi2, usable, scale),
             {"valid": usable, "weights": w, "chi2": chi2, "scale": scale},
         )
-    res = np.empty(n * P)
+    res = np.empty(len(idx) * P)
     # 32-bit indices: scipy keeps them as they are, where 64-bit ones are
     # checked and copied down to 32 bits on every call (measured at 3 M rows:
     # 0.37-1.0 s per call, against 1 ms).
-    index = np.int32 if 5 * n * P < np.iinfo(np.int32).max else np.int64
-    cols = np.empty((n * P, 5), index)
-    vals = np.empty((n * P, 5))
-    _pixel_rows(X, R, s, var, v, ds, dv, valid, nbr, slot, w, res, cols, vals)
+    index = np.int32 if 5 * len(res) < np.iinfo(np.int32).max and n < 2**31 else np.int64
+    cols = np.empty((len(res), 5), index)
+    vals = np.empty((len(res), 5))
+    _pixel_rows(X, R, s, var, v, ds, dv, valid, nbr, idx, w, res, cols, vals)
     indptr = np.arange(0, 5 * len(res) + 1, 5, dtype=index)
     J = sp.csr_matrix((vals.ravel(), cols.ravel(), indptr), shape=(len(res), n))
     info = {"valid": usable, "weights": w, "chi2": chi2, "scale": scale, "jacobian_values": vals}
