@@ -394,6 +394,26 @@ def _smallest_singular(u, vt, warm=False):
 
 
 @nb.njit(parallel=True, cache=True)
+def _whitened_rows(s, var, v, w, ok):
+    """The rows ``w = s_a v_a - s_b v_b`` (N, P, 3) of eq. (5) at each point, and
+    ``ok`` (N,): every row finite and every variance positive (else its rows are
+    0). One compiled pass instead of NumPy's temporaries (0.3 s a call at
+    1280x960); the same arithmetic, so the same bits."""
+    N, P = s.shape[0], s.shape[1]
+    for i in nb.prange(N):
+        good = True
+        for k in range(P):
+            for j in range(3):
+                x = s[i, k, 0] * v[i, k, 0, j] - s[i, k, 1] * v[i, k, 1, j]
+                w[i, k, j] = x
+                good &= np.isfinite(x)
+            good &= var[i, k, 0] > 0 and var[i, k, 1] > 0
+        ok[i] = good
+        if not good:
+            w[i] = 0.0
+
+
+@nb.njit(parallel=True, cache=True)
 def _whitened_kernel(w, var, v, ok, R, passes, chi2, normal):
     """:func:`whitened_cost` per point (compiled; see there)."""
     N, P = w.shape[0], w.shape[1]
@@ -455,9 +475,9 @@ def whitened_cost(sides: HelmholtzSides, X: np.ndarray, R: np.ndarray, passes: i
     chi2 : (N,) NaN where a sample is unusable. normal : (N, 3) towards -R.
     """
     s, var, v, _, _ = sample_sides(sides, X, R, derivatives=False)
-    w = s[..., 0, None] * v[:, :, 0] - s[..., 1, None] * v[:, :, 1]
-    ok = np.all(np.isfinite(w), axis=(1, 2)) & np.all(var > 0, axis=(1, 2))
-    w = np.where(ok[:, None, None], w, 0.0)
+    w = np.empty((len(s), sides.pairs, 3))
+    ok = np.empty(len(s), bool)
+    _whitened_rows(s, var, v, w, ok)
     chi2 = np.empty(len(w))
     normal = np.empty((len(w), 3))
     _whitened_kernel(w, var, v, ok, np.ascontiguousarray(R, float), passes, chi2, normal)
