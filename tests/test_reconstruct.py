@@ -186,6 +186,13 @@ def test_ml_is_clearly_worse_than_bayes(tiny_dataset, calib, capsys):
     for step in steps:
         assert re.search(rf"{step}.* \[\d+\.\d s\]", err), step
     assert "data term: 100%" in err
+    reconstruct(fr, "ml", progress=True)
+    err = capsys.readouterr().err
+    steps = ["candidate 1 of", "parabola round 1 of 2", "candidate 1: its tangent-plane window"]
+    steps += ["4 more rounds on"]
+    steps += ["parabola round 1 of 4"]  # the chosen roots' rounds
+    for step in steps:
+        assert re.search(rf"ml: {step}.* \[\d+\.\d s\]", err), step
 
 
 def test_calibrations_help(tiny_dataset, calib):
