@@ -183,6 +183,7 @@ def test_ml_is_clearly_worse_than_bayes(tiny_dataset, calib, capsys):
     # Progress: one line per step, with the seconds since the start, and the data term's bar.
     err = capsys.readouterr().err
     steps = ["data term of", "MRF labelling", "initial surface", "depth search", "final LM"]
+    steps += ["normal integration, solve 1 of 3", "LM step 1 of 3"]
     for step in steps:
         assert re.search(rf"{step}.* \[\d+\.\d s\]", err), step
     assert "data term: 100%" in err
