@@ -197,29 +197,28 @@ def calibrate_crosstalk(
     fields = {}
     label = "cross-talk: filter mixing field"
     cams = ds.rig.camera_names
-    shown = bar(desc=label, total=3 * len(cams), enabled=progress and spatial, unit="fit")
-    for cam in cams:
-        imgs, sats = {}, {}
-        for colour in COLOURS:
-            imgs[colour], sats[colour] = read_image(
-                ds.chromatic_image("white", colour, cam), ds.rig.image
-            )
-        M, spread = crosstalk_matrix(imgs, sats)
-        out["cameras"][cam] = {"M": M.tolist(), "spread": spread.tolist()}
-        if spatial:
-            quantum = 1.0 / (ds.rig.image.white_level - ds.rig.image.black_level)
-            field, info = fit_mixing_field(
-                imgs, sats, degree=degree, quantum=quantum, step=shown.update
-            )
-            fields[cam] = field
-            out["cameras"][cam] |= {
-                "M": field.median.tolist(),
-                "filter_M": M.tolist(),
-                "field": field.to_json(),
-                "field_rms": info["rms"].tolist(),
-                "field_quantised": info["quantised"].tolist(),
-            }
-    shown.close()
+    with bar(desc=label, total=3 * len(cams), enabled=progress and spatial, unit="fit") as shown:
+        for cam in cams:
+            imgs, sats = {}, {}
+            for colour in COLOURS:
+                imgs[colour], sats[colour] = read_image(
+                    ds.chromatic_image("white", colour, cam), ds.rig.image
+                )
+            M, spread = crosstalk_matrix(imgs, sats)
+            out["cameras"][cam] = {"M": M.tolist(), "spread": spread.tolist()}
+            if spatial:
+                quantum = 1.0 / (ds.rig.image.white_level - ds.rig.image.black_level)
+                field, info = fit_mixing_field(
+                    imgs, sats, degree=degree, quantum=quantum, step=shown.update
+                )
+                fields[cam] = field
+                out["cameras"][cam] |= {
+                    "M": field.median.tolist(),
+                    "filter_M": M.tolist(),
+                    "field": field.to_json(),
+                    "field_rms": info["rms"].tolist(),
+                    "field_quantised": info["quantised"].tolist(),
+                }
     if spatial:
         out["method"] = (
             f"per-pixel I_c / I_b under light b alone (white reference), Legendre degree {degree}"

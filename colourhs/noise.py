@@ -166,24 +166,23 @@ def calibrate_noise(dataset_dir, out_json=None, progress: bool = True) -> NoiseM
         for cam in ds.rig.camera_names
     }
     total = sum(map(len, paths.values()))
-    shown = bar(desc="noise model", total=total, enabled=progress, unit="image")
-    for cam in ds.rig.camera_names:
-        images = []
-        for path in paths[cam]:
-            images.append(read_image(path, ds.rig.image)[0])
-            shown.update()
-        try:
-            floor = quantisation_variance(ds.rig.image.black_level, ds.rig.image.white_level)
-            gains[cam], offsets[cam] = estimate_noise(images, floor)
-        except ValueError as err:
-            raise ValueError(f"{ds.root / 'photometric'}: camera {cam}: {err}") from None
-        full_well = [1.0 / g if g > 0 else None for g in gains[cam]]
-        out["cameras"][cam] = {
-            "gain": gains[cam].tolist(),
-            "offset": offsets[cam].tolist(),
-            "full_well_e": full_well,
-        }
-    shown.close()
+    with bar(desc="noise model", total=total, enabled=progress, unit="image") as shown:
+        for cam in ds.rig.camera_names:
+            images = []
+            for path in paths[cam]:
+                images.append(read_image(path, ds.rig.image)[0])
+                shown.update()
+            try:
+                floor = quantisation_variance(ds.rig.image.black_level, ds.rig.image.white_level)
+                gains[cam], offsets[cam] = estimate_noise(images, floor)
+            except ValueError as err:
+                raise ValueError(f"{ds.root / 'photometric'}: camera {cam}: {err}") from None
+            full_well = [1.0 / g if g > 0 else None for g in gains[cam]]
+            out["cameras"][cam] = {
+                "gain": gains[cam].tolist(),
+                "offset": offsets[cam].tolist(),
+                "full_well_e": full_well,
+            }
     if out_json is not None:
         write_json(out_json, out)
     return NoiseModel(gains, offsets)

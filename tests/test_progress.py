@@ -141,3 +141,27 @@ def test_synth_shows_its_steps_before_the_views(tmp_path, capsys):
     assert "synth tiny: 100%" in err and "| 1/1 [" in err  # one job: the board pose
     synthesise(tmp_path / "b", preset, parts=("photometric",), workers=1, progress=False)
     assert capsys.readouterr() == ("", "")
+
+
+def test_calibration_bars_close_when_a_fit_fails(tiny_dataset, tmp_path, monkeypatch, capsys):
+    """The noise and cross-talk bars are closed before the error is reported: the
+    message starts its own line, not the end of a half-drawn bar."""
+    import colourhs.crosstalk as crosstalk
+    import colourhs.noise as noise
+
+    def fail(*args, **kwargs):
+        raise ValueError("no usable pixels")
+
+    monkeypatch.setattr(noise, "estimate_noise", fail)
+    monkeypatch.setattr(crosstalk, "fit_mixing_field", fail)
+    poses = tmp_path / "poses.csv"
+    marker_poses(tiny_dataset, poses, progress=False)
+    for argv in (
+        ["noise", tiny_dataset, tmp_path / "n.json"],
+        ["crosstalk", tiny_dataset, tmp_path / "x.json", "--poses", poses],
+    ):
+        assert main([str(a) for a in argv]) != 0
+        err = capsys.readouterr().err
+        assert "no usable pixels" in err
+        line = next(x for x in err.replace("\r", "\n").splitlines() if "no usable pixels" in x)
+        assert "%|" not in line, line
