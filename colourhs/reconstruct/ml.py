@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import warnings
 
+import numba as nb
 import numpy as np
 
 from colourhs.reconstruct.sides import HelmholtzSides, sample_sides, whitened_cost
@@ -135,16 +136,42 @@ def plane_chi2(sides: HelmholtzSides, X: np.ndarray, R: np.ndarray, n: np.ndarra
     """Eq. (5) residuals of points ``X`` (N, 3) against normals ``n`` (N, 3), in noise units.
 
     Sum over the pairs of ``(w_k . n)^2 / (var_a (v_a . n)^2 + var_b (v_b . n)^2)``
-    (the Sampson form); NaN where a sample is unusable.
+    (the Sampson form); NaN where a sample is unusable. Compiled, one pass
+    per point (:func:`_plane_chi2`).
     """
     s, var, v, _, _ = sample_sides(sides, X, R, derivatives=False)
-    w = s[..., 0, None] * v[:, :, 0] - s[..., 1, None] * v[:, :, 1]
-    ca = np.einsum("npk,nk->np", v[:, :, 0], n)
-    cb = np.einsum("npk,nk->np", v[:, :, 1], n)
-    sd2 = var[..., 0] * ca**2 + var[..., 1] * cb**2
-    with np.errstate(invalid="ignore", divide="ignore"):
-        r2 = np.einsum("npk,nk->np", w, n) ** 2 / sd2
-    return np.sum(r2, axis=1)
+    out = np.empty(len(s))
+    _plane_chi2(s, var, v, np.ascontiguousarray(n, float), out)
+    return out
+
+
+@nb.njit(parallel=True, cache=True, error_model="numpy")
+def _plane_chi2(s, var, v, n, out):
+    """:func:`plane_chi2` per point, into ``out`` (N,).
+
+    Beyond the paper (speed): replaces NumPy's five (N, P, 3) temporaries and
+    three einsums (4.3 s of an ML frame at 1280x960 on 2 threads, cProfile).
+    The dot products sum x, y, z in order, where einsum summed (x + z) + y,
+    so about 60 % of the values differ from NumPy's in the last bits. Division
+    as NumPy's (``error_model="numpy"``): x / 0 is inf or NaN, not an error.
+    Measured: the depths of the 8 kept random rigs' 24 ML frames and of
+    paper frame 99 are the same to the bit (the window's median picks the
+    same candidates).
+    """
+    P = s.shape[1]
+    for i in nb.prange(s.shape[0]):
+        nx, ny, nz = n[i, 0], n[i, 1], n[i, 2]
+        total = 0.0
+        for k in range(P):
+            sa, sb = s[i, k, 0], s[i, k, 1]
+            wx = sa * v[i, k, 0, 0] - sb * v[i, k, 1, 0]
+            wy = sa * v[i, k, 0, 1] - sb * v[i, k, 1, 1]
+            wz = sa * v[i, k, 0, 2] - sb * v[i, k, 1, 2]
+            ca = v[i, k, 0, 0] * nx + v[i, k, 0, 1] * ny + v[i, k, 0, 2] * nz
+            cb = v[i, k, 1, 0] * nx + v[i, k, 1, 1] * ny + v[i, k, 1, 2] * nz
+            r = wx * nx + wy * ny + wz * nz
+            total += r * r / (var[i, k, 0] * ca * ca + var[i, k, 1] * cb * cb)
+        out[i] = total
 
 
 def window_score(
