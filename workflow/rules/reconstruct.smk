@@ -22,7 +22,7 @@ rule reconstruct_frame:
     # One thread: two frames at once keep both cores busy (the solver and the
     # refinement are serial); raise with --set-threads reconstruct_frame=N.
     threads: 1
-    # Measured at 1280x960 (paper preset, sheet frame 99, 2 threads): bayes 2.47 GB, 43-49 s; ml 2.05 GB, 35-40 s.
+    # Measured at 1280x960 (paper preset, sheet frame 99, 2 threads): bayes 2.47 GB, 43-49 s; ml 2.01 GB, 31-32 s.
     resources:
         mem_mb=3000,
         runtime=10,
