@@ -36,6 +36,7 @@ around the fixation point.
 from __future__ import annotations
 
 from functools import partial
+from pathlib import Path
 from time import perf_counter
 
 import numpy as np
@@ -317,6 +318,10 @@ def visual_hull(
         say(f"visual hull: {len(v)} vertices; depth map in {ref.name}")
         depth = hull_depth(v, t, n, ref, spec.width, spec.height, sils[ref.name])
         depth.info.update(info)
+    say(
+        f"visual hull: writing {Path(out_ply).name}"
+        + (" and its depth map" if depth is not None else "")
+    )
     write_ply(out_ply, v, t, n)
     if depth is not None:
         from colourhs.depthfile import write_depth
