@@ -213,8 +213,9 @@ def test_float16_normals_same_as_float32():
 
 
 def test_sgm_reports_its_three_sweeps_and_gives_the_same_labels():
-    """``say`` gets a line before each sweep (progress at 1280 x 960, where each
-    takes seconds); the result is the one without it."""
+    """``say`` gets a line before each sweep and each band of a vertical sweep's rows
+    (progress at 1280 x 960, where each sweep takes seconds); the result is the one
+    without it."""
     cost, normals, rays, depths = random_problem(np.random.default_rng(5), 9, 11, 8)
     lines = []
     labels, S = sgm_depth_normal(cost, normals, rays, depths, say=lines.append)
@@ -222,7 +223,13 @@ def test_sgm_reports_its_three_sweeps_and_gives_the_same_labels():
     assert np.array_equal(labels, ref_labels) and np.array_equal(S, ref_S)
     assert lines == [
         "MRF: paths along the columns and diagonals, top to bottom",
+        "MRF: top to bottom, 2 of 9 rows",  # the sweep's bands (SWEEP_BANDS = 4)
+        "MRF: top to bottom, 4 of 9 rows",
+        "MRF: top to bottom, 6 of 9 rows",
         "MRF: paths along the columns and diagonals, bottom to top",
+        "MRF: bottom to top, 2 of 9 rows",
+        "MRF: bottom to top, 4 of 9 rows",
+        "MRF: bottom to top, 6 of 9 rows",
         "MRF: paths along the rows, both ways; the labels",
     ]
 

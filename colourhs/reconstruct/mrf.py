@@ -81,6 +81,9 @@ _JH_MAX = 1e6  # |j_hat| beyond this: treated as uninformative (V = tau either w
 _HALF_SCALE = np.ldexp(np.float32(1.0), np.arange(32) - 25).astype(np.float32)
 
 
+SWEEP_BANDS = 4  # progress only: a vertical sweep runs as this many bands of rows, same numbers
+
+
 @njit(cache=True)
 def _half_to_f32(h):
     """Exact float16 (given as its uint16 bits) to float32 conversion, in
@@ -172,21 +175,25 @@ def _predict(dks_k, a, den, off):
 
 
 @njit(parallel=True, cache=True, fastmath=_FASTMATH)
-def _sweep_vertical(cost, normals, rays, dks, off, alpha, w, wtau, S, down, diag, first, nchunks):
+def _sweep_vertical(
+    cost, normals, rays, dks, off, alpha, w, wtau, S, down, diag, first, nchunks, bufs, steps
+):
     """Top-to-bottom (``down``) or bottom-to-top paths: vertical (+ both diagonals).
 
     Rows are processed in order; the columns of a row in parallel. Path
-    buffers: the distance transforms and minima of the previous row's
-    ``L_r`` (two rows, ``2 * nd * W * K`` floats). ``first``: assign ``S``
-    instead of accumulating. ``nchunks``: column blocks per row (<= W).
+    buffers ``bufs`` = (Dbuf (2, nd, W, K), mbuf (2, nd, W)) float32: the
+    distance transforms and minima of the previous row's ``L_r`` (nd = 3
+    with ``diag``, else 1). ``first``: assign ``S`` instead of accumulating.
+    ``nchunks``: column blocks per row (<= W). ``steps`` = (s0, s1): the rows
+    s0 .. s1 - 1 of the sweep's order, so that a sweep can run in bands
+    (the buffers carry the last row from one band to the next).
     """
     H, W, K = cost.shape
     nd = 3 if diag else 1
     # direction r = (di, dj): predecessor q = (i - di, j - dj)
     djs = np.array([0, 1, -1], dtype=np.int64)
-    Dbuf = np.empty((2, nd, W, K), dtype=np.float32)
-    mbuf = np.empty((2, nd, W), dtype=np.float32)
-    for step in range(H):
+    Dbuf, mbuf = bufs
+    for step in range(steps[0], steps[1]):
         i = step if down else H - 1 - step
         qi = i - 1 if down else i + 1
         cur = step & 1
@@ -483,10 +490,16 @@ def sgm_depth_normal(
     args = (cost, nrm, rays, dks32, off32, a32, w32, wtau, S)
     nchunks = min(W, 4 * numba.get_num_threads())
     columns = "columns and diagonals" if diag else "columns"
+    nd = 3 if diag else 1
+    bufs = (np.empty((2, nd, W, K), np.float32), np.empty((2, nd, W), np.float32))
     for down, text in ((True, "top to bottom"), (False, "bottom to top")):
         if say is not None:
             say(f"MRF: paths along the {columns}, {text}")
-        _sweep_vertical(*args, down, diag, down, nchunks)
+        for b in range(SWEEP_BANDS):  # a line per band: 6 s a sweep at 1280x960, 1 thread
+            s0, s1 = b * H // SWEEP_BANDS, (b + 1) * H // SWEEP_BANDS
+            if b and say is not None:
+                say(f"MRF: {text}, {s0} of {H} rows")
+            _sweep_vertical(*args, down, diag, down, nchunks, bufs, (s0, s1))
     if say is not None:
         say("MRF: paths along the rows, both ways; the labels")
     _sweep_horizontal(*args, labels, False)
