@@ -461,8 +461,9 @@ def sgm_depth_normal(
     directions : {8, 4}
         8: rows, columns and both diagonals, both senses; 4: rows and columns.
     say : callable, optional
-        Called with a line before each of the three sweeps (progress: 2-3 s
-        each at 1280 x 960 on one thread).
+        Called with a line before each of the three sweeps and before each
+        later band of ``SWEEP_BANDS`` of a vertical sweep's rows (progress: a
+        vertical sweep took 6 s at 1280 x 960 on one thread).
 
     Returns
     -------
