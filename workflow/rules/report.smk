@@ -37,7 +37,8 @@ rule scene_figures:
     benchmark:
         "benchmarks/snakemake/scene_figures/{name}/{scene}.tsv"
     threads: 1
-    # Measured at 1280x960 (paper preset, benchmarks/bench_paper.py): 0.90 GB, 45 s for 5 variants.
+    # Measured at 1280x960 (paper preset, benchmarks/bench_paper.py): 5 variants and the
+    # animation of 20 frames 1.09 GB, 34 s; of the 201-frame sheet 1.31 GB, 3.0 min.
     resources:
         mem_mb=1500,
         runtime=10,
