@@ -39,6 +39,7 @@ from colourhs.commands import (  # noqa: F401 (imported from here by users)
     _validate,
     frame_indices,
 )
+from colourhs.progress import line_buffered
 
 NUISANCE_SWITCHES = ("light_falloff", "vignetting", "crosstalk", "noise", "saturate")
 
@@ -549,6 +550,7 @@ def main(argv: list[str] | None = None) -> int:
         from colourhs.io import record_reads
 
         record_reads(os.environ["COLOURHS_AUDIT_READS"])
+    line_buffered()  # stdout reaches a job's log line by line, beside stderr's progress
     argv = list(sys.argv[1:] if argv is None else argv)
     command_line, extra = ["colourhs", *argv], []
     if "--" in argv:

@@ -227,7 +227,9 @@ def _chromaticity(args) -> int:
 
     from colourhs.chromaticity import chromaticity_maps
 
-    result = chromaticity_maps(args.dataset, args.object, args.out, min_signal=args.min_signal)
+    result = chromaticity_maps(
+        args.dataset, args.object, args.out, min_signal=args.min_signal, progress=True
+    )
     if args.figure:
         from colourhs.figures import chromaticity_figure
 

@@ -43,8 +43,9 @@ def _run_out(argv, capsys) -> tuple[str, str]:
 
 
 def test_calibration_stages_show_progress(tiny_dataset, tmp_path, capsys):
-    """validate (10 s at paper scale), markers (7 s), noise (16 s) and photometric (21 s):
-    bars over the images, poses, images and pairs, a line per later step (6.1-6.7 s here)."""
+    """validate (10 s at paper scale), markers (7 s), noise (16 s), photometric (21 s) and
+    chromaticity (7 s): bars over the images, poses, images, pairs and cameras, a line
+    per later step (6.1-6.7 s here)."""
     poses = tmp_path / "poses.csv"
     err = _run(["markers", tiny_dataset, poses], capsys)
     assert "markers: board poses: 100%" in err and "| 7/7 [" in err  # 7 poses
@@ -63,6 +64,10 @@ def test_calibration_stages_show_progress(tiny_dataset, tmp_path, capsys):
         "photometric: dense maps, calibrated regions, eq. (7) residuals",
         "photometric: writing ph.h5",
     ]
+    out, err = _run_out(["chromaticity", tiny_dataset, "toy", tmp_path / "toy.h5"], capsys)
+    assert "chromaticity toy: 100%" in err and "| 3/3 [" in err  # 3 cameras
+    assert "chromaticity toy: writing toy.h5" in err
+    assert "pixels with a chromaticity" in out and "wrote" in out
     marker_poses(tiny_dataset, tmp_path / "p2.csv", progress=False)
     calibrate_noise(tiny_dataset, progress=False)
     photometric_maps(tiny_dataset, poses, tmp_path / "p2.h5", progress=False)
@@ -165,3 +170,40 @@ def test_calibration_bars_close_when_a_fit_fails(tiny_dataset, tmp_path, monkeyp
         assert "no usable pixels" in err
         line = next(x for x in err.replace("\r", "\n").splitlines() if "no usable pixels" in x)
         assert "%|" not in line, line
+
+
+def test_bar_redraws_when_its_items_slow_down(monkeypatch, capsys):
+    """A bar redraws on any update once MIN_INTERVAL_S has passed, also after fast
+    items (tqdm's default learns a minimum of items between redraws from the first
+    ones: the paper preset's noise model then went 6 s without a line). Here with a
+    50 ms interval: 10 instant items, then 8 of 60 ms; measured 9 redraws in the slow
+    part (tqdm's default: 2, the last one the closing redraw)."""
+    import time
+
+    from colourhs import progress
+
+    monkeypatch.setattr(progress, "MIN_INTERVAL_S", 0.05)
+    for i in progress.bar(range(18), "slow down"):
+        if i >= 10:
+            time.sleep(0.06)
+    lines = _lines(capsys.readouterr().err)
+    shown = [int(line.split("|")[2].split("/")[0]) for line in lines if "|" in line]
+    assert sum(1 for n in shown if n > 10) >= 6  # measured 9
+
+
+def test_stdout_reaches_a_file_line_by_line():
+    """``colourhs`` makes its stdout line-buffered, so a job's printed lines reach its
+    log as they are printed (block buffering held the paper preset's chromaticity
+    job's lines until it ended, 7 s)."""
+    import io
+
+    from colourhs.progress import line_buffered
+
+    raw = io.BytesIO()
+    stream = io.TextIOWrapper(raw, encoding="utf-8")
+    print("before", file=stream)
+    assert raw.getvalue() == b""  # block-buffered, as a file is
+    line_buffered(stream)
+    print("cam1: 255715 pixels with a chromaticity", file=stream)
+    assert raw.getvalue() == b"before\ncam1: 255715 pixels with a chromaticity\n"
+    line_buffered(object())  # a stream without reconfigure is left alone
