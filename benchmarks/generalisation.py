@@ -5,20 +5,24 @@ Run: ``.venv/bin/python benchmarks/generalisation.py [--seeds 0-7] [--preset ran
 
 For every seed it renders ``colourhs synth --preset random --seed N`` (a
 different rig and scene set each time, ranges in
-:mod:`colourhs.synth.randomrig`), runs the calibration stages exactly as the
-workflow does (marker poses, cross-talk with the board's LED factor, noise
-model, photometric maps, chromaticity maps of the statue and the toy), then
-reconstructs every scene with the paper's ablation (``vh``, ``ml_full``,
-``bayes_nocalib``, ``bayes_ph``, ``bayes_full``, the workflow's calibration
-files per variant) and compares each depth map with the ground truth
-rendered into the reference camera. Nothing in the pipeline sees the seed,
-the preset or the ``gt/`` folder.
+:mod:`colourhs.synth.randomrig`; ``--preset corner`` draws from the ranges'
+hard ends combined, ``random-tiny`` and ``corner-tiny`` at 160x120), runs
+the calibration stages exactly as the workflow does (marker poses,
+cross-talk with the board's LED factor, noise model, photometric maps,
+chromaticity maps of the statue and the toy), then reconstructs every scene
+with the paper's ablation (``vh``, ``ml_full``, ``bayes_nocalib``,
+``bayes_ph``, ``bayes_full``, the workflow's calibration files per variant)
+and compares each depth map with the ground truth rendered into the
+reference camera. Nothing in the pipeline sees the seed, the preset or the
+``gt/`` folder.
 
 Writes to ``benchmarks/results/``:
 
 - ``generalisation_seeds.csv``: one row per seed x scene x variant (frames of
-  the sheet pooled): depth median, RMS, p95 (mm), normal median (deg),
-  completeness (reconstructed / ground-truth-visible pixels), and per seed
+  the sheet pooled): the set (the preset's name), depth median of the
+  absolute errors and of the signed ones (``depth_signed_median_mm``:
+  reconstructed minus true z-depth, a bias), RMS, p95 (mm), normal median
+  (deg), completeness (reconstructed / ground-truth-visible pixels), and per seed
   the calibration errors (mu RMS log error, worst map; cross-talk residual
   leak; chromaticity median).
 - ``generalisation_summary.json``: per scene x variant and metric the median
@@ -213,7 +217,14 @@ def run_seed(
                     data, scene, frames, variant, files, sc.chromatic, root / "work"
                 )
                 rows.append(
-                    {"seed": seed, "scene": scene, "variant": variant, "frames": len(frames), **m}
+                    {
+                        "set": preset,
+                        "seed": seed,
+                        "scene": scene,
+                        "variant": variant,
+                        "frames": len(frames),
+                        **m,
+                    }
                 )
                 print(
                     f"seed {seed} {scene:7s} {variant:14s} depth {m['depth_median_mm']:.3f} "
@@ -227,6 +238,7 @@ def run_seed(
         for k, v in cal.items():
             table[k] = v
         table["bit_depth"] = rig.image.bit_depth
+        table["white_level"] = rig.image.white_level  # 4095: 12-bit data in 16-bit PNGs
         table["working_distance_m"] = draw.get("working_distance_m")
         table["masks"] = draw.get("mask_mode")
         table["render_s"], table["calib_s"] = t_render, t_calib
@@ -240,6 +252,8 @@ def run_seed(
 def summarise(table: pd.DataFrame) -> dict:
     metrics = ("depth_median_mm", "depth_rms_mm", "normal_median_deg", "coverage")
     out = {"seeds": sorted(int(s) for s in table["seed"].unique()), "scenes": {}}
+    if "set" in table:  # tables written before the column have none
+        out["sets"] = sorted(str(s) for s in table["set"].unique())
     for (scene, variant), g in table.groupby(["scene", "variant"]):
         entry = {}
         for m in metrics:
@@ -285,7 +299,12 @@ def summarise(table: pd.DataFrame) -> dict:
 def main(argv=None) -> dict:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--seeds", default="0-7", help="seeds, e.g. 0-7 or 1,3,5 (default 0-7)")
-    p.add_argument("--preset", default="random", help="random (640x480) or random-tiny")
+    p.add_argument(
+        "--preset",
+        default="random",
+        help="a randomised preset: random or corner (640x480; corner: the ranges' hard ends "
+        "combined), random-tiny or corner-tiny (160x120); default random",
+    )
     p.add_argument("--sheet-frames", type=int, default=2, help="sheet frames per seed (default 2)")
     p.add_argument("--keep", type=Path, default=None, help="keep datasets and results here")
     p.add_argument("--tag", default="", help="suffix of the output files")
@@ -301,6 +320,12 @@ def main(argv=None) -> dict:
         help="only summarise this per-seed table (a generalisation_seeds CSV), rendering nothing",
     )
     args = p.parse_args(argv)
+    if args.summarise is None:
+        from colourhs.synth.dataset import PRESETS
+
+        if args.preset not in PRESETS or not PRESETS[args.preset].randomised:
+            randomised = ", ".join(k for k, v in PRESETS.items() if v.randomised)
+            p.error(f"--preset {args.preset}: not a randomised preset ({randomised})")
     out_dir = HERE / "results"
     out_dir.mkdir(exist_ok=True)
     csv = out_dir / f"generalisation_seeds{args.tag}.csv"

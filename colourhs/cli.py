@@ -93,8 +93,9 @@ def build_parser(show_defaults: bool | Collection[str] = False) -> argparse.Argu
     s.add_argument(
         "--preset",
         default="demo",
-        help="tiny, demo, paper, random, random-tiny or random-tiny-lens (default demo); the "
-        "random presets draw a different rig, board, encoding and scene set for every --seed",
+        help="tiny, demo, paper, random, random-tiny, random-tiny-lens, corner or corner-tiny "
+        "(default demo); the random and corner presets draw a different rig, board, encoding "
+        "and scene set for every --seed (corner: the ranges' hard ends combined)",
     )
     s.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     s.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")

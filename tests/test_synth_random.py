@@ -5,6 +5,7 @@ Renders use ``random-tiny`` (160x120) and only the parts a test needs.
 
 from __future__ import annotations
 
+import hashlib
 import json
 from dataclasses import replace
 
@@ -21,7 +22,7 @@ from colourhs.ply import load_mesh
 from colourhs.sampling import sample_bilinear
 from colourhs.synth import randomrig as rr
 from colourhs.synth.brdf import Material
-from colourhs.synth.dataset import PRESETS, SCENE_META, _mask, synthesise
+from colourhs.synth.dataset import PRESETS, SCENE_META, _mask, rig_json, synthesise
 from colourhs.synth.rig import COLOURS, Nuisances
 
 TINY = PRESETS["random-tiny"]
@@ -215,6 +216,11 @@ def test_seeds_give_different_rigs():
     assert len({d.mask_mode for d in draws}) >= 2
 
 
+def _slant(normal, sight):
+    """Angle (deg) between a board's normal and a line of sight."""
+    return np.rad2deg(np.arccos(np.clip(normal @ sight / np.linalg.norm(sight), -1, 1)))
+
+
 def _pair_angle(c1, c2):
     return np.rad2deg(np.arccos(c1 @ c2 / np.linalg.norm(c1) / np.linalg.norm(c2)))
 
@@ -256,13 +262,18 @@ def _check_ranges(d, rg, width, height):
         assert rg.crosstalk[0] <= X[off].min() and X[off].max() <= rg.crosstalk[1]
         ratio = Xc[off] / X[off]
         assert np.all((ratio >= 0.6) & (ratio <= 1.4)) and not np.allclose(ratio, 1, atol=0.01)
-        np.testing.assert_array_equal(cam.light_offset, np.zeros(3))
+        lo, hi = rg.light_offset_m
+        if hi > 0:  # beside the lens, in the camera's x-y plane
+            assert lo - 1e-12 <= np.linalg.norm(cam.light_offset) <= hi + 1e-12
+            assert cam.light_offset[2] == 0
+        else:
+            np.testing.assert_array_equal(cam.light_offset, np.zeros(3))
         # Channel vignetting centres differ by at most 0.1 of the corner radius.
         vc = cam.vignetting_centre
         spread = max(np.linalg.norm(vc[i] - vc[j]) for i in range(3) for j in range(i))
         assert spread <= 0.1 * cam.corner_radius + 1e-12
     for light, cam in zip(d.rig.lights, cams, strict=True):
-        np.testing.assert_allclose(light.position, cam.centre, atol=1e-12)
+        np.testing.assert_allclose(light.position, cam.light_centre, atol=1e-12)
         tilt = np.rad2deg(np.arccos(np.clip(light.R[2] @ cam.R[2], -1, 1)))
         assert tilt <= rg.led_tilt_deg + 1e-6
         amp, period, _ = light.ripple
@@ -286,10 +297,15 @@ def _check_ranges(d, rg, width, height):
         for j in range(i):
             assert np.any(np.abs(c[i] - c[j]) > L)  # no overlap
     assert len(d.poses) == 8
-    for R, t in d.poses:
+    for k, (R, t) in enumerate(d.poses):
         normal = R @ [0, 0, -1.0]
-        assert np.rad2deg(np.arccos(-normal[2])) <= rg.pose_slant_deg + 1e-6
         centre = R @ np.array([w / 2, h / 2, 0]) + t
+        if k == len(d.poses) - 1 and rg.plane_slant_deg is not None:  # the plane: to the reference
+            slant = _slant(normal, cams[0].centre - centre)
+            assert rg.plane_slant_deg[0] - 1e-6 <= slant <= rg.plane_slant_deg[1] + 1e-6
+            assert slant == pytest.approx(desc["plane_slant_deg"], abs=1e-9)
+        else:
+            assert np.rad2deg(np.arccos(-normal[2])) <= rg.pose_slant_deg + 1e-6
         half = D * np.tan(np.deg2rad(hfov) / 2)
         assert np.all(np.abs(centre[:2]) <= rg.pose_offcentre * half + 1e-9)
         for cam in cams:
@@ -429,3 +445,160 @@ def test_lens_preset_draws_skewed_cameras_with_rational_and_thin_prism_terms():
     for cam in d.rig.cameras:
         assert len(cam.dist) >= 12 and np.all(cam.dist[5:8] != 0) and np.any(cam.dist[8:12] != 0)
         assert cam.K[0, 1] != 0
+
+
+# --------------------------------------------------------------------------- corner
+CORNER = PRESETS["corner-tiny"]
+
+
+def _draw_preset(name, seed, exact=False):
+    p = PRESETS[name]
+    return rr.draw_random(
+        seed,
+        p.width,
+        p.height,
+        Nuisances(),
+        rr.RANGES_BY_NAME[p.random_ranges],
+        n_poses=p.n_poses,
+        sheet_frames=p.sheet_frames,
+        statue_level=p.statue_level,
+        exact=exact,
+    )
+
+
+def _rounded(v):
+    """``v`` (JSON data) with floats to 9 significant digits: last-bit differences
+    between platforms do not change a digest."""
+    if isinstance(v, float):
+        return float(f"{v:.9g}")
+    if isinstance(v, dict):
+        return {k: _rounded(x) for k, x in v.items()}
+    if isinstance(v, list):
+        return [_rounded(x) for x in v]
+    return v
+
+
+def _digest(d) -> str:
+    """Digest of a draw: its description, rig model (cameras, lights, nuisances),
+    board poses and encoding."""
+    data = rr.describe(d) | {
+        "rig": d.rig.to_json(),
+        "poses": [[R.tolist(), t.tolist()] for R, t in d.poses],
+        "encoding": [d.bit_depth, d.black_level, d.mask_mode],
+    }
+    text = json.dumps(_rounded(json.loads(json.dumps(data))), sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+# The draws of the code before the corner presets (12-bit data, the plane's
+# slant, light offsets) were added: those options draw nothing on the other
+# presets, so every seed keeps its rig, scenes and images.
+DIGESTS = {
+    ("random", 0): "84b43e626ecca783",
+    ("random", 1): "a6b41b82a16b2a2f",
+    ("random-tiny", 0): "996b56ab443d8cfc",
+    ("random-tiny", 1): "ca9789e4c48fd4eb",
+    ("random-tiny-lens", 0): "d3a904c916148944",
+    ("random-tiny-lens", 1): "6f915bb7c551fb87",
+}
+
+
+@pytest.mark.parametrize("key", sorted(DIGESTS), ids=lambda k: f"{k[0]}-{k[1]}")
+def test_existing_presets_draw_as_before(key):
+    d = _draw_preset(*key)
+    assert d.white_level == 2**d.bit_depth - 1
+    assert "white_level" not in d.description and "plane_slant_deg" not in d.description
+    assert _digest(d) == DIGESTS[key]
+
+
+def _corner_encoding(seed):
+    """(sensor bit depth, mask mode) a corner seed draws (the encoding stream only)."""
+    enc = rr._stream(seed, "encoding")
+    bits = int(enc.choice(list(rr.CORNER_TINY_RANGES.bit_depths)))
+    enc.uniform(0, 1)
+    return bits, str(enc.choice(rr.MASK_MODES))
+
+
+def _first_seed_corner(bits):
+    return next(s for s in range(100) if _corner_encoding(s)[0] == bits)
+
+
+def test_corner_draws_stay_in_their_ranges():
+    """Pair angles U(12, 15) deg, the plane 40-50 deg to the reference camera,
+    lights 2-4 cm beside the lenses (also in rig.json), 8- or 12-bit data."""
+    rg = rr.CORNER_TINY_RANGES
+    assert (
+        rr.RANGES_BY_NAME["corner-tiny"] is rg and rr.RANGES_BY_NAME["corner"] is rr.CORNER_RANGES
+    )
+    assert (rg.pair_angle_deg, rg.plane_slant_deg, rg.light_offset_m) == (
+        (12.0, 15.0),
+        (40.0, 50.0),
+        (0.02, 0.04),
+    )
+    sensor_bits = set()
+    for seed in range(4):
+        d = _draw_preset("corner-tiny", seed)
+        _check_ranges(d, rg, CORNER.width, CORNER.height)
+        bits = _corner_encoding(seed)[0]
+        sensor_bits.add(bits)
+        assert (d.bit_depth, d.white_level) == ((8, 255) if bits == 8 else (16, 4095))
+        assert 0 <= d.black_level <= rg.black_level_dn[bits]
+        rig = rig_json(
+            d.rig, replace(CORNER, bit_depth=d.bit_depth, white_level=d.white_level), d.board
+        )
+        assert rig["image"]["white_level"] == d.white_level
+        for cam, entry in zip(d.rig.cameras, rig["cameras"], strict=True):
+            offset = np.array(entry["light"]["offset"])
+            np.testing.assert_array_equal(offset, cam.light_offset)
+            assert 0.02 <= np.linalg.norm(offset) <= 0.04 and offset[2] == 0
+    assert sensor_bits == {8, 12}
+    # exact: 16-bit data at 65535 whatever the seed drew
+    seed = _first_seed_corner(12)
+    e = _draw_preset("corner-tiny", seed, exact=True)
+    assert (e.bit_depth, e.white_level, e.mask_mode) == (16, 65535, "exact")
+    assert _draw_preset("corner-tiny", seed).board == e.board
+
+
+def test_corner_12_bit_dataset_validates(tmp_path):
+    """A 12-bit corner-tiny draw: 16-bit PNGs up to 4095, white level 4095 in
+    rig.json, the lights' offsets there, every marker found on the slanted boards."""
+    seed = _first_seed_corner(12)
+    root = synthesise(
+        tmp_path / "d",
+        "corner-tiny",
+        seed=seed,
+        parts=("photometric", "scenes"),
+        scenes=("plane",),
+        progress=False,
+        workers=2,
+    )
+    summary = validate(root)
+    assert summary["image"]["bit_depth"] == 16
+    rig = json.loads((root / "rig.json").read_text())
+    assert rig["image"]["bit_depth"] == 16 and rig["image"]["white_level"] == 4095
+    assert 0 <= rig["image"]["black_level"] <= 256
+    d = _draw_preset("corner-tiny", seed)
+    for cam, entry in zip(d.rig.cameras, rig["cameras"], strict=True):
+        np.testing.assert_allclose(entry["light"]["offset"], cam.light_offset, rtol=0, atol=1e-15)
+    draw = json.loads((root / "gt" / "rig_model.json").read_text())["draw"]
+    assert draw["white_level"] == 4095 and 40 <= draw["plane_slant_deg"] <= 50
+    top = 0
+    for path in root.glob("**/*.png"):
+        if "masks" in path.parts:
+            continue
+        img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+        assert img.dtype == np.uint16, path
+        top = max(top, int(img.max()))
+    assert 255 < top <= 4095
+    ds = open_dataset(root)
+    det = cv2.aruco.ArucoDetector(
+        cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, ds.rig.board.dictionary)),
+        cv2.aruco.DetectorParameters(),
+    )
+    frames = [root / "photometric" / p for p in ds.poses]
+    for frame in [*frames, root / "scenes" / "plane" / "frames" / "000000"]:
+        for cam in ds.rig.cameras:
+            img, _ = read_image(frame / f"{cam.name}.png", ds.rig.image)
+            _, ids, _ = det.detectMarkers(to_grey8(img.mean(axis=2)))
+            found = sorted(ids.ravel()) if ids is not None else []
+            assert found == sorted(ds.rig.board.markers), f"{frame.name}/{cam.name}: {found}"

@@ -31,6 +31,8 @@ from colourhs.ply import write_ply
 from colourhs.progress import bar, stage
 from colourhs.raycast import raycasting_scene
 from colourhs.synth import scenes as sc
+from colourhs.synth.groundtruth import true_mu_maps
+from colourhs.synth.groundtruth import true_poses_csv as true_poses_csv  # re-exported
 from colourhs.synth.poses import board_poses
 from colourhs.synth.render import (
     camera_rays,
@@ -74,8 +76,10 @@ class Preset:
 
     A ``randomised`` preset draws its rig, board, encoding and scenes from the
     seed, from the ranges ``randomrig.RANGES_BY_NAME[random_ranges]`` (see
-    :mod:`colourhs.synth.randomrig`; ``focal_px``, ``board``, ``bit_depth`` and
-    ``black_level`` are then ignored).
+    :mod:`colourhs.synth.randomrig`; ``focal_px``, ``board``, ``bit_depth``,
+    ``black_level`` and ``white_level`` are then ignored). ``bit_depth`` is the
+    PNGs' (8 or 16); ``white_level`` the raw value of full scale, None for
+    ``2**bit_depth - 1`` (4095 for 12-bit data in 16-bit PNGs).
     """
 
     name: str
@@ -89,6 +93,7 @@ class Preset:
     board: dict = field(default_factory=lambda: DEMO_BOARD)
     bit_depth: int = 16
     black_level: int = 512
+    white_level: int | None = None
     randomised: bool = False
     random_ranges: str = "random"
 
@@ -114,6 +119,12 @@ PRESETS = {
 # (randomranges.RANGES_BY_NAME), for the camera model's less common coefficients.
 PRESETS["random-tiny-lens"] = replace(
     PRESETS["random-tiny"], name="random-tiny-lens", random_ranges="random-tiny-lens"
+)
+# The hard ends of the ranges combined (randomranges.CORNER_RANGES), at the
+# random presets' sizes.
+PRESETS["corner"] = replace(PRESETS["random"], name="corner", random_ranges="corner")
+PRESETS["corner-tiny"] = replace(
+    PRESETS["random-tiny"], name="corner-tiny", random_ranges="corner-tiny"
 )
 
 
@@ -160,7 +171,7 @@ def rig_json(rig: RigModel, preset: Preset, board: dict) -> dict:
             "height": preset.height,
             "bit_depth": preset.bit_depth,
             "black_level": preset.black_level,
-            "white_level": 2**preset.bit_depth - 1,
+            "white_level": _white_level(preset),
         },
         "cameras": [c.to_json() for c in rig.cameras],
         "board": board,
@@ -168,43 +179,9 @@ def rig_json(rig: RigModel, preset: Preset, board: dict) -> dict:
     }
 
 
-def true_mu_maps(rig: RigModel) -> dict[str, np.ndarray]:
-    """Ground-truth mu = rho / sigma (eq. 2) per Helmholtz camera, on pixel centres.
-
-    Keys are ``"<camera>/<channel colour>"`` for every channel that records
-    another camera's light; values are float32 (height, width).
-    """
-    colours = [c.light_colour for c in rig.cameras]
-    out = {}
-    for i, cam in enumerate(rig.cameras):
-        rays = camera_rays(cam, rig.width, rig.height, supersample=1)
-        for colour in colours:
-            if colour == cam.light_colour:
-                continue
-            ch = COLOURS.index(colour)
-            mu = rig.helmholtz_mu(i, ch, rays.xy, rays.origin + 0.8 * rays.directions)
-            out[f"{cam.name}/{colour}"] = mu.reshape(rig.height, rig.width).astype(np.float32)
-    return out
-
-
-def true_poses_csv(dataset_dir: str | Path, out_csv: str | Path) -> Path:
-    """A marker-poses table (``R00..R22``, ``t_x/y/z``) from a synthetic dataset's true poses.
-
-    Reads ``gt/board_poses.json``; the rows are the ``photometric/`` poses in
-    name order, so a stage fed this table instead of
-    :func:`colourhs.markers.marker_poses`'s is isolated from pose errors.
-    """
-    root = Path(dataset_dir)
-    poses = json.loads((root / "gt" / "board_poses.json").read_text())
-    rows = []
-    for name in sorted(p.name for p in (root / "photometric").iterdir()):
-        R, t = np.array(poses[name]["R"]), np.array(poses[name]["t"])
-        row = {"pose": name} | {f"R{i}{j}": R[i, j] for i in range(3) for j in range(3)}
-        rows.append(row | {"t_x": t[0], "t_y": t[1], "t_z": t[2]})
-    import pandas as pd
-
-    pd.DataFrame(rows).to_csv(out_csv, index=False)
-    return Path(out_csv)
+def _white_level(preset: Preset) -> int:
+    """The preset's raw value of full scale: its ``white_level``, else ``2**bit_depth - 1``."""
+    return 2**preset.bit_depth - 1 if preset.white_level is None else preset.white_level
 
 
 def _image_rng(seed: int, relpath: str) -> np.random.Generator:
@@ -329,8 +306,9 @@ def synthesise(
     Parameters
     ----------
     out : dataset folder to create.
-    preset : ``"tiny"``, ``"demo"``, ``"paper"``, ``"random"``, ``"random-tiny"`` or a
-        :class:`Preset`.
+    preset : a name of :data:`PRESETS` (``"tiny"``, ``"demo"``, ``"paper"``,
+        ``"random"``, ``"random-tiny"``, ``"random-tiny-lens"``, ``"corner"``,
+        ``"corner-tiny"``) or a :class:`Preset`.
     seed : seed of every random choice (rig, poses, noise; with a randomised
         preset also the rig's design, board, encoding, masks and scenes).
     nuisances : effects to simulate (default: all on, :class:`Nuisances`). With a
@@ -386,7 +364,13 @@ def synthesise(
             exact=exact,
         )
         rig, poses = d.rig, d.poses
-        p = replace(p, board=d.board, bit_depth=d.bit_depth, black_level=d.black_level)
+        p = replace(
+            p,
+            board=d.board,
+            bit_depth=d.bit_depth,
+            black_level=d.black_level,
+            white_level=d.white_level,
+        )
         nuis = rig.nuisances
         b = d.builders
         content = Content(
@@ -589,7 +573,8 @@ def _mask(coverage: np.ndarray, mode: str) -> np.ndarray:
 
 
 def _write_image(root, rel, signal, seed, nuis, p):
-    dn = sensor(signal, _image_rng(seed, rel), nuis, p.bit_depth, p.black_level)
+    rng = _image_rng(seed, rel)
+    dn = sensor(signal, rng, nuis, p.bit_depth, p.black_level, _white_level(p))
     if dn.dtype.kind == "f":
         raise ValueError("datasets are written quantised: Nuisances.quantise must be on")
     write_png(root / rel, dn)

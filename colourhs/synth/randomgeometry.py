@@ -19,7 +19,13 @@ import numpy as np
 from colourhs.capture import Camera
 from colourhs.geometry import look_at
 from colourhs.synth import scenes as sc
-from colourhs.synth.poses import board_poses
+from colourhs.synth.poses import (
+    _board_visible,
+    _marker_quads,
+    _min_cell_px,
+    board_poses,
+    rotation_xyz,
+)
 from colourhs.synth.randomranges import (
     DICTIONARY_SIZES,
     NAME_STYLES,
@@ -220,12 +226,19 @@ def _layout(rng, n, lo, hi, pitch) -> list | None:
 
 
 def _draw_poses(rng, view, board, rg, geo, n_poses):
+    """``n_poses`` calibration poses and the held-out plane (last), or None if unplaceable.
 
+    With ``rg.plane_slant_deg`` the plane is drawn by :func:`_slanted_plane`
+    after the calibration poses, from the same stream; without it the draws
+    are those of the code before the option (the plane the last of
+    ``n_poses + 1`` calibration-like poses).
+    """
+    slanted = rg.plane_slant_deg is not None
     try:
-        return board_poses(
+        poses = board_poses(
             view,
             board,
-            n_poses + 1,
+            n_poses + (0 if slanted else 1),
             rng,
             rg.margin_px,
             depth_m=rg.pose_depth_rel * geo["distance"],
@@ -239,3 +252,62 @@ def _draw_poses(rng, view, board, rg, geo, n_poses):
         )
     except RuntimeError:
         return None
+    if not slanted:
+        return poses
+    plane = _slanted_plane(rng, view, board, rg, geo)
+    return None if plane is None else [*poses, plane]
+
+
+#: Draws of the slanted plane before the whole rig is redrawn: as many as a
+#: calibration pose gets (board_poses' ``tries`` above).
+PLANE_TRIES = 300
+
+
+def _slanted_plane(rng, view, board, rg, geo):
+    """The held-out plane at a slant U(``rg.plane_slant_deg``) to the reference camera.
+
+    The slant is the angle between the board's normal (its white side) and
+    the line of sight from the reference camera (the first in rig.json order)
+    to the board's centre; the normal leans from that line towards a direction
+    U(0, 360) deg about it, the board turns U(-roll, roll) about its normal
+    (roll ``rg.pose_roll_deg``), and its centre is placed as a calibration
+    pose's (+-``pose_offcentre`` of the field's half-width in x and y,
+    +-``pose_depth_rel`` D in z). Kept under the calibration poses' rules
+    (whole board in every view with the margin, incidence and cell size).
+
+    Returns
+    -------
+    (R_b, t_b) with world X = R_b X_board + t_b, or None if no draw of
+    :data:`PLANE_TRIES` is kept.
+    """
+    corners = sc.board_corners(board["size"])
+    centre_b = corners.mean(axis=0)
+    markers = _marker_quads(board) if rg.pose_min_cell_px > 0 else None
+    ref = geo["cameras"][0].centre
+    lateral = rg.pose_offcentre * geo["half_width"]
+    depth = rg.pose_depth_rel * geo["distance"]
+    down = np.array([0.0, 0.0, -1.0])  # the board's white side in its own frame
+    for _ in range(PLANE_TRIES):
+        c = rng.uniform([-lateral, -lateral, -depth], [lateral, lateral, depth])
+        slant = np.deg2rad(rng.uniform(*rg.plane_slant_deg))
+        azimuth = np.deg2rad(rng.uniform(0, 360))
+        roll = np.deg2rad(rng.uniform(-rg.pose_roll_deg, rg.pose_roll_deg))
+        sight = (ref - c) / np.linalg.norm(ref - c)
+        e1 = np.cross(sight, np.eye(3)[np.argmin(np.abs(sight))])  # any axis not along it
+        e1 /= np.linalg.norm(e1)
+        e2 = np.cross(sight, e1)
+        axis = np.cos(azimuth) * e1 + np.sin(azimuth) * e2
+        normal = sc.axis_angle(axis, slant) @ sight
+        # The shortest turn of the board's white side onto the normal, then the roll.
+        turn = np.cross(down, normal)
+        angle = np.arctan2(np.linalg.norm(turn), down @ normal)
+        R0 = sc.axis_angle(turn, angle) if np.linalg.norm(turn) > 1e-12 else np.eye(3)
+        R = R0 @ rotation_xyz(0, 0, roll)
+        t = c - R @ centre_b
+        world = corners @ R.T + t
+        if not _board_visible(view, world, normal, rg.margin_px, rg.pose_incidence_deg):
+            continue
+        if markers is not None and _min_cell_px(view, markers, R, t) < rg.pose_min_cell_px:
+            continue
+        return R, t
+    return None

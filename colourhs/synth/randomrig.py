@@ -1,10 +1,13 @@
-"""Randomised rigs and scenes: the presets ``random`` and ``random-tiny``.
+"""Randomised rigs and scenes: the presets ``random``, ``random-tiny`` and ``corner``.
 
 Every seed draws a different, plausible colour HS rig and scene set from the
 ranges below (U = uniform, N = normal; "per camera" draws are independent
-for each camera). This table is the one place the ranges are documented;
+for each camera). These tables are the one place the ranges are documented;
 :class:`RandomRanges` holds them (``RANGES`` for ``random``, ``TINY_RANGES``
-for ``random-tiny``, which differs only where the last column says so).
+for ``random-tiny``, which differs only where the last column says so;
+``CORNER_RANGES`` and ``CORNER_TINY_RANGES`` for ``corner`` and
+``corner-tiny``, which differ from ``random`` and ``random-tiny`` only as the
+second table says).
 
 ====================  =================================================  =====================
 quantity              range (``random``)                                 ``random-tiny``
@@ -39,7 +42,9 @@ camera names          one style of cam1..3, left/right/top (by           same
                       a random permutation
 image encoding        8 or 16 bit (p = 0.5 each); black level U(0, 1) x  same
                       16 DN (8 bit) or x 4096 DN (16 bit), rounded;
-                      white level 2^bits - 1
+                      white level 2^bits - 1; 12-bit data (``corner``)
+                      in 16-bit PNGs, black level U(0, 1) x 256 DN,
+                      white level 4095
 exposure              white Lambertian (albedo 0.8) at the origin,       same
                       facing the light, reads U(0.3, 0.6) of full scale
 board                 width U(0.20, 0.32) m, height/width U(0.65,        width U(0.22, 0.27)
@@ -55,13 +60,16 @@ board poses           7 calibration poses + the held-out ``plane``:      slant <
                       field's half-width in x and y, depth stratified
                       over +-0.1 D; kept if every camera sees the whole
                       board (margin 4 px) from its white side at < 65
-                      deg incidence and every marker cell spans >= 2 px
+                      deg incidence and every marker cell spans >= 2
+                      px; the ``plane`` drawn as the others
+                      (``corner``: at a slant to the reference camera)
 LED profile           cos(tx)^mx cos(ty)^my (1 + sx tx + sy ty): mx      same
                       U(10, 14), my U(6, 9), sx, sy U(-0.4, 0.4) /rad;
                       axis tilted U(0, 8) deg off the optical axis
                       towards U(0, 360) deg; ripple 1 + a cos(2 pi
                       theta / T + phase), a U(0, 0.03), T U(4, 15) deg,
-                      phase U(0, 2 pi); lights collocated (offset 0)
+                      phase U(0, 2 pi); lights collocated (offset 0;
+                      ``corner``: beside the lens, below)
 vignetting            sigma_c = g_c (1 - k_c r_c^2 / r_corner^2):        same
                       corner loss k U(0.05, 0.2) per camera, k_c = k +
                       U(-0.02, 0.02) per channel; centres: a common
@@ -106,22 +114,57 @@ white reference       facing the rig through the origin, tilted U(0,     same
                       tan(FOV/2) wide (fills every view)
 ====================  =================================================  =====================
 
+The ``corner`` presets combine the hard ends of the ranges (the rest as
+``random`` and ``random-tiny``); each was drawable on every seed tried
+(0-19 at both sizes, 1 to 5 whole-rig draws per seed), so none was relaxed:
+
+====================  ============================  ================================================
+quantity              ``corner`` presets            why
+====================  ============================  ================================================
+pair angles           each U(12, 15) deg, largest   the narrowest triangle: the shortest baselines
+                      minus smallest >= 1 deg       give the weakest depth (3 deg spread does not
+                                                    fit a 3 deg range)
+board poses           slant U(0, 50) deg,           the most foreshortened markers a calibration
+                      incidence < 70 deg (cells >=  takes; 70 deg so that 50 deg slants fit the
+                      2 px, 3 px for                other cameras too
+                      ``corner-tiny``)
+held-out plane        its normal U(40, 50) deg      a steep plane: depth changes fastest across the
+                      from the line of sight of     reference view, and the other cameras see it at
+                      the reference camera (the     up to ~65 deg; placed and kept as a calibration
+                      first in rig.json) to the     pose (centre, roll, rules), the normal tilted
+                      board's centre                from that line towards U(0, 360) deg
+sensor                full well U(5000, 8000) e-,   the noisiest sensor: shot noise 1.1-1.4 %, read
+                      read noise U(8, 10) e-        noise 0.1-0.2 % of full scale
+image encoding        8 or 12 bit (p = 0.5 each)    the coarsest (8) and the 12-bit data of many
+                                                    machine-vision sensors, in 16-bit PNGs with
+                                                    white level 4095 (not 2^16 - 1)
+lens distortion       k1 U(-0.15, -0.12), k2        the barrel end of ``random``'s k1 range, k2 of
+                      U(0.05, 0.1)                  the opposite sign in the upper half of its
+                                                    range: the corners of a 640x480 image move 2-9
+                                                    px (FOV 18-35 deg)
+light offset          U(0.02, 0.04) m from the      lights on a ring beside the lens, as built rigs
+                      lens, in the camera's x-y     have them: the collocated-light assumption is
+                      plane, towards U(0, 360) deg  off by 1-5 deg at 0.5-1 m
+                      (per camera)
+====================  ============================  ================================================
+
 Draws come from independent random streams per topic (rig geometry and
-scenes, photometric model, encoding), each seeded by the seed and the topic's
-name, so the geometry, board, poses, scenes and encoding of a seed do not
-depend on which nuisances are switched on: every photometric value is drawn
+scenes, photometric model, encoding, light offsets), each seeded by the seed
+and the topic's name, so the geometry, board, poses, scenes and encoding of
+a seed do not depend on which nuisances are switched on: every photometric value is drawn
 whatever the switches, and a switched-off effect just drops its values. A
 draw whose boards or objects cannot be placed is redrawn as a whole (the
 table's ranges are the ranges of every accepted draw).
 
-``exact=True`` forces 16-bit images and exact masks while keeping the rest of
-the seed's draw (the black level keeps its drawn fraction of 4096 DN).
+``exact=True`` forces 16-bit images (white level 65535, also where the
+ranges draw 12-bit data) and exact masks while keeping the rest of the
+seed's draw (the black level keeps its drawn fraction of 4096 DN).
 
 :func:`draw_random` assembles the draw: the ranges and the seeded streams are
 :mod:`colourhs.synth.randomranges`, the cameras, board and poses
 :mod:`colourhs.synth.randomgeometry`, the scenes
-:mod:`colourhs.synth.randomscenes`; the image encoding and the photometric
-model are drawn here.
+:mod:`colourhs.synth.randomscenes`; the image encoding, the lights' offsets and the
+photometric model are drawn here.
 """
 
 from __future__ import annotations
@@ -133,6 +176,9 @@ import numpy as np
 from colourhs.synth import scenes as sc
 from colourhs.synth.randomgeometry import _draw_geometry
 from colourhs.synth.randomranges import (
+    CONTAINER_BITS,
+    CORNER_RANGES,
+    CORNER_TINY_RANGES,
     MASK_MODES,
     METALS,
     NAME_STYLES,
@@ -154,6 +200,8 @@ from colourhs.synth.rig import (
 )
 
 __all__ = [
+    "CORNER_RANGES",
+    "CORNER_TINY_RANGES",
     "MASK_MODES",
     "METALS",
     "NAME_STYLES",
@@ -177,7 +225,8 @@ class RandomDraw:
         nuisances with the drawn sensor values).
     board : rig.json's board entry.
     poses : board poses (R_b, t_b): 7 calibration poses, then the ``plane``.
-    bit_depth, black_level : the image encoding.
+    bit_depth, black_level, white_level : the image encoding (``bit_depth`` the
+        PNG's: 12-bit data has 16 and ``white_level`` 4095).
     mask_mode : one of :data:`MASK_MODES`.
     builders : ``white``, ``statue``, ``toy`` (callables () -> SceneGeometry) and
         ``sheet`` (callable phase -> SceneGeometry).
@@ -189,6 +238,7 @@ class RandomDraw:
     poses: list
     bit_depth: int
     black_level: int
+    white_level: int
     mask_mode: str
     builders: dict
     description: dict
@@ -219,17 +269,19 @@ def draw_random(
     n_poses : calibration board poses (the held-out ``plane`` pose comes on top).
     sheet_frames : frames of the dynamic sheet.
     statue_level : icosphere subdivision of the statue.
-    exact : force 16-bit images and exact masks (the rest of the draw unchanged).
+    exact : force 16-bit images (white level 65535) and exact masks (the rest of the
+        draw unchanged).
     """
     rg = ranges
     geo = _draw_geometry(seed, width, height, rg, n_poses, sheet_frames, statue_level)
     enc = _stream(seed, "encoding")
-    bits = int(enc.choice([8, 16]))
+    sensor_bits = int(enc.choice(list(rg.bit_depths)))
     black_fraction = float(enc.uniform(0, 1))
     mask_mode = str(enc.choice(MASK_MODES))
     if exact:
-        bits, mask_mode = 16, "exact"
-    black = int(round(black_fraction * rg.black_level_dn[bits]))
+        sensor_bits, mask_mode = 16, "exact"
+    black = int(round(black_fraction * rg.black_level_dn[sensor_bits]))
+    bits, white = CONTAINER_BITS[sensor_bits], 2**sensor_bits - 1
     rig, photometric = _photometric(seed, geo, width, height, nuisances, rg)
     scene_desc = geo["scenes"]
     builders = _builders(scene_desc, geo, statue_level)
@@ -245,12 +297,18 @@ def draw_random(
         "scenes": jsonable(scene_desc),
         "photometric": jsonable(photometric),
     }
+    # Only where a range draws them: the other presets' descriptions stay as they were.
+    if white != 2**bits - 1:
+        description["white_level"] = white
+    if rg.plane_slant_deg is not None:
+        description["plane_slant_deg"] = _plane_slant(geo)
     return RandomDraw(
         rig=rig,
         board=geo["board"],
         poses=geo["poses"],
         bit_depth=bits,
         black_level=black,
+        white_level=white,
         mask_mode=mask_mode,
         builders=builders,
         description=description,
@@ -265,8 +323,9 @@ def _photometric(seed, geo, width, height, nuisances, rg) -> tuple[RigModel, dic
     exposure = rng.uniform(*rg.exposure)
     full_well = rng.uniform(*rg.full_well_e)
     read_noise = rng.uniform(*rg.read_noise_e)
+    offsets = _light_offsets(seed, rg, len(geo["cameras"]))
     cams, lights, per_camera = [], [], []
-    for cam in geo["cameras"]:
+    for cam, offset in zip(geo["cameras"], offsets, strict=True):
         gains_u = rng.uniform(-1, 1, 3)
         k = rng.uniform(*rg.vignetting_corner)
         k_c = k + rng.uniform(-rg.colour_shading, rg.colour_shading, 3)
@@ -298,7 +357,7 @@ def _photometric(seed, geo, width, height, nuisances, rg) -> tuple[RigModel, dic
             R=cam.R,
             t=cam.t,
             light_colour=cam.light_colour,
-            light_offset=np.zeros(3),
+            light_offset=offset,
             gains=gains,
             vignetting=vig,
             vignetting_centre=centre * rg.vignetting_centre_rel * corner,
@@ -335,6 +394,32 @@ def _photometric(seed, geo, width, height, nuisances, rg) -> tuple[RigModel, dic
     )
     rig = RigModel(tuple(cams), tuple(lights), chrom, width, height, recorded)
     return rig, {"exposure": exposure, "cameras": per_camera}
+
+
+def _light_offsets(seed, rg, n: int) -> np.ndarray:
+    """Each camera's light offset (n, 3), camera coordinates, metres.
+
+    Magnitude U(``rg.light_offset_m``) in a direction U(0, 360) deg in the
+    camera's x-y plane (beside the lens), from the seed's ``light-offset``
+    stream; zeros, drawing nothing, when the range's upper end is 0.
+    """
+    out = np.zeros((n, 3))
+    if rg.light_offset_m[1] <= 0:
+        return out
+    rng = _stream(seed, "light-offset")
+    r = rng.uniform(*rg.light_offset_m, n)
+    a = rng.uniform(0, 2 * np.pi, n)
+    out[:, 0], out[:, 1] = r * np.cos(a), r * np.sin(a)
+    return out
+
+
+def _plane_slant(geo) -> float:
+    """The held-out plane's slant to the reference camera's line of sight, degrees."""
+    R, t = geo["poses"][-1]
+    centre = R @ sc.board_corners(geo["board"]["size"]).mean(axis=0) + t
+    sight = geo["cameras"][0].centre - centre
+    cos = (R @ [0.0, 0.0, -1.0]) @ sight / np.linalg.norm(sight)
+    return float(np.rad2deg(np.arccos(np.clip(cos, -1.0, 1.0))))
 
 
 def _disc(rng, k: int) -> np.ndarray:

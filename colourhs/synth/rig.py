@@ -196,7 +196,8 @@ class RigModel:
         Camera ``cam``'s channel ``channel`` as a sensor, its collocated light
         as the source; ``xy`` are normalised image coordinates of the rays and
         ``points`` world points along them (the profile depends on direction
-        only, so any point on the ray gives the same value).
+        only, so with a collocated light any point on the ray gives the same
+        value; with a light beside the lens, the value at those points).
         """
         c = self.cameras[cam]
         sigma = c.sensitivity(xy)[..., channel] * c.crosstalk[channel, channel]
@@ -379,7 +380,8 @@ def sensor(
 
     Shot noise is Poisson in electrons (``full_well_e`` electrons at full
     scale), read noise Gaussian (``read_noise_e`` electrons); the result is
-    scaled to [black_level, white_level], rounded and clipped.
+    scaled to [black_level, white_level], rounded and clipped. ``white_level``
+    defaults to ``2**bit_depth - 1``; 12-bit data in 16-bit images has 4095.
 
     Returns
     -------
