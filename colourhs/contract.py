@@ -11,6 +11,7 @@ other's libraries."""
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -19,7 +20,15 @@ from colourhs.io import atomic_output
 if TYPE_CHECKING:
     import pandas as pd
 
-__all__ = ["EXTRA_COLUMNS", "KEY_COLUMNS", "METRIC_COLUMNS", "REQUIRED_COLUMNS", "metrics_table"]
+__all__ = [
+    "EXTRA_COLUMNS",
+    "GAUSSIAN_WITHIN",
+    "KEY_COLUMNS",
+    "METRIC_COLUMNS",
+    "REQUIRED_COLUMNS",
+    "SIGMA_MULTIPLES",
+    "metrics_table",
+]
 
 #: The contract's key columns of ``metrics.csv``.
 KEY_COLUMNS = ("scene", "frame", "variant")
@@ -32,6 +41,12 @@ METRIC_COLUMNS = (
     "depth_rms_mm",
     "normal_median_deg",
 )
+#: Multiples k of the depth's sigma whose share ``sigma_within_<k>`` is reported: the
+#: 68-95-99.7 rule's, so that each share reads against a well-known Gaussian value.
+SIGMA_MULTIPLES = (1, 2, 3)
+#: The share of a Gaussian error within k sigma, ``erf(k / sqrt(2))``: what a calibrated
+#: sigma gives (0.683, 0.954, 0.997).
+GAUSSIAN_WITHIN = {k: math.erf(k / math.sqrt(2.0)) for k in SIGMA_MULTIPLES}
 #: Every column ``metrics.csv`` must have (results contract, version 1).
 REQUIRED_COLUMNS = KEY_COLUMNS + METRIC_COLUMNS
 #: Extra metric columns that the evaluation writes after the contract's
@@ -46,6 +61,13 @@ EXTRA_COLUMNS = (
     "hausdorff_samples",
     "completeness_samples",
     "outside_share",
+    # The depth's own 1-sigma uncertainty (``depth_sigma`` of the depth file), against
+    # the ground truth on the depth errors' pixels and, without it, as it stands.
+    "depth_signed_median_mm",
+    "depth_sigma_median_mm",
+    *(f"sigma_within_{k}" for k in SIGMA_MULTIPLES),
+    "expected_depth_error_mm",
+    "uncertain_share",
 )
 
 

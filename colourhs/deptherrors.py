@@ -3,15 +3,28 @@
 A depth file (:mod:`colourhs.depthfile`) compared pixel by pixel with the
 ground truth rendered into its reference camera
 (:func:`colourhs.raycast.render_depth_normals`); used by the evaluation
-stage (:mod:`colourhs.evaluate`) and the accuracy benchmarks.
+stage (:mod:`colourhs.evaluate`) and the accuracy benchmarks. Where the depth
+file carries its per-pixel 1-sigma uncertainty (``depth_sigma``), the same
+pixels also say how well that sigma predicts the error (:func:`sigma_summary`);
+:func:`uncertainty_summary` needs no ground truth.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from colourhs.contract import GAUSSIAN_WITHIN, SIGMA_MULTIPLES
 from colourhs.depthfile import DepthMap
 from colourhs.raycast import render_depth_normals
+
+__all__ = [
+    "GAUSSIAN_WITHIN",
+    "SIGMA_MULTIPLES",
+    "depth_errors",
+    "depth_summary",
+    "sigma_summary",
+    "uncertainty_summary",
+]
 
 
 def depth_summary(
@@ -32,12 +45,14 @@ def depth_summary(
     -------
     dict
         ``depth_median_mm``, ``depth_rms_mm``, ``depth_p95_mm`` (of the absolute
-        error), ``normal_median_deg``, ``coverage`` (compared / truth pixels; None
-        where there are no truth pixels) and ``truth_pixels``; the errors are None
-        where there is nothing to compare.
+        error), ``depth_signed_median_mm`` (median of the signed error,
+        reconstructed minus true: the bias), ``normal_median_deg``, ``coverage``
+        (compared / truth pixels; None where there are no truth pixels) and
+        ``truth_pixels``; the errors are None where there is nothing to compare.
     """
-    e = np.abs(np.asarray(depth_error_m, float).ravel()) * 1e3
-    e = e[np.isfinite(e)]
+    signed = np.asarray(depth_error_m, float).ravel() * 1e3
+    signed = signed[np.isfinite(signed)]
+    e = np.abs(signed)
     a = np.asarray(normal_error_deg, float).ravel()
     a = a[np.isfinite(a)]
     truth_pixels = int(truth_pixels)
@@ -45,6 +60,7 @@ def depth_summary(
         "depth_median_mm": None,
         "depth_rms_mm": None,
         "depth_p95_mm": None,
+        "depth_signed_median_mm": None,
         "normal_median_deg": None,
         "coverage": e.size / truth_pixels if truth_pixels > 0 else None,
         "truth_pixels": truth_pixels,
@@ -53,8 +69,83 @@ def depth_summary(
         out["depth_median_mm"] = float(np.median(e))
         out["depth_rms_mm"] = float(np.sqrt(np.mean(e**2)))
         out["depth_p95_mm"] = float(np.percentile(e, 95))
+        out["depth_signed_median_mm"] = float(np.median(signed))
     if a.size:
         out["normal_median_deg"] = float(np.median(a))
+    return out
+
+
+def sigma_summary(depth_error_m: np.ndarray, depth_sigma_m: np.ndarray | None) -> dict:
+    """How well a depth map's 1-sigma uncertainty predicts its error against the truth.
+
+    Over the compared pixels (finite ``depth_error_m``, the pixels of
+    :func:`depth_summary`) that have a finite sigma.
+
+    Parameters
+    ----------
+    depth_error_m : ndarray, shape (H, W) or (N,)
+        Signed depth errors, metres (NaN: not compared).
+    depth_sigma_m : ndarray of the same shape, or None
+        1-sigma uncertainty of each pixel's depth, metres (NaN: none); None where
+        the depth file has none.
+
+    Returns
+    -------
+    dict
+        ``depth_sigma_median_mm`` (median sigma, mm), ``sigma_within_<k>`` for k in
+        :data:`SIGMA_MULTIPLES` (share of those pixels with ``|error| <= k sigma``;
+        :data:`GAUSSIAN_WITHIN` for a calibrated sigma) and ``sigma_pixels`` (how
+        many pixels; 0 where none). The values are None without sigma or pixels.
+    """
+    out = {"depth_sigma_median_mm": None, "sigma_pixels": 0}
+    out |= {f"sigma_within_{k}": None for k in SIGMA_MULTIPLES}
+    if depth_sigma_m is None:
+        return out
+    err = np.asarray(depth_error_m, float).ravel()
+    sigma = np.asarray(depth_sigma_m, float).ravel()
+    if err.shape != sigma.shape:
+        raise ValueError(f"depth sigma has {sigma.size} values, the errors {err.size}")
+    ok = np.isfinite(err) & np.isfinite(sigma)
+    out["sigma_pixels"] = int(ok.sum())
+    if not ok.any():
+        return out
+    err, sigma = np.abs(err[ok]), sigma[ok]
+    out["depth_sigma_median_mm"] = float(np.median(sigma)) * 1e3
+    for k in SIGMA_MULTIPLES:
+        out[f"sigma_within_{k}"] = float(np.mean(err <= k * sigma))
+    return out
+
+
+def uncertainty_summary(depth_map: DepthMap) -> dict:
+    """A depth map's own uncertainty, without ground truth.
+
+    Parameters
+    ----------
+    depth_map : DepthMap
+
+    Returns
+    -------
+    dict
+        ``expected_depth_error_mm``: the median ``depth_sigma`` over the
+        reconstructed pixels (``mask`` with a finite depth and sigma), mm: the
+        error the reconstruction expects of itself; ``uncertain_share``: the
+        ``uncertain`` (flagged) pixels over the reconstructed (``mask`` with a
+        finite depth, not flagged) plus the flagged ones. Each None where the file
+        lacks its dataset (files written before them, the visual hull) or has no
+        such pixel.
+    """
+    out = {"expected_depth_error_mm": None, "uncertain_share": None}
+    reconstructed = np.asarray(depth_map.mask, bool) & np.isfinite(depth_map.depth)
+    if depth_map.depth_sigma is not None:
+        sigma = np.asarray(depth_map.depth_sigma, float)
+        sigma = sigma[reconstructed & np.isfinite(sigma)]
+        if sigma.size:
+            out["expected_depth_error_mm"] = float(np.median(sigma)) * 1e3
+    if depth_map.uncertain is not None:
+        flagged = np.asarray(depth_map.uncertain, bool)
+        total = int((reconstructed & ~flagged).sum() + flagged.sum())
+        if total:
+            out["uncertain_share"] = float(flagged.sum()) / total
     return out
 
 
@@ -92,7 +183,8 @@ def depth_errors(
     normal_error : ndarray, shape (H, W)
         Angle between reconstructed and true normals, degrees; NaN where either is missing.
     metrics : dict
-        :func:`depth_summary` of the two maps.
+        :func:`depth_summary` of the two maps and :func:`sigma_summary` of the depth
+        errors and the depth map's ``depth_sigma``.
     """
     width = depth_map.width if width is None else int(width)
     height = depth_map.height if height is None else int(height)
@@ -117,7 +209,8 @@ def depth_errors(
         n = n / np.linalg.norm(n, axis=2, keepdims=True)
         ang = np.degrees(np.arccos(np.clip(np.sum(n * gn, axis=2), -1.0, 1.0)))
     ang[~np.isfinite(err)] = np.nan
-    return err, ang, depth_summary(err, ang, int(np.isfinite(gd).sum()))
+    metrics = depth_summary(err, ang, int(np.isfinite(gd).sum()))
+    return err, ang, metrics | sigma_summary(err, depth_map.depth_sigma)
 
 
 # --------------------------------------------------------------------------- rule functions

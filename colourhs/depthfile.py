@@ -5,7 +5,9 @@ One module for both ends: :func:`write_depth` writes a reconstruction
 hull), :func:`read_depth` reads and checks any file in the contract's layout
 (:class:`DepthMap`). Datasets ``depth`` (H, W) z-depth in metres along the
 reference camera (NaN = none), ``normal`` (H, W, 3) world unit normals,
-``confidence`` and ``mask``; attributes ``camera``, ``K``, ``R``, ``t``,
+``confidence`` and ``mask``, optionally ``depth_sigma`` (H, W) the depth's
+1-sigma uncertainty in metres and ``uncertain`` (H, W) the pixels left out of
+``mask`` for too large a sigma; attributes ``camera``, ``K``, ``R``, ``t``,
 ``dist``, ``method`` and ``params`` (JSON).
 """
 
@@ -27,22 +29,56 @@ __all__ = ["DepthMap", "DepthResult", "as_depth_map", "read_depth", "write_depth
 
 @dataclass
 class DepthResult:
-    """A reconstructed frame in the reference camera."""
+    """A reconstructed frame in the reference camera.
 
-    depth: np.ndarray  # (H, W) float32 z-depth, metres, NaN = none
-    normal: np.ndarray  # (H, W, 3) float32 world unit normals, NaN = none
-    confidence: np.ndarray  # (H, W) float32 in [0, 1]
-    mask: np.ndarray  # (H, W) bool
+    Attributes
+    ----------
+    depth : ndarray of float32, shape (H, W)
+        z-depth along the reference camera, metres; NaN = none.
+    normal : ndarray of float32, shape (H, W, 3)
+        World-frame unit normals; NaN = none.
+    confidence : ndarray of float32, shape (H, W)
+        Per-pixel confidence in [0, 1].
+    mask : ndarray of bool, shape (H, W)
+        Reconstructed pixels.
+    info : dict
+        The method's diagnostics.
+    depth_sigma : ndarray of float32, shape (H, W), optional
+        1-sigma uncertainty of ``depth``, metres; NaN where none. None: the method
+        gives no uncertainty (nothing is written).
+    uncertain : ndarray of bool, shape (H, W), optional
+        Pixels whose ``depth_sigma`` exceeded the configured tolerance: left out of
+        ``mask`` and flagged here. None: nothing is written.
+    """
+
+    depth: np.ndarray
+    normal: np.ndarray
+    confidence: np.ndarray
+    mask: np.ndarray
     info: dict
+    depth_sigma: np.ndarray | None = None
+    uncertain: np.ndarray | None = None
 
 
 def write_depth(path, result: DepthResult, camera: Camera, attrs: dict) -> None:
-    """Write the results contract's depth HDF5 atomically."""
+    """Write the results contract's depth HDF5 atomically.
+
+    Datasets ``depth``, ``normal``, ``confidence`` and ``mask``, and ``depth_sigma``
+    (float32, metres) and ``uncertain`` (bool) where ``result`` has them (gzip);
+    attributes the camera's (``camera``, ``K``, ``R``, ``t``, ``dist``), ``units``
+    and ``attrs`` (non-scalars as JSON).
+    """
     with atomic_output(path) as tmp, h5py.File(tmp, "w") as f:
         f.create_dataset("depth", data=result.depth, compression="gzip")
         f.create_dataset("normal", data=result.normal, compression="gzip")
         f.create_dataset("confidence", data=result.confidence, compression="gzip")
         f.create_dataset("mask", data=result.mask, compression="gzip")
+        if result.depth_sigma is not None:
+            sigma = np.asarray(result.depth_sigma, np.float32)
+            f.create_dataset("depth_sigma", data=sigma, compression="gzip")
+        if result.uncertain is not None:
+            uncertain = np.asarray(result.uncertain, bool)
+            f.create_dataset("uncertain", data=uncertain, compression="gzip")
         f.attrs["camera"] = camera.name
         f.attrs["K"] = np.asarray(camera.K, float)
         f.attrs["R"] = np.asarray(camera.R, float)
@@ -67,6 +103,12 @@ class DepthMap:
         Per-pixel confidence in [0, 1] (ones where the file has none).
     mask : ndarray of bool, shape (H, W)
         Pixels the method considered (finite depth where the file has none).
+    depth_sigma : ndarray of float32, shape (H, W), or None
+        1-sigma uncertainty of ``depth``, metres, NaN where none; None where the file
+        has no ``depth_sigma`` (files written before it, the visual hull).
+    uncertain : ndarray of bool, shape (H, W), or None
+        Pixels left out of ``mask`` because their sigma exceeded the configured
+        tolerance; None where the file has no ``uncertain``.
     camera : str
         Reference camera name.
     K : ndarray, shape (3, 3)
@@ -95,6 +137,8 @@ class DepthMap:
     method: str = ""
     params: dict | None = None
     path: str = ""
+    depth_sigma: np.ndarray | None = None
+    uncertain: np.ndarray | None = None
 
     @property
     def height(self) -> int:
@@ -111,7 +155,7 @@ class DepthMap:
 
 
 #: The contract's datasets of a depth file (``depth`` and ``normal`` are required).
-DATASETS = ("depth", "normal", "confidence", "mask")
+DATASETS = ("depth", "normal", "confidence", "mask", "depth_sigma", "uncertain")
 
 
 def _attr_array(attrs: dict, name, shape, path):
@@ -166,8 +210,9 @@ def read_depth(path: str | Path) -> DepthMap:
     ----------
     path : str or Path
         HDF5 file with datasets ``depth`` (H, W), ``normal`` (H, W, 3) and optionally
-        ``confidence`` (H, W) and ``mask`` (H, W); attributes ``camera``, ``K``, ``R``,
-        ``t`` and optionally ``dist``, ``method``, ``params`` (JSON).
+        ``confidence``, ``mask``, ``depth_sigma`` and ``uncertain`` (H, W); attributes
+        ``camera``, ``K``, ``R``, ``t`` and optionally ``dist``, ``method``, ``params``
+        (JSON).
 
     Returns
     -------
@@ -199,8 +244,11 @@ def read_depth(path: str | Path) -> DepthMap:
     finite = np.isfinite(depth)
     confidence = np.asarray(data.get("confidence", finite), np.float32)
     mask = np.asarray(data.get("mask", finite), bool)
-    for name, a in (("confidence", confidence), ("mask", mask)):
-        if a.shape != (h, w):
+    sigma = np.asarray(data["depth_sigma"], np.float32) if "depth_sigma" in data else None
+    uncertain = np.asarray(data["uncertain"], bool) if "uncertain" in data else None
+    optional = (("depth_sigma", sigma), ("uncertain", uncertain))
+    for name, a in (("confidence", confidence), ("mask", mask), *optional):
+        if a is not None and a.shape != (h, w):
             raise ValueError(f"{path}: dataset {name!r} has shape {a.shape}, expected {(h, w)}")
     if "camera" not in attrs:
         raise ValueError(f"{path}: missing attribute 'camera'")
@@ -218,7 +266,20 @@ def read_depth(path: str | Path) -> DepthMap:
     if not np.any(finite & (depth > 0)):
         raise ValueError(f"{path}: no reconstructed pixels (depth is empty or all NaN)")
     return DepthMap(
-        depth, normal, confidence, mask, camera, K, dist, R, t, method, params, str(path)
+        depth,
+        normal,
+        confidence,
+        mask,
+        camera,
+        K,
+        dist,
+        R,
+        t,
+        method,
+        params,
+        str(path),
+        depth_sigma=sigma,
+        uncertain=uncertain,
     )
 
 

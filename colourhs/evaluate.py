@@ -28,7 +28,21 @@ Reported per frame (:func:`evaluate_frame`, all in millimetres):
     reference pixel where the GT is visible) to the whole reconstruction mesh.
 ``depth_median_mm``, ``depth_rms_mm``, ``depth_p95_mm``, ``normal_median_deg``, ``coverage``
     Per-pixel errors of the depth file against the GT rendered into the
-    reference camera (:func:`depth_errors`).
+    reference camera (:func:`depth_errors`); ``depth_signed_median_mm`` the
+    median of the signed error (reconstructed minus true: the bias).
+``depth_sigma_median_mm``, ``sigma_within_1``, ``sigma_within_2``, ``sigma_within_3``
+    The depth file's 1-sigma uncertainty (``depth_sigma``) on the same pixels:
+    its median, and the share of pixels whose |depth error| is at most 1, 2, 3
+    sigma (0.683, 0.954, 0.997 for a calibrated sigma;
+    :func:`colourhs.deptherrors.sigma_summary`).
+``expected_depth_error_mm``, ``uncertain_share``
+    Without ground truth too: the median sigma over the reconstructed pixels,
+    and the share of pixels flagged ``uncertain`` (sigma over the tolerance)
+    among the reconstructed and flagged ones
+    (:func:`colourhs.deptherrors.uncertainty_summary`).
+
+The sigma columns are empty where the depth file has no ``depth_sigma`` or
+``uncertain`` (files written before them, the visual hull).
 
 Distances are point-to-surface distances from samples of one mesh to the
 closest point on the other's triangles (:func:`hausdorff`, the distances of
@@ -50,7 +64,7 @@ from colourhs.contract import (  # metrics_table: re-exported, its old home
     REQUIRED_COLUMNS,
     metrics_table,
 )
-from colourhs.deptherrors import depth_errors, depth_summary
+from colourhs.deptherrors import depth_errors, depth_summary, uncertainty_summary
 from colourhs.depthfile import DepthMap, as_depth_map
 from colourhs.geometry import camera_centre, project, world_to_camera
 from colourhs.io import write_json
@@ -382,6 +396,7 @@ def evaluate_frame(
         "camera": dm.camera,
     }
     info.update(_empty_metrics())
+    info.update(uncertainty_summary(dm))  # needs no ground truth
     mesh = load_mesh(mesh_ply) if mesh_ply is not None else None  # vertices, triangles, normals
     dist_v = None
     if gt_ply is not None:
@@ -449,7 +464,9 @@ def evaluate_frame(
             "completeness_max_samples": int(completeness_samples),
             "units": "mm; hausdorff_* = reconstruction -> seen GT (accuracy), "
             "completeness_* = seen GT -> reconstruction; outside_share = share of the "
-            "mesh vertices the reference camera sees that lie off the seen GT",
+            "mesh vertices the reference camera sees that lie off the seen GT; "
+            "sigma_within_k = share of the compared pixels with |depth error| <= k "
+            "depth_sigma; uncertain_share = flagged / (reconstructed + flagged) pixels",
             "seconds": time.perf_counter() - t0,
         }
     )

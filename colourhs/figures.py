@@ -28,6 +28,7 @@ __all__ = [
     "render_grid_figure",
     "shaded_render",
     "shared_scale_images",
+    "sigma_maps_figure",
     "write_animation",
 ]
 
@@ -384,17 +385,57 @@ def error_maps_figure(
     title: str,
     unit: str = "mm",
     vmax: float | None = None,
+    quantity: str = "error",
 ) -> Path:
     """Every variant's error map side by side on one colour scale, with its colour bar.
 
     ``errors``: label -> (H, W) error in ``unit``, NaN where none; ``vmax``: top of
-    the scale (default: :func:`shared_scale_images`'). Up to four panels in a row, else three.
+    the scale (default: :func:`shared_scale_images`'); ``quantity``: what the colour
+    bar names. Up to four panels in a row, else three.
     """
     images, top = shared_scale_images(errors, vmax)
     ncols = len(images) if len(images) <= 4 else 3
+    bar_label = f"{quantity} ({unit})"
     return render_grid_figure(
-        images, path, title, ncols=ncols, colourbar=("inferno", 0.0, top, f"error ({unit})")
+        images, path, title, ncols=ncols, colourbar=("inferno", 0.0, top, bar_label)
     )
+
+
+def sigma_maps_figure(
+    sigmas_mm: Mapping[str, np.ndarray], path: str | Path, vmax: float | None = None
+) -> Path:
+    """Every variant's depth uncertainty (1 sigma) side by side on one colour scale.
+
+    The figure of :func:`error_maps_figure` (same colour map, layout and colour bar),
+    so that it reads beside ``depth_error.png``.
+
+    Parameters
+    ----------
+    sigmas_mm : dict of str to ndarray, shape (H, W)
+        Label (variant) -> ``depth_sigma`` in millimetres, NaN where none.
+    path : str or Path
+        PNG file to write (atomically).
+    vmax : float, optional
+        Top of the scale, mm (the depth-error map's, to compare colours; default
+        :func:`shared_scale_images`').
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
+    title = "depth sigma (1-sigma uncertainty of the depth)"
+    return error_maps_figure(sigmas_mm, path, title, "mm", vmax, quantity="sigma")
+
+
+def _sigma_mm(depth_map) -> np.ndarray | None:
+    """A depth map's ``depth_sigma`` in mm on its reconstructed pixels (``mask`` with a
+    finite depth), NaN elsewhere; None when it has none or no finite value there."""
+    if depth_map.depth_sigma is None:
+        return None
+    shown = np.asarray(depth_map.mask, bool) & np.isfinite(depth_map.depth)
+    sigma = np.where(shown, np.asarray(depth_map.depth_sigma, np.float64) * 1e3, np.nan)
+    return sigma if np.isfinite(sigma).any() else None
 
 
 def scene_figures(
@@ -414,7 +455,10 @@ def scene_figures(
     paper's Figure 7), and per variant ``<variant>_depth.png``,
     ``<variant>_normal.png`` and, with ground truth, ``depth_error.png``
     (|depth error|, mm) and ``normal_error.png`` (degrees), every variant's map
-    on one colour scale with its colour bar (:func:`error_maps_figure`); with
+    on one colour scale with its colour bar (:func:`error_maps_figure`); where a
+    variant's depth file has ``depth_sigma``, ``depth_sigma.png``
+    (:func:`sigma_maps_figure`: those variants' sigma, mm, on the depth-error
+    map's scale when there is ground truth, else on their own); with
     ``animation`` (frame -> mesh of a dynamic scene), ``animation.gif`` of the
     shaded reconstruction over the frames, each labelled with the variant, the
     frame and its place in the sequence (:mod:`colourhs.animation`); with
@@ -449,7 +493,7 @@ def scene_figures(
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     written = []
-    renders, dz_mm, dn_deg = {}, {}, {}
+    renders, dz_mm, dn_deg, sigma_mm = {}, {}, {}, {}
     gt = load_mesh(gt_ply) if gt_ply is not None else None
     cam = None
     label = "figures: depth and normal maps" + (", depth errors" if gt is not None else "")
@@ -458,16 +502,25 @@ def scene_figures(
         cam = cam or dm
         written.append(depth_map_figure(dm.depth, out / f"{variant}_depth.png", variant))
         written.append(normal_map_figure(dm.normal, out / f"{variant}_normal.png", variant))
+        sigma = _sigma_mm(dm)
+        if sigma is not None:
+            sigma_mm[variant] = sigma
         if gt is not None:
             dz, dn, _ = depth_errors(dm, *gt)
             if np.isfinite(dz).any():
                 dz_mm[variant], dn_deg[variant] = np.abs(dz) * 1e3, dn
+    top_mm = None  # the depth-error map's scale, which the sigma map shares
     if dz_mm:
         stage("figures: depth and normal error maps", enabled=progress)
-        written.append(error_maps_figure(dz_mm, out / "depth_error.png", "|depth error|"))
+        top_mm = _median_p95(dz_mm.values())
+        title = "|depth error|"
+        written.append(error_maps_figure(dz_mm, out / "depth_error.png", title, vmax=top_mm))
         written.append(
             error_maps_figure(dn_deg, out / "normal_error.png", "normal error", unit="deg")
         )
+    if sigma_mm:
+        stage("figures: depth sigma map", enabled=progress)
+        written.append(sigma_maps_figure(sigma_mm, out / "depth_sigma.png", top_mm))
 
     def render(ply):
         v, t, _ = load_mesh(ply)

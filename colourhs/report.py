@@ -52,10 +52,12 @@ from colourhs.reporttables import (
     METRIC_COLUMNS,
     REQUIRED_COLUMNS,
     _aggregation_of,
+    expected_error_table,
     find_benchmarks,
     format_number,
     read_benchmarks,
     read_metrics,
+    sigma_calibration_table,
     summarise_benchmarks,
     summarise_metrics,
 )
@@ -204,6 +206,22 @@ SUMMARY_COLUMNS = (
     "normal_median_deg",
     "coverage",
 )
+
+
+#: Columns a scene's metrics table shows right after another (column -> the one it
+#: follows): the signed median depth error (the bias) beside the absolute one.
+BESIDE = {"depth_signed_median_mm": "depth_median_mm"}
+
+
+def beside(table: pd.DataFrame, pairs: Mapping[str, str] = BESIDE) -> pd.DataFrame:
+    """``table`` with each column of ``pairs`` moved right after the column it names
+    (where both are present; the others keep their order)."""
+    cols = list(table.columns)
+    for col, anchor in pairs.items():
+        if col in cols and anchor in cols:
+            cols.remove(col)
+            cols.insert(cols.index(anchor) + 1, col)
+    return table[cols]
 
 
 def _image_src(path: Path, out_dir: Path, embed: bool) -> str:
@@ -373,8 +391,12 @@ def build_report(
 
     The page (template ``colourhs/templates/report.html``) opens with a summary
     table (scene x variant, key metrics beside the paper's numbers, a legend);
-    per scene: its description, every metric in a scrollable table, the
-    Figure 7 renders and error maps full width, the other figures as
+    per scene: its description, every metric in a scrollable table, its
+    expected depth error (the median ``depth_sigma``, with or without ground
+    truth: :func:`colourhs.reporttables.expected_error_table`) and, with ground
+    truth, how well sigma predicts the error
+    (:func:`colourhs.reporttables.sigma_calibration_table`), the
+    Figure 7 renders, error and sigma maps full width, the other figures as
     thumbnails, a per-frame plot for sequences and links to the result files;
     then timing, provenance, configuration and software versions.
 
@@ -475,8 +497,11 @@ def build_report(
             },
         }
         rows = summary[summary["scene"] == scene]
+        expected, calibration = expected_error_table(rows), sigma_calibration_table(rows)
+        s["expected"] = _table(expected, "metrics") if len(expected) else ""
+        s["sigma_calibration"] = _table(calibration, "metrics") if len(calibration) else ""
         if len(rows):
-            t, _ = with_paper_columns(rows)
+            t, _ = with_paper_columns(beside(rows))
             s["table"] = _table(t.drop(columns="scene"), "metrics")
             s["n_columns"] = t.shape[1] - 1
             s["aggregation"] = _aggregation_text(summary)

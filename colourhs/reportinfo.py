@@ -45,10 +45,10 @@ __all__ = [
 #: so that the report (a job of the workflow it starts) can name it.
 COMMAND_ENV = "COLOURHS_RUN_COMMAND"
 
-#: Figures shown full width, in this order (file stems); every other figure is a
-#: thumbnail, except per-variant error maps (``<variant>_*_error``), shown as
-#: larger tiles.
-WIDE_FIGURES = ("figure7", "depth_error", "normal_error", "hausdorff")
+#: Figures shown full width, in this order (file stems; the depth sigma map right
+#: after the depth-error map it reads beside); every other figure is a thumbnail,
+#: except per-variant error maps (``<variant>_*_error``), shown as larger tiles.
+WIDE_FIGURES = ("figure7", "depth_error", "depth_sigma", "normal_error", "hausdorff")
 
 
 def git_provenance(project_dir: str | Path) -> dict[str, str]:

@@ -23,27 +23,38 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from colourhs.contract import EXTRA_COLUMNS, KEY_COLUMNS, METRIC_COLUMNS, REQUIRED_COLUMNS
+from colourhs.contract import (
+    EXTRA_COLUMNS,
+    GAUSSIAN_WITHIN,
+    KEY_COLUMNS,
+    METRIC_COLUMNS,
+    REQUIRED_COLUMNS,
+    SIGMA_MULTIPLES,
+)
 from colourhs.variants import VARIANT_ORDER
 
 __all__ = [
     "AGGREGATION",
     "BENCHMARK_COLUMNS",
+    "EXPECTED_ERROR_COLUMNS",
     "EXTRA_COLUMNS",
     "KEY_COLUMNS",
     "METRIC_COLUMNS",
     "REQUIRED_COLUMNS",
+    "expected_error_table",
     "find_benchmarks",
     "format_number",
     "read_benchmarks",
     "read_metrics",
+    "sigma_calibration_table",
     "summarise_benchmarks",
     "summarise_metrics",
 ]
 
 #: How a contract metric is aggregated over the frames of one (scene, variant):
 #: "mean", "max", "median", "rms" (``sqrt(mean(x**2))``) or "sum". Other numeric
-#: columns are aggregated by :func:`_aggregation_of` (by their name's pattern).
+#: columns are aggregated by :func:`_aggregation_of` (by their name's pattern),
+#: except those named here too.
 AGGREGATION = {
     "hausdorff_rms_mm": "mean",
     "hausdorff_mean_mm": "mean",
@@ -51,7 +62,20 @@ AGGREGATION = {
     "depth_median_mm": "median",
     "depth_rms_mm": "rms",
     "normal_median_deg": "median",
+    # a median sigma per frame, as depth_sigma_median_mm (which its name's pattern gives)
+    "expected_depth_error_mm": "median",
 }
+
+#: The expected-error table's metric columns (:func:`expected_error_table`): the
+#: reconstruction's own median sigma and flagged share, which need no ground truth,
+#: then the measured errors beside them where there is ground truth.
+EXPECTED_ERROR_COLUMNS = (
+    "expected_depth_error_mm",
+    "uncertain_share",
+    "depth_sigma_median_mm",
+    "depth_median_mm",
+    "depth_signed_median_mm",
+)
 
 #: Columns of a Snakemake benchmark TSV file.
 BENCHMARK_COLUMNS = (
@@ -215,6 +239,67 @@ def summarise_metrics(df: pd.DataFrame) -> pd.DataFrame:
     out = out.sort_values(["scene", "_o"], kind="stable").drop(columns="_o")
     out["frames"] = out["frames"].astype(int)
     return out.reset_index(drop=True)
+
+
+def _has_values(table: pd.DataFrame, columns) -> pd.Series:
+    """Rows of ``table`` with a finite value in any of ``columns`` (those present)."""
+    cols = [c for c in columns if c in table.columns]
+    if not cols:
+        return pd.Series(False, index=table.index)
+    values = table[cols].apply(pd.to_numeric, errors="coerce").to_numpy(float)
+    return pd.Series(np.isfinite(values).any(axis=1), index=table.index)
+
+
+def expected_error_table(summary: pd.DataFrame) -> pd.DataFrame:
+    """Each variant's expected depth error, from :func:`summarise_metrics`' rows of a scene.
+
+    Parameters
+    ----------
+    summary : DataFrame
+        Rows of one scene (columns ``variant`` and metric columns).
+
+    Returns
+    -------
+    DataFrame
+        Columns ``variant`` and those of :data:`EXPECTED_ERROR_COLUMNS` present in
+        ``summary`` (``expected_depth_error_mm``: median sigma, mm, with or without
+        ground truth; the measured errors are NaN without it); one row per variant
+        with an expected error or a flagged share. Empty when no variant has
+        either (depth files without ``depth_sigma``).
+    """
+    cols = [c for c in EXPECTED_ERROR_COLUMNS if c in summary.columns]
+    rows = summary[_has_values(summary, ("expected_depth_error_mm", "uncertain_share"))]
+    return rows[["variant", *cols]].reset_index(drop=True)
+
+
+def sigma_calibration_table(summary: pd.DataFrame) -> pd.DataFrame:
+    """Shares of pixels within 1, 2, 3 sigma per variant, beside a calibrated sigma's.
+
+    Parameters
+    ----------
+    summary : DataFrame
+        :func:`summarise_metrics`' rows of one scene (columns ``variant`` and
+        ``sigma_within_<k>``, k in :data:`colourhs.contract.SIGMA_MULTIPLES`).
+
+    Returns
+    -------
+    DataFrame
+        Columns ``variant`` and ``within 1 sigma``, ``within 2 sigma``, ``within 3
+        sigma``: one row per variant with a share (measured against ground truth),
+        then the row ``calibrated (Gaussian)`` with :data:`colourhs.contract.GAUSSIAN_WITHIN`
+        (0.683, 0.954, 0.997). Empty when no variant has a share.
+    """
+    share = [f"sigma_within_{k}" for k in SIGMA_MULTIPLES]
+    label = {c: f"within {k} sigma" for c, k in zip(share, SIGMA_MULTIPLES, strict=True)}
+    columns = ["variant", *label.values()]
+    rows = summary[_has_values(summary, share)]
+    if rows.empty:
+        return pd.DataFrame(columns=columns)
+    table = rows.reindex(columns=["variant", *share]).rename(columns=label)
+    ideal = {"variant": "calibrated (Gaussian)"} | {
+        label[c]: GAUSSIAN_WITHIN[k] for c, k in zip(share, SIGMA_MULTIPLES, strict=True)
+    }
+    return pd.concat([table, pd.DataFrame([ideal])], ignore_index=True)[columns]
 
 
 # --------------------------------------------------------------------------- benchmarks

@@ -11,6 +11,8 @@ import pytest
 from scipy.spatial import cKDTree
 
 from colourhs.capture import Camera
+from colourhs.contract import EXTRA_COLUMNS, GAUSSIAN_WITHIN
+from colourhs.deptherrors import sigma_summary, uncertainty_summary
 from colourhs.depthfile import DepthResult, read_depth, write_depth
 from colourhs.evaluate import (
     CONTRACT_COLUMNS,
@@ -351,3 +353,139 @@ def test_evaluate_frame_and_metrics_table(tmp_path):
     with pytest.raises(ValueError, match="repeated"):
         metrics_table([out_json, out_json], tmp_path / "dup.csv")
     assert not (tmp_path / "dup.csv").exists()
+
+
+# --------------------------------------------------------------------------- depth sigma
+
+SIGMA_COLUMNS = (
+    "depth_signed_median_mm",
+    "depth_sigma_median_mm",
+    "sigma_within_1",
+    "sigma_within_2",
+    "sigma_within_3",
+    "expected_depth_error_mm",
+    "uncertain_share",
+)
+
+
+@pytest.mark.parametrize("scale", [1.0, 0.5])
+def test_sigma_shares_of_gaussian_errors(scale):
+    """Errors drawn from N(0, sigma), sigma from 0.5 to 3 mm, over 100 000 pixels: a
+    calibrated sigma has 0.683, 0.954, 0.997 of them within 1, 2, 3 sigma; a sigma half
+    the true one the shares of |N(0, 1)| within 0.5, 1, 1.5: 0.383, 0.683, 0.866.
+    Bound: 4 binomial standard deviations, sqrt(p (1 - p) / n) (0.0059, 0.0026,
+    0.0007 for the calibrated shares). Measured gaps at most 1.2e-4 (seed 7)."""
+    import math
+
+    n = 100_000
+    rng = np.random.default_rng(7)
+    sigma = rng.uniform(0.5e-3, 3e-3, n)
+    err = sigma * rng.standard_normal(n)
+    m = sigma_summary(err, scale * sigma)
+    for k in (1, 2, 3):
+        p = math.erf(scale * k / math.sqrt(2.0))
+        assert m[f"sigma_within_{k}"] == pytest.approx(p, abs=4 * math.sqrt(p * (1 - p) / n))
+    if scale == 1.0:
+        assert [round(GAUSSIAN_WITHIN[k], 3) for k in (1, 2, 3)] == [0.683, 0.954, 0.997]
+    assert m["depth_sigma_median_mm"] == pytest.approx(scale * np.median(sigma) * 1e3, rel=1e-12)
+    assert m["sigma_pixels"] == n
+
+
+def test_sigma_summary_skips_pixels_without_error_or_sigma():
+    err = np.array([0.5, -1.5, 2.5, np.nan, 0.1, 0.2]) * 1e-3
+    sigma = np.array([1.0, 1.0, 1.0, 1.0, np.nan, 1.0]) * 1e-3
+    m = sigma_summary(err, sigma)  # pixels 0, 1, 2 and 5: errors 0.5, 1.5, 2.5, 0.2 sigma
+    assert m["sigma_pixels"] == 4
+    assert (m["sigma_within_1"], m["sigma_within_2"], m["sigma_within_3"]) == (0.5, 0.75, 1.0)
+    assert m["depth_sigma_median_mm"] == pytest.approx(1.0, rel=1e-12)
+    none = sigma_summary(err, None)
+    assert none["sigma_within_1"] is None and none["depth_sigma_median_mm"] is None
+    assert sigma_summary(err, np.full(6, np.nan))["sigma_within_2"] is None
+
+
+def _sigma_depth_map(tmp_path, gd, gnorm, camera):
+    """The GT depth off by +0.5 sigma on the left 3/5 of the columns and -1.5 sigma on
+    the rest (sigma 1 mm; 2 mm on the bottom rows); the top rows have no sigma and the
+    columns right of 0.7 W are flagged uncertain (no depth, not in the mask). Returns
+    the file, the signed errors (m) and the sigma (m) written."""
+    rows, cols = np.indices(gd.shape)
+    sigma = np.where(rows >= 3 * H // 4, 2e-3, 1e-3)
+    offset = np.where(cols < 3 * W // 5, 0.5, -1.5) * sigma
+    depth = gd + offset
+    uncertain = np.isfinite(gd) & (cols > 0.7 * W)
+    depth[uncertain] = np.nan
+    sigma[rows < H // 5] = np.nan
+    mask = np.isfinite(depth)
+    result = DepthResult(
+        depth.astype(np.float32),
+        gnorm.astype(np.float32),
+        mask.astype(np.float32),
+        mask,
+        {},
+        depth_sigma=sigma.astype(np.float32),
+        uncertain=uncertain,
+    )
+    path = tmp_path / "sigma.h5"
+    write_depth(path, result, camera, {"method": "bayes"})
+    return path, np.where(mask, offset, np.nan), sigma
+
+
+def test_evaluate_frame_sigma_columns(tmp_path):
+    """On the pixels the depth errors compare (reconstructed and true), the shares are
+    those of the constructed errors: +0.5 sigma within 1, 2 and 3 sigma, -1.5 sigma
+    within 2 and 3. Without ground truth the expected error and the flagged share stay;
+    a file without sigma (the visual hull, older files) leaves every sigma column empty."""
+    cam = make_camera()
+    gv, gt, gn = sphere(0.1, 40)
+    gt_ply = write_ply(tmp_path / "gt.ply", gv, gt, gn)
+    gd, gnorm = render_depth_normals(gv, gt, gn, cam, W, H)
+    h5, offset, sigma = _sigma_depth_map(tmp_path, gd, gnorm, cam)
+    compared = np.isfinite(offset) & np.isfinite(sigma)
+    left = compared & (offset > 0)
+    flagged = np.isfinite(gd) & (np.indices(gd.shape)[1] > 0.7 * W)
+    assert compared.sum() > 1500 and 0.4 < left.sum() / compared.sum() < 0.9
+    out = tmp_path / "m"
+    ids = {"scene": "s", "frame": "000000"}
+    info = evaluate_frame(h5, None, gt_ply, out / "a.json", variant="b", **ids)
+    # float32 depths at 0.8 m: 6e-8 m = 0.06 sigma at worst, far from any share's edge
+    assert info["sigma_within_1"] == pytest.approx(left.sum() / compared.sum(), abs=1e-12)
+    assert info["sigma_within_2"] == info["sigma_within_3"] == 1.0
+    assert info["sigma_pixels"] == compared.sum()
+    assert np.median(sigma[compared]) == 1e-3  # the 2 mm rows are the fewer
+    assert info["depth_sigma_median_mm"] == pytest.approx(1.0, abs=1e-6)  # float32 sigma
+    # the bias beside the absolute error (one float32 ulp at 0.8 m: 6e-5 mm)
+    reconstructed = np.isfinite(offset)
+    signed = np.median(offset[reconstructed]) * 1e3
+    assert info["depth_signed_median_mm"] == pytest.approx(signed, abs=6e-5)
+    absolute = np.median(np.abs(offset[reconstructed])) * 1e3
+    assert info["depth_median_mm"] == pytest.approx(absolute, abs=6e-5)
+    expected = np.median(sigma[reconstructed & np.isfinite(sigma)]) * 1e3
+    assert info["expected_depth_error_mm"] == pytest.approx(expected, abs=1e-6)
+    share = flagged.sum() / (reconstructed.sum() + flagged.sum())
+    assert info["uncertain_share"] == pytest.approx(share, abs=1e-12)
+    assert 0.05 < share < 0.4
+    # no ground truth: no comparison, but the reconstruction's own expected error
+    blind = evaluate_frame(h5, None, None, out / "b.json", variant="c", **ids)
+    assert blind["sigma_within_1"] is None and blind["depth_sigma_median_mm"] is None
+    assert blind["depth_signed_median_mm"] is None
+    assert blind["expected_depth_error_mm"] == info["expected_depth_error_mm"]
+    assert blind["uncertain_share"] == info["uncertain_share"]
+    # a depth file without sigma: every sigma column empty
+    plain = _depth_map(tmp_path, "plain", gd + 1e-3, gnorm, cam)
+    vh = evaluate_frame(plain, None, gt_ply, out / "c.json", variant="vh", **ids)
+    assert all(vh[c] is None for c in SIGMA_COLUMNS if c != "depth_signed_median_mm")
+    assert vh["depth_signed_median_mm"] == pytest.approx(1.0, abs=6e-5)
+    assert uncertainty_summary(read_depth(plain)) == {
+        "expected_depth_error_mm": None,
+        "uncertain_share": None,
+    }
+    # metrics.csv: the new columns after the earlier extras, before method and same_as
+    csv = tmp_path / "metrics.csv"
+    metrics_table(sorted(out.glob("*.json")), csv)
+    read = pd.read_csv(csv, dtype={"frame": str}).set_index("variant")
+    assert list(read.columns[-len(SIGMA_COLUMNS) - 2 :]) == [*SIGMA_COLUMNS, "method", "same_as"]
+    assert tuple(EXTRA_COLUMNS[-len(SIGMA_COLUMNS) :]) == SIGMA_COLUMNS
+    assert read.loc["b", "sigma_within_1"] == pytest.approx(info["sigma_within_1"], rel=1e-12)
+    assert read.loc["c", "expected_depth_error_mm"] == pytest.approx(expected, abs=1e-6)
+    assert read.loc["c", ["sigma_within_1", "depth_sigma_median_mm"]].isna().all()
+    assert read.loc["vh", list(SIGMA_COLUMNS[1:])].isna().all()

@@ -19,6 +19,7 @@ from colourhs.figures import (
     render_grid_figure,
     shaded_render,
     shared_scale_images,
+    sigma_maps_figure,
     write_animation,
 )
 
@@ -256,6 +257,8 @@ def test_scene_figures_share_one_scale(tmp_path):
             ok.astype(np.float32),
             ok,
             {},
+            # the visual hull has no sigma; bayes_full's is 0.5 mm
+            depth_sigma=None if variant == "vh" else np.full(gd.shape, 5e-4, np.float32),
         )
         depths[variant] = tmp_path / f"{variant}.h5"
         write_depth(depths[variant], res, cam, {"method": "test"})
@@ -269,6 +272,7 @@ def test_scene_figures_share_one_scale(tmp_path):
         "bayes_full_depth.png",
         "bayes_full_normal.png",
         "depth_error.png",
+        "depth_sigma.png",
         "figure7.png",
         "hausdorff.png",
         "normal_error.png",
@@ -286,6 +290,42 @@ def test_scene_figures_share_one_scale(tmp_path):
         for run, mm in zip(runs, (3.0, 1.0), strict=True):
             want = value_colours(np.array([mm]), 0.0, 2.0, cmap)[0] * 255
             np.testing.assert_allclose(row[run[len(run) // 2]], want, atol=12)  # shaded 0.97
+    # the sigma map on the depth error's scale (0 to 2 mm): one panel (bayes_full), 0.5 mm
+    img = cv2.imread(str(tmp_path / "figs" / "depth_sigma.png"))[..., ::-1].astype(float)
+    assert img.shape[:2] == (300, 430)  # one 80 x 60 panel: (3 + 1.3) x (2.25 + 0.75) in
+    row = img[img.shape[0] // 2]
+    cols = np.flatnonzero(np.any(row < 250, axis=-1))
+    panel = np.split(cols, np.flatnonzero(np.diff(cols) > 1) + 1)[0]
+    want = value_colours(np.array([0.5]), 0.0, 2.0, "inferno")[0] * 255
+    np.testing.assert_allclose(row[panel[len(panel) // 2]], want, atol=3)
+
+
+def test_sigma_maps_figure_size_and_scale(tmp_path):
+    """Two variants' sigma maps (80 x 60 px) in one figure the size of the depth-error
+    figure's: two 3 in panels plus 1.3 in of colour bar and margins, 3 in tall (panel
+    2.25 in, label 0.35 in, title 0.4 in), at 100 dpi: 730 x 300 px. Without a given
+    scale the top is the median of the maps' 95th percentiles (1 and 3 mm: 2 mm), so the
+    1 mm map's centre has the scale's middle colour, the 3 mm map's its top."""
+    sigmas = {"bayes_ph": np.full((H, W), 1.0), "bayes_full": np.full((H, W), 3.0)}
+    sigmas["bayes_ph"][:5] = np.nan  # no sigma: background
+    path = sigma_maps_figure(sigmas, tmp_path / "figs" / "depth_sigma.png")
+    img = np.asarray(Image.open(path).convert("RGB")).astype(float)
+    assert img.shape == (300, 730, 3)
+    row = img[img.shape[0] // 2]
+    cols = np.flatnonzero(np.any(row < 250, axis=-1))
+    runs = np.split(cols, np.flatnonzero(np.diff(cols) > 1) + 1)[:2]
+    for run, mm in zip(runs, (1.0, 3.0), strict=True):
+        want = value_colours(np.array([mm]), 0.0, 2.0, "inferno")[0] * 255
+        np.testing.assert_allclose(row[run[len(run) // 2]], want, atol=3)
+    # a given top (the depth error's) sets the scale
+    path = sigma_maps_figure(sigmas, tmp_path / "fixed.png", vmax=4.0)
+    row = np.asarray(Image.open(path).convert("RGB")).astype(float)[150]
+    cols = np.flatnonzero(np.any(row < 250, axis=-1))
+    run = np.split(cols, np.flatnonzero(np.diff(cols) > 1) + 1)[0]
+    want = value_colours(np.array([1.0]), 0.0, 4.0, "inferno")[0] * 255
+    np.testing.assert_allclose(row[run[len(run) // 2]], want, atol=3)
+    with pytest.raises(ValueError, match="no finite values"):
+        sigma_maps_figure({"vh": np.full((H, W), np.nan)}, tmp_path / "none.png")
 
 
 def test_mu_maps_diverge_about_one_and_grey_the_uncalibrated_part(tmp_path):
@@ -305,3 +345,49 @@ def test_mu_maps_diverge_about_one_and_grey_the_uncalibrated_part(tmp_path):
     green = (g - r > 40) & (g - b > 40)
     assert red.sum() > 15000 and blue.sum() > 15000
     assert green.sum() == 0
+
+
+def test_scene_figures_sigma_map_without_ground_truth(tmp_path):
+    """A scene without ground truth has no error maps but its sigma map, on its own
+    scale (the one variant's 95th percentile: 2 mm, so the 1 mm left half has the
+    scale's middle colour)."""
+    from colourhs.capture import Camera
+    from colourhs.depthfile import DepthResult, write_depth
+    from colourhs.figures import scene_figures
+    from colourhs.geometry import look_at, vertex_normals
+    from colourhs.ply import write_ply
+    from colourhs.raycast import render_depth_normals
+
+    v, f = _sphere(30)
+    n = vertex_normals(v, f)
+    R, t = look_at(np.array([0.0, 0.0, -0.5]), np.zeros(3))
+    cam = Camera("cam1", K, np.zeros(5), R, t, "red", np.zeros(3))
+    gd, gn = render_depth_normals(v, f, n, cam, W, H)
+    ok = np.isfinite(gd)
+    sigma = np.where(np.arange(W) < W // 2, 1e-3, 2e-3) * np.ones((H, 1))
+    res = DepthResult(
+        gd.astype(np.float32),
+        gn.astype(np.float32),
+        ok.astype(np.float32),
+        ok,
+        {},
+        depth_sigma=sigma.astype(np.float32),
+    )
+    write_depth(tmp_path / "b.h5", res, cam, {"method": "bayes"})
+    mesh = write_ply(tmp_path / "m.ply", v, f, n)
+    depths, meshes = {"bayes_full": tmp_path / "b.h5"}, {"bayes_full": mesh}
+    written = scene_figures(tmp_path / "figs", depths, meshes)
+    assert sorted(p.name for p in written) == [
+        "bayes_full_depth.png",
+        "bayes_full_normal.png",
+        "depth_sigma.png",
+        "figure7.png",
+    ]
+    img = np.asarray(Image.open(tmp_path / "figs" / "depth_sigma.png").convert("RGB"))
+    assert img.shape == (300, 430, 3)
+    row = img[img.shape[0] // 2].astype(float)
+    cols = np.flatnonzero(np.any(row < 250, axis=-1))
+    panel = np.split(cols, np.flatnonzero(np.diff(cols) > 1) + 1)[0]
+    for at, mm in ((0.3, 1.0), (0.7, 2.0)):  # left and right of the sphere's middle
+        want = value_colours(np.array([mm]), 0.0, 2.0, "inferno")[0] * 255
+        np.testing.assert_allclose(row[panel[int(at * len(panel))]], want, atol=3)

@@ -27,6 +27,11 @@ from colourhs.report import (
     summarise_metrics,
 )
 from colourhs.reportinfo import arrange_figures, git_provenance, resolve_config
+from colourhs.reporttables import (
+    EXPECTED_ERROR_COLUMNS,
+    EXTRA_COLUMNS,
+    sigma_calibration_table,
+)
 
 HEADER = "s\th:m:s\tmax_rss\tmax_vms\tmax_uss\tmax_pss\tio_in\tio_out\tmean_load\tcpu_time\n"
 VARIANTS = ("bayes_ph", "vh", "bayes_nocalib")  # deliberately not in the paper's order
@@ -568,8 +573,78 @@ def test_arrange_figures_and_template_is_package_data():
     ]
     a = arrange_figures([Path(n) for n in names])
     assert [p.name for p in a["wide"]] == ["figure7.png", "hausdorff.png"]
+    # the sigma map right after the depth-error map it reads beside
+    b = arrange_figures([Path(n) for n in ("depth_sigma.png", "hausdorff.png", "depth_error.png")])
+    assert [p.name for p in b["wide"]] == ["depth_error.png", "depth_sigma.png", "hausdorff.png"]
     assert [p.name for p in a["errors"]] == ["vh_depth_error.png", "vh_normal_error.png"]
     thumbs = ["animation.gif", "vh_depth.png", "bayes_ph_depth.png", "bayes_ph_normal.png"]
     assert [p.name for p in a["thumbs"]] == thumbs  # by kind, then the paper's variant order
     assert (files("colourhs") / "templates" / "report.html").is_file()
     assert 'colourhs = ["templates/*.html"]' in Path("pyproject.toml").read_text()
+
+
+def test_report_expected_error_and_sigma_calibration(tmp_path, images):
+    """Each scene's expected depth error (median sigma) shows also where there is no
+    ground truth (``sheet``); the sigma calibration (shares within 1, 2, 3 sigma beside
+    0.683, 0.954, 0.997) only where there is (``plane``); the signed median depth error
+    right after the absolute one in the scene's metrics table."""
+    rows = []
+    for frame, f in (("000000", 0), ("000001", 1)):
+        rows.append(
+            {
+                "scene": "sheet",
+                "frame": frame,
+                "variant": "bayes_full",
+                "expected_depth_error_mm": (1.5, 2.5)[f],  # median over frames 2.00
+                "uncertain_share": (0.1, 0.3)[f],  # mean 0.200
+            }
+        )
+        rows.append({"scene": "sheet", "frame": frame, "variant": "vh"})  # no sigma
+        rows.append(
+            {
+                "scene": "plane",
+                "frame": frame,
+                "variant": "bayes_full",
+                "hausdorff_rms_mm": 2.0,
+                "depth_median_mm": 1.0,
+                "depth_signed_median_mm": (-0.25, -0.75)[f],  # median -0.500
+                "depth_sigma_median_mm": 1.25,
+                "sigma_within_1": (0.5, 0.6)[f],  # mean 0.550
+                "sigma_within_2": 0.9,
+                "sigma_within_3": (0.97, 0.99)[f],  # mean 0.980
+                "expected_depth_error_mm": 1.3,
+                "uncertain_share": 0.05,
+            }
+        )
+    csv = tmp_path / "metrics.csv"
+    cols = [*REQUIRED_COLUMNS, *EXTRA_COLUMNS, "method", "same_as"]
+    pd.DataFrame(rows, columns=cols).to_csv(csv, index=False)
+    out = build_report(tmp_path / "index.html", "demo", csv, [], {"plane": [], "sheet": []}, [], {})
+    text = out.read_text(encoding="utf-8")
+    tables = _tables(text)
+    sheet = text[text.index('id="scene-sheet"') : text.index('id="timing"')]
+    assert "Expected depth error" in sheet and "Sigma calibration" not in sheet
+    _, expected = tables["scene-sheet"]  # after the scene's metrics
+    assert expected[0] == ["variant", *EXPECTED_ERROR_COLUMNS]
+    assert _as_dicts(expected) == {
+        "bayes_full": {
+            "variant": "bayes_full",
+            "expected_depth_error_mm": "2.00",
+            "uncertain_share": "0.200",
+            "depth_sigma_median_mm": "",
+            "depth_median_mm": "",
+            "depth_signed_median_mm": "",
+        }
+    }  # vh has no sigma: no row
+    metrics, expected, calibration = tables["scene-plane"]
+    header = metrics[0]
+    assert header[header.index("depth_median_mm") + 1] == "depth_signed_median_mm"
+    assert _as_dicts(metrics)["bayes_full"]["depth_signed_median_mm"] == "-0.500"
+    assert _as_dicts(expected)["bayes_full"]["expected_depth_error_mm"] == "1.30"
+    assert _as_dicts(expected)["bayes_full"]["depth_signed_median_mm"] == "-0.500"
+    assert calibration == [
+        ["variant", "within 1 sigma", "within 2 sigma", "within 3 sigma"],
+        ["bayes_full", "0.550", "0.900", "0.980"],
+        ["calibrated (Gaussian)", "0.683", "0.954", "0.997"],
+    ]
+    assert sigma_calibration_table(summarise_metrics(read_metrics(csv))[:0]).empty

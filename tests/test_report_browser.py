@@ -75,7 +75,7 @@ def _make_report(root: Path, n_scenes: int, n_frames: int) -> Path:
             "scene": s,
             "frame": f,
             "variant": v,
-            **dict(zip(metric_cols, rng.uniform(0, 9, 15), strict=True)),
+            **dict(zip(metric_cols, rng.uniform(0, 9, len(metric_cols)), strict=True)),
         }
         for s in scenes
         for f in frames
@@ -89,7 +89,7 @@ def _make_report(root: Path, n_scenes: int, n_frames: int) -> Path:
         d = root / "reports" / "demo" / "figures" / s
         d.mkdir(parents=True)
         _png(d / "figure7.png", 1820, 300, 40 * i)  # render_grid_figure's size, 6 panels
-        for stem in ("depth_error", "normal_error", "hausdorff"):  # 3 x 2 panels, colour bar
+        for stem in ("depth_error", "depth_sigma", "normal_error", "hausdorff"):  # 3 x 2 panels
             _png(d / f"{stem}.png", 1030, 560, 60)
         for v in VARIANT_ORDER:
             _png(d / f"{v}_depth.png", 630, 425, 90)  # _image_axes with a colour bar
@@ -163,7 +163,7 @@ def test_report_fits_1400px_and_stays_short(tmp_path):
         assert m[k]["scrollWidth"] <= WIDTH, m[k]["wide"]  # measured 1400: nothing wider
         assert not m[k]["wide"]
         assert m[k]["broken"] == []  # every <img> loaded, those of hidden tabs too
-        assert m[k]["images"] == 2 + n_scenes * (14 + (n_frames > 1))  # + animation
+        assert m[k]["images"] == 2 + n_scenes * (15 + (n_frames > 1))  # + animation
         summary = m[k]["summary"]
         assert summary[0] <= summary[1], summary  # the summary needs no sideways scrolling
         # one scene shown: its Figure 7 full width (the body's 72 em less padding), not
@@ -175,10 +175,11 @@ def test_report_fits_1400px_and_stays_short(tmp_path):
         assert len(m[k]["drawn"]) == n_scenes and min(m[k]["drawn"]) > 150_000, m[k]["drawn"]
     shot = Image.open(tmp_path / "report.png")
     assert shot.size == (WIDTH, HEIGHT)
-    # height, measured 6,330 px (2 scenes), 6,529 (6: the summary table's scroll box
-    # full), 7,085 (6 scenes of 30 frames: + the per-frame plot and the animation); was
-    # 8,224 and 20,460 px for 2 and 6 scenes with every scene on the page
+    # height, measured 7,570 px (2 scenes), 7,770 (6: the summary table's scroll box
+    # full), 8,326 (6 scenes of 30 frames: + the per-frame plot and the animation); was
+    # 8,224 and 20,460 px for 2 and 6 scenes with every scene on the page, 6,330 to
+    # 7,085 px before the depth sigma map and the expected-error and sigma tables
     h = {k: v["height"] for k, v in m.items()}
-    assert max(h.values()) < 7300, h
+    assert max(h.values()) < 8600, h
     assert 0 <= h["s6f1"] - h["s2f1"] < 300, h  # scenes: only the summary box's growth
     assert 0 < h["s6f30"] - h["s6f1"] < 800, h  # frames: the plot and the animation, once
