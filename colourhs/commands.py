@@ -37,6 +37,10 @@ RECONSTRUCT_PARAMS = {
     "surface_iterations": (int, "Levenberg-Marquardt steps before and after the depth search"),
     "spline_px": (float, "spline control spacing, pixels (default: 1/120 of the width)"),
     "blur_px": (float, "blur of the Helmholtz sides, pixels (default: sides.BLUR_PX)"),
+    "max_sigma_mm": (
+        float,
+        "a depth less certain than this (1 sigma, mm) is flagged (default: 5 %% of the depth)",
+    ),
 }
 
 #: ``colourhs photometric`` options: name -> (type, help); defaults in

@@ -164,3 +164,22 @@ def assign(*keys: str | int, value: Any) -> Callable[[Any], None]:
         doc[keys[-1]] = value
 
     return change
+
+
+def render_exact(root, preset, seed: int, scenes, parts=("photometric", "scenes")):
+    """A synthetic dataset of ``scenes`` without sensor noise and cross-talk (16 bit,
+    exact masks; every other nuisance on, which the true calibration undoes)."""
+    from colourhs.synth.dataset import synthesise
+    from colourhs.synth.rig import Nuisances
+
+    return synthesise(
+        root,
+        preset,
+        seed=seed,
+        nuisances=Nuisances().without("noise", "crosstalk"),
+        exact=True,
+        parts=parts,
+        scenes=scenes,
+        progress=False,
+        workers=2,
+    )

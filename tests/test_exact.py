@@ -14,6 +14,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from capture_helpers import render_exact
 
 from colourhs.ply import load_mesh
 from colourhs.raycast import render_depth_normals
@@ -126,17 +127,7 @@ def exact_statue(tmp_path_factory):
     """Rig 1's statue (glossy plaster with dirt), exact as above, with its true
     chromaticity; plane and sheet are flat or gently curved, the statue is not."""
     root = tmp_path_factory.mktemp("exact_statue") / "d"
-    synthesise(
-        root,
-        EXACT,
-        seed=1,
-        nuisances=Nuisances().without("noise", "crosstalk"),
-        exact=True,
-        parts=("photometric", "scenes", "chromatic"),
-        scenes=("statue",),
-        progress=False,
-        workers=2,
-    )
+    render_exact(root, EXACT, 1, ("statue",), ("photometric", "scenes", "chromatic"))
     return root
 
 

@@ -17,7 +17,6 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from functools import partial
 from time import perf_counter
 
@@ -40,23 +39,15 @@ from colourhs.progress import bar, stage
 from colourhs.reconstruct.dataterm import INVALID_COST, data_term, pair_arrays, prepare_images
 from colourhs.reconstruct.inputs import Frame, load_frame
 from colourhs.reconstruct.integrate import initial_surface
+from colourhs.reconstruct.options import (
+    MAX_SIGMA,
+    WORKING_RADIUS,
+    ReconstructOptions,
+    min_component_px,
+)
 
 METHODS = ("ml", "bayes")
 CHUNK = 16384  # pixels per data-term call (bounds the float32 normals buffer)
-WORKING_RADIUS = 0.25  # depth hypotheses: the working depth +- this fraction of it
-"""Why ``WORKING_RADIUS`` holds on any rig: it is relative to the working
-distance, so a rig twice as far from its objects searches twice as deep.
-A rig's common volume (where the three views overlap) grows with its
-distance, and so do the poses a user gives the board and the objects: on
-the random rigs (working distance 0.5-1.0 m, boards up to 45 deg slanted
-and +-0.1 D off the fixation depth) the held-out boards reach 193 mm, or
-20 % of the working depth, in front of it (seeds 0 and 5, which lost 17 and
-29 % of the board to the former fixed +-0.15 m: coverage 0.77 -> 0.86 and
-0.83 -> 0.94, depth unchanged within 0.03 mm); statue, toy and sheet
-unchanged or better within 0.1 mm (seeds 0-1), the demo within 0.02 mm.
-A scene beyond it is reconstructed only where the hull gives the range
-(``depth_from_hull``) or ``depth_range`` is given.
-"""
 
 
 def reference_rays(camera: Camera, width: int, height: int) -> np.ndarray:
@@ -136,72 +127,6 @@ def _depth_at(depths: np.ndarray, fractional: np.ndarray) -> np.ndarray:
     return depths[0] + fractional * (depths[1] - depths[0])
 
 
-@dataclass(frozen=True)
-class ReconstructOptions:
-    """The reconstruction's tuning options (keywords of :func:`reconstruct`).
-
-    Attributes
-    ----------
-    n_labels : number of depth hypotheses.
-    working_radius : half the depth range as a fraction of the working depth
-        (see ``WORKING_RADIUS``).
-    working_radius_m : the same in metres, instead of ``working_radius``
-        (the option of earlier versions; a fixed length fits one rig only).
-    alpha : weight of the data term in the Bayesian energy.
-    tau : truncation of the depth-normal prior, in labels.
-    refine : continuous refinement after the Bayesian labelling.
-    data_weight : weight of the discrete solution in the initial surface
-        (the normal integration that starts the refinement).
-    max_cost : pixels whose chosen hypothesis costs more are left out.
-    cost_scale : the Bayesian data term is ``min(cost / cost_scale, 1 / cost_scale)``
-        (sigma_3 / sigma_2 in units of its typical noise level).
-    edge_m, refine_passes : the initial surface's edge threshold (metres)
-        and number of passes (each re-evaluates the normals).
-    min_component : connected groups of valid pixels smaller than this (e.g.
-        the white cells inside a marker, cut off by its black ones) are left
-        out of the Bayesian result; default (None) 0.2 % of the image; 0 keeps all
-        (:func:`min_component_px`).
-    erode_px : the Bayesian result's mask is eroded by this many pixels;
-        default 1 per 320 pixels of image width (at least 1).
-    link_m : neighbours within this distance of each other's tangent plane
-        belong to one surface (small unlinked pieces are left out).
-    surface_iterations, spline_px : the final refinement
-        (:func:`colourhs.reconstruct.refine.refine_surface`):
-        Levenberg-Marquardt steps before and after its depth search, and the
-        spline control spacing (default 1/120 of the width,
-        :func:`colourhs.reconstruct.spline.default_spacing`).
-    blur_px : Gaussian blur of the Helmholtz sides before sampling, pixels
-        (ML HS's continuous step and the refinement; default
-        :data:`colourhs.reconstruct.sides.BLUR_PX`, see
-        :func:`colourhs.reconstruct.sides.side_maps`).
-    """
-
-    n_labels: int = 192
-    working_radius: float = WORKING_RADIUS
-    working_radius_m: float | None = None
-    alpha: float = 0.35
-    tau: float = 30.0
-    refine: bool = True
-    data_weight: float = 0.01
-    max_cost: float = 0.5
-    cost_scale: float = 0.05
-    edge_m: float = 0.02
-    refine_passes: int = 3
-    min_component: int | None = None
-    erode_px: int | None = None
-    link_m: float = 0.002
-    surface_iterations: int = 3
-    spline_px: float | None = None
-    blur_px: float | None = None
-
-
-def min_component_px(min_component: int | None, shape: tuple[int, int]) -> int:
-    """Smallest connected group of valid pixels the Bayesian result keeps:
-    ``min_component``, or 0.2 % of the image when it is None (0 keeps all)."""
-    H, W = shape
-    return int(0.002 * H * W if min_component is None else min_component)
-
-
 def reconstruct(
     frame: Frame,
     method: str = "bayes",
@@ -263,18 +188,26 @@ def reconstruct(
         "pixels": int(len(pix)),
     }
     solve = _ml_reconstruction if method == "ml" else _bayes_reconstruction
-    z, nrm, ok, conf = solve(
+    z, nrm, ok, conf, sigma = solve(
         frame, evaluate, rays, pix, depths, ref, pairs, (H, W), opts, info, progress, say
     )
+    limit = MAX_SIGMA * np.abs(z) if opts.max_sigma_mm is None else opts.max_sigma_mm * 1e-3
+    with np.errstate(invalid="ignore"):
+        uncertain = ok & (sigma > limit)  # an unknown (NaN) sigma flags nothing
+    ok &= ~uncertain
     z[~ok] = np.nan
     nrm[~ok] = np.nan
     conf[~ok] = 0.0
+    sigma = np.where(ok | uncertain, sigma, np.nan)
+    info |= {"max_sigma_mm": opts.max_sigma_mm, "uncertain_pixels": int(uncertain.sum())}
     return DepthResult(
         z.reshape(H, W).astype(np.float32),
         nrm.reshape(H, W, 3).astype(np.float32),
         conf.reshape(H, W),
         ok.reshape(H, W),
         info | {"valid_pixels": int(ok.sum())},
+        depth_sigma=sigma.reshape(H, W).astype(np.float32),
+        uncertain=uncertain.reshape(H, W),
     )
 
 
@@ -283,7 +216,7 @@ def _ml_reconstruction(
 ):
     """ML HS of the foreground ``pix``: the cost volume (no normals: ML HS takes its
     normals from its own minima), then :func:`_ml_solution`. Returns (H*W,) depth,
-    (H*W, 3) normal, validity and confidence; ``info`` is not changed."""
+    (H*W, 3) normal, validity, confidence and uncertainty; ``info`` is not changed."""
     cost = np.empty((len(pix), len(depths)), np.float32)
     evaluate(rays[pix], depths, show=progress, out=(cost, None, np.arange(len(pix))))
     return _ml_solution(
@@ -299,8 +232,9 @@ def _bayes_reconstruction(
     (:func:`_bayes_labelling`), the initial surface
     (:func:`colourhs.reconstruct.integrate.initial_surface`) and the consistent
     surface (:func:`_consistent_surface`), the rims eroded. Returns (H*W,) depth,
-    (H*W, 3) normal, validity and confidence; adds the MRF's and the surface's
-    figures to ``info``."""
+    (H*W, 3) normal, validity, confidence and each depth's 1-sigma uncertainty
+    (metres, :func:`colourhs.reconstruct.refine.depth_sigma`; NaN without the
+    refinement); adds the MRF's and the surface's figures to ``info``."""
     H, W = shape
     box, local = _mrf_box(pix, shape)
     h, w = box[1] - box[0], box[3] - box[2]
@@ -314,6 +248,7 @@ def _bayes_reconstruction(
         cost[local, labels], normals[local, labels], frac, depths, pix, shape, opts.max_cost
     )
     del cost, normals
+    sigma = np.full(H * W, np.nan)
     if opts.refine and ok.sum() > 10:
         # Wrong labels (a few labels off or worse) must not move the surface.
         anchor = 2.0 * float(depths[1] - depths[0]) / float(np.median(depths))
@@ -334,7 +269,7 @@ def _bayes_reconstruction(
             anchor,
             say,
         )
-        z, nrm, ok, weights, info["surface"] = _consistent_surface(
+        z, nrm, ok, weights, sigma, info["surface"] = _consistent_surface(
             frame,
             z,
             ok,
@@ -348,7 +283,7 @@ def _bayes_reconstruction(
         )
         conf = np.where(ok, weights, 0.0).astype(np.float32)
     erode_px = max(1, round(W / 320)) if opts.erode_px is None else opts.erode_px
-    return z, nrm, _without_rims(ok, shape, erode_px), conf
+    return z, nrm, _without_rims(ok, shape, erode_px), conf, sigma
 
 
 def depth_hypotheses(
@@ -409,7 +344,8 @@ def _ml_solution(
     frame, cost, depths, pix, rays, ref, pairs, shape, max_cost, blur_px=None, say=None
 ):
     """ML HS (:func:`colourhs.reconstruct.ml.ml_depth`) as (H*W,) depth, (H*W, 3)
-    normal, validity and confidence (1 - the best hypothesis' cost)."""
+    normal, validity, confidence (1 - the best hypothesis' cost) and each
+    depth's 1-sigma uncertainty (:func:`ml_sigma`, metres)."""
     from colourhs.reconstruct.ml import ml_depth
     from colourhs.reconstruct.sides import helmholtz_sides
 
@@ -424,7 +360,15 @@ def _ml_solution(
     ok[pix] = good
     conf = np.zeros(H * W, np.float32)
     conf[pix] = np.clip(1.0 - cost.min(axis=1), 0, 1) * good
-    return z, nrm, ok, conf
+    sigma = np.full(H * W, np.nan)
+    if good.any():
+        from colourhs.reconstruct.uncertainty import ml_sigma
+
+        if say is not None:
+            say("ml: each depth's uncertainty")
+        sel = pix[good]
+        sigma[sel] = ml_sigma(sides, rays[sel], z[sel], ref.centre)
+    return z, nrm, ok, conf, sigma
 
 
 def _labelled_surface(chosen, n_sel, frac, depths, pix, shape, max_cost):
@@ -523,6 +467,7 @@ def _consistent_surface(
     )
     ok = (ok | sinfo["filled"]) & np.isfinite(zr) & sinfo["valid"]
     z = np.where(ok, zr, np.nan)
+    sigma = np.where(ok, sinfo["sigma"], np.nan)
     nrm = np.where(ok[:, None], nr, np.nan)
     info = {
         "iterations": iterations,
@@ -530,8 +475,10 @@ def _consistent_surface(
         "surfaces": sinfo["surfaces"],
         "control_points": sinfo["control_points"],
         "filled": int(sinfo["filled"].sum()),
+        "depth_factors": sinfo["depth_factors"],
+        "depth_factor_sigma": sinfo["depth_factor_sigma"],
     }
-    return z, nrm, ok, sinfo["weights"], info
+    return z, nrm, ok, sinfo["weights"], sigma, info
 
 
 def reconstruct_frame(

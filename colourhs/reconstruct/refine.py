@@ -26,6 +26,13 @@ from colourhs.reconstruct.surface import (
     robust_energy,
     surface_normals,
 )
+from colourhs.reconstruct.uncertainty import (
+    SIGMA_SAMPLES,
+    VALLEY_BLOCK,
+    depth_sigma,
+    filled_sigma,
+    valley_sigma,
+)
 
 CURVATURE_TOL_PER_M = 100.0  # weak prior on the spline: curvature radii under 1 cm cost
 LM_START, LM_MIN = 1e-3, 1e-9  # Levenberg-Marquardt damping, relative to diag(A)
@@ -333,9 +340,11 @@ def depth_search(problem: _Problem, c, step=SEARCH_STEP, max_steps=SEARCH_STEPS,
     steps either side (a step, then a quarter step about the first vertex)
     give the minimum.
 
-    Returns the control points at each surface's best depth (shape re-fitted)
-    and the factors (n_surfaces,) applied. ``say(text)``, if given, reports each
-    trial depth (each is ``SEARCH_FITS`` LM steps: 10-25 s at 1280 x 960).
+    Returns the control points at each surface's best depth (shape re-fitted),
+    the factors (n_surfaces,) applied and the relative 1-sigma uncertainty
+    of each factor (:func:`valley_sigma`, from the trial depths' energies).
+    ``say(text)``, if given, reports each trial depth (each is
+    ``SEARCH_FITS`` LM steps).
     """
     n = problem.n
     sc = problem.scale(c)
@@ -406,7 +415,11 @@ def depth_search(problem: _Problem, c, step=SEARCH_STEP, max_steps=SEARCH_STEPS,
                 vertex[k] += h * float(np.clip(0.5 * (em - ep) / den, -1.0, 1.0))
         trial(at(best), best, vertex, everyone)
         best = pick(list(zip(best, vertex, strict=True)))
-    return at(best), 1.0 + best
+    g = problem.graph
+    block = VALLEY_BLOCK * problem.spline.spacing
+    groups = (g.rows // block).astype(np.int64) * (int(g.shape[1] // block) + 1) + g.cols // block
+    sigma = np.array([valley_sigma(tried[k], best[k], groups[pixels[k]], step) for k in range(n)])
+    return at(best), 1.0 + best, sigma
 
 
 def explained_surfaces(chi2, usable, surface, scale) -> np.ndarray:
@@ -446,6 +459,7 @@ def refine_surface(
     edge_footprints: float = EDGE_FOOTPRINTS,
     fill: np.ndarray | None = None,
     search: bool = True,
+    sigma_samples: int = SIGMA_SAMPLES,
     say=None,
 ) -> tuple[np.ndarray, np.ndarray, dict]:
     """Minimise E (module docstring) over a B-spline surface, from depths ``z0``.
@@ -471,6 +485,7 @@ def refine_surface(
         lit foreground): the holes of each surface inside it (black markers,
         dark spots, pixels whose rows were unusable) are filled by
         :func:`fill_holes` (their weight, and so their confidence, is 0).
+    sigma_samples : draws of :func:`depth_sigma` (0: no uncertainty, all NaN).
     say : called with a line of text at each step (progress), if given.
 
     Returns
@@ -479,7 +494,10 @@ def refine_surface(
     normals : (H*W, 3) unit normals of the refined surface (NaN outside).
     info : ``valid`` (H*W,) pixels of the result (without the surfaces
         that :func:`explained_surfaces` leaves out), ``weights`` (H*W,) final
-        robust weights (0 where the rows were unusable), ``filled`` (H*W,)
+        robust weights (0 where the rows were unusable), ``sigma`` (H*W,) each
+        depth's 1-sigma uncertainty (:func:`depth_sigma` and the depth
+        search's :func:`valley_sigma`, metres; :func:`filled_sigma` where the
+        rows were unusable and in filled holes), ``filled`` (H*W,)
         filled holes, ``energy`` after each step, ``depth_factors`` (the
         search's scale per surface), ``surfaces`` and ``control_points``.
     """
@@ -498,10 +516,11 @@ def refine_surface(
     c, more, _ = problem.lm(problem.fit(coarse.B @ c), iterations, say=say)
     energies += more
     factors = np.ones(graph.n_surfaces)
+    valley = np.zeros(graph.n_surfaces)
     if search:
         stride = search_stride(spacing)
         say(f"refinement: depth search along E's valley (pixel stride {stride})")
-        c, factors = depth_search(problem.subsampled(stride), c, say=say)
+        c, factors, valley = depth_search(problem.subsampled(stride), c, say=say)
     say(f"refinement: {iterations} final LM steps")
     c, more, _ = problem.lm(c, iterations, say=say)
     z = B @ c
@@ -517,12 +536,20 @@ def refine_surface(
     out_z[graph.pix[~explained[graph.surface]]] = np.nan
     weights = np.zeros(H * W)
     weights[graph.pix] = info["weights"] * info["valid"]
+    sigma = np.full(H * W, np.nan)
+    if sigma_samples > 0:
+        say("refinement: each depth's uncertainty")
+        local = depth_sigma(problem, c, sigma_samples)
+        sigma[graph.pix] = np.hypot(local, np.abs(z) * valley[graph.surface])
     filled = np.zeros(H * W, bool)
     if fill is not None:
         zh = fill_holes(z, graph, fill, rays, surfaces=explained)
         filled = np.isfinite(zh) & (zh > 0)
         out_z[filled] = zh[filled]
         valid |= filled
+    # Filled holes and pixels whose rows were unusable: extrapolated depths.
+    guessed = valid & ~np.isfinite(sigma)
+    sigma[guessed] = filled_sigma(sigma, guessed, shape)
     out_n = np.full((H * W, 3), np.nan)
     if valid.any():  # the output's normals: E's, over the output's own links
         # Filled holes had no footprint: it is z / focal length, so scale it from out_z.
@@ -536,9 +563,11 @@ def refine_surface(
         {
             "valid": valid,
             "weights": weights,
+            "sigma": sigma,
             "energy": energies + more,
             "filled": filled,
             "depth_factors": factors.tolist(),
+            "depth_factor_sigma": valley.tolist(),
             "surfaces": int(graph.n_surfaces),
             "control_points": int(B.shape[1]),
         },

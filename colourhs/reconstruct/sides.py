@@ -29,6 +29,15 @@ from colourhs.geometry import model_coefficients
 from colourhs.reconstruct.dataterm import to_pixel
 
 BLUR_PX = 1.0  # Gaussian blur of the images before sampling, pixels (see side_maps)
+FOOTPRINT_PX = 0.15  # disagreement of two views' footprints at an edge, pixels (see side_maps)
+"""Why ``FOOTPRINT_PX`` holds on any rig: it is in pixels of the image sampled,
+the unit of the blur and of the interpolation; two cameras of a reciprocal
+pair see a surface foreshortened differently (by 10-20 % between cameras 12-30
+degrees apart on a surface slanted up to 50 degrees), so their 1-pixel blur
+kernels and their pixels cover patches that differ by about 0.15 pixel, and a
+sample across an edge is uncertain by that much of its gradient: far more
+than the sensor noise at any signal level, so such rows carry next to no
+weight whatever the noise."""
 ORDER = 1  # interpolation of the sides: 1 bilinear, 3 cubic convolution (see helmholtz_sides)
 
 
@@ -47,6 +56,7 @@ class HelmholtzSides:
     maps: list
     blurred: bool = False  # neighbouring pixels' noise correlated (see side_maps)
     order: int = 1  # 1 bilinear, 3 cubic convolution (see helmholtz_sides)
+    blur_px: float = 0.0  # the Gaussian blur's sigma, pixels (the noise's correlation)
 
     def __post_init__(self):
         self.stack = np.ascontiguousarray(np.stack(self.maps), dtype=np.float64)
@@ -55,10 +65,26 @@ class HelmholtzSides:
         self.R = np.stack([np.asarray(c.R, float) for c in self.cameras])
         self.t = np.stack([np.asarray(c.t, float) for c in self.cameras])
         self.light = np.ascontiguousarray(self.light, dtype=np.float64)
+        self.noise_corr = noise_correlation(self.blur_px) if self.blurred else np.zeros(4)
 
     @property
     def pairs(self) -> int:
         return len(self.cameras) // 2
+
+
+def noise_correlation(blur_px: float) -> np.ndarray:
+    """Correlation (4,) of Gaussian-blurred white noise between pixels 0..3 apart.
+
+    Blurring independent pixels with a Gaussian of sigma ``blur_px`` makes
+    their noise a stationary field whose autocorrelation is a Gaussian of
+    sigma ``blur_px * sqrt(2)``: ``exp(-k^2 / (4 blur_px^2))`` at k pixels, in
+    rows and columns alike (separable). :func:`sample_sides` uses it for the
+    exact variance of an interpolated sample (beyond the paper): a sample
+    between pixels averages partly independent noise, so its variance is
+    lower than a pixel's by a factor that depends on the sub-pixel offset.
+    """
+    k = np.arange(4.0)
+    return np.exp(-(k**2) / (4.0 * float(blur_px) ** 2))
 
 
 def _blur(values: np.ndarray, sigma: float, min_support: float = 0.9) -> np.ndarray:
@@ -69,7 +95,9 @@ def _blur(values: np.ndarray, sigma: float, min_support: float = 0.9) -> np.ndar
     return np.where(support >= min_support, out, np.nan)
 
 
-def side_maps(J: np.ndarray, var: np.ndarray, blur_px: float = BLUR_PX) -> np.ndarray:
+def side_maps(
+    J: np.ndarray, var: np.ndarray, blur_px: float = BLUR_PX, footprint_px: float = FOOTPRINT_PX
+) -> np.ndarray:
     """Stack (H, W, 2) of one Helmholtz camera: J and its noise variance.
 
     Parameters
@@ -79,13 +107,31 @@ def side_maps(J: np.ndarray, var: np.ndarray, blur_px: float = BLUR_PX) -> np.nd
     blur_px : Gaussian blur (pixels) of J before sampling; the noise
         variance is scaled by the kernel's sum of squared weights,
         1 / (4 pi sigma^2). Blurred neighbours are correlated, so a sample
-        between them has this variance at any sub-pixel position (with no
-        blur, :func:`sample_sides` weighs the pixels' variances by the
-        squared bilinear weights instead).
+        between them has the variance of :func:`sample_sides` (with no blur,
+        the squared bilinear weights of the pixels' variances).
+    footprint_px : the model error of a sample at the edge of an unusable
+        region (beyond the paper): within reach of the blur and the bilinear
+        support of an unusable pixel (a dark marker, a shadow, a silhouette,
+        a saturated patch; counted as 0) ``(footprint_px |grad J|)^2`` is
+        added to the variance (:data:`FOOTPRINT_PX`). The two sides of a
+        pair sample such an edge through footprints that do not match, an
+        error that does not fall with the sensor noise; without this term
+        the robust weights drop such rows only while the noise is small
+        against them, so a surface's depth moved with the noise level.
     """
+    unusable = ~np.isfinite(J)
     if blur_px > 0:
         J = _blur(J, blur_px)
         var = _blur(var, blur_px) * min(1.0 / (4.0 * np.pi * blur_px**2), 1.0)
+    if footprint_px > 0 and unusable.any():
+        from scipy.ndimage import binary_dilation
+
+        # Within reach of the blur (2 sigma) and the bilinear support of an unusable
+        # pixel: the edge of a dark, saturated or outside region.
+        reach = int(np.ceil(2.0 * blur_px)) + 1
+        rim = binary_dilation(unusable, iterations=reach) & ~unusable
+        gy, gx = np.gradient(np.where(np.isfinite(J), J, 0.0))
+        var = var + np.where(rim, footprint_px**2 * (gx * gx + gy * gy), 0.0)
     return np.stack([J, var], axis=-1)
 
 
@@ -143,7 +189,7 @@ def helmholtz_sides(
             cams.append(cam)
             light.append(cam.light_centre)
             maps.append(side_maps(J, V, blur_px))
-    return HelmholtzSides(cams, np.asarray(light), maps, blur_px > 0, order)
+    return HelmholtzSides(cams, np.asarray(light), maps, blur_px > 0, order, blur_px)
 
 
 @nb.njit(cache=True, inline="always")
@@ -167,11 +213,24 @@ def _keys(t):
     return w, d
 
 
+@nb.njit(cache=True, inline="always")
+def _correlated_gain(w, corr):
+    """Variance of ``sum_a w_a n_a`` over unit-variance noise with correlation
+    ``corr[|a - b|]`` between taps a and b (one axis of a separable sample)."""
+    n = len(w)
+    g = 0.0
+    for a in range(n):
+        for b in range(n):
+            g += w[a] * w[b] * corr[abs(a - b)]
+    return g
+
+
 @nb.njit(cache=True)
-def _cubic(maps, j, u, vv, blurred):
+def _cubic(maps, j, u, vv, blurred, corr):
     """Cubic-convolution sample of side j at pixel (u, vv): J, dJ/du, dJ/dv and the
-    noise variance (squared weights, or the weights where ``blurred``); NaN
-    without the full 4 x 4 support inside the image."""
+    noise variance (squared weights; where ``blurred``, the weights times the
+    correlated noise's gain, :func:`noise_correlation`); NaN without the full
+    4 x 4 support inside the image."""
     Hh, Ww = maps.shape[1], maps.shape[2]
     if not (u >= 1.0 and vv >= 1.0 and u < Ww - 2 and vv < Hh - 2):
         return np.nan, np.nan, np.nan, np.nan
@@ -193,12 +252,14 @@ def _cubic(maps, j, u, vv, blurred):
             if not blurred:
                 w = w * w
             noise += w * maps[j, v0 - 1 + a, u0 - 1 + b, 1]
+    if blurred:
+        noise *= _correlated_gain(wu, corr) * _correlated_gain(wv, corr)
     return J, gu, gv, noise
 
 
 @nb.njit(parallel=True, cache=True, fastmath=False)
 def _sample_kernel(
-    X, R, Ks, dists, Rs, ts, light, maps, blurred, order, derivatives, s, var, v, ds, dv
+    X, R, Ks, dists, Rs, ts, light, maps, blurred, corr, order, derivatives, s, var, v, ds, dv
 ):
     """Project every point into every side's camera (OpenCV model, with the
     derivative of the pixel along the ray where ``derivatives``), sample the
@@ -249,7 +310,7 @@ def _sample_kernel(
             gu = nan
             gv = nan
             if order == 3:
-                J, gu, gv, noise = _cubic(maps, j, u, vv, blurred)
+                J, gu, gv, noise = _cubic(maps, j, u, vv, blurred, corr)
             elif (u >= 0.0) and (vv >= 0.0) and (u <= Ww - 1) and (vv <= Hh - 1):
                 u0 = min(int(np.floor(u)), Ww - 2)
                 v0 = min(int(np.floor(vv)), Hh - 2)
@@ -266,11 +327,19 @@ def _sample_kernel(
                 gu = (1.0 - b) * (j01 - j00) + b * (j11 - j10)
                 gv = (1.0 - a) * (j10 - j00) + a * (j11 - j01)
                 # The noise of a weighted sum of independent pixels: squared weights
-                # (a sample between four pixels averages their noise); blurred
-                # pixels are correlated, and their variance interpolates.
-                if not blurred:
+                # (a sample between four pixels averages their noise). Blurred
+                # pixels are correlated (corr[1] between neighbours): their
+                # variance interpolates, times the gain of the bilinear weights
+                # on that correlated noise, per axis t^2 + (1 - t)^2 + 2 t (1 - t)
+                # corr[1] (1 at a pixel, (1 + corr[1]) / 2 half-way).
+                gain = 1.0
+                if blurred:
+                    gain = (1.0 - 2.0 * a * (1.0 - a) * (1.0 - corr[1])) * (
+                        1.0 - 2.0 * b * (1.0 - b) * (1.0 - corr[1])
+                    )
+                else:
                     w00, w01, w10, w11 = w00 * w00, w01 * w01, w10 * w10, w11 * w11
-                noise = (
+                noise = gain * (
                     w00 * maps[j, v0, u0, 1]
                     + w01 * maps[j, v0, u0 + 1, 1]
                     + w10 * maps[j, v0 + 1, u0, 1]
@@ -331,6 +400,7 @@ def sample_sides(sides: HelmholtzSides, X: np.ndarray, R: np.ndarray, derivative
         sides.light,
         sides.stack,
         sides.blurred,
+        sides.noise_corr,
         sides.order,
         bool(derivatives),
         s,
