@@ -65,16 +65,17 @@ def test_noise_correlation_and_its_lattice_gain():
 
 
 def test_footprint_error_at_the_rims_of_unusable_regions():
-    """``side_maps`` adds (footprint_px |grad J|)^2 to the variance within reach
+    """``side_maps(footprint_px=0.15)`` adds (footprint_px |grad J|)^2 to the variance within reach
     of an unusable pixel (the rim of a dark marker or a silhouette, where the
     unusable pixels count as 0): a ramp of 2 per pixel keeps its variance
     away from the hole, and next to a hole at column 10 of row 5 the
     gradient jumps (to (0 - 16) / 2 = -8 per pixel at column 9)."""
     J = np.tile(np.arange(20.0) * 2, (10, 1))
-    ramp = side_maps(J, np.full_like(J, 0.5), blur_px=0)
+    ramp = side_maps(J, np.full_like(J, 0.5), blur_px=0, footprint_px=0.15)
     assert np.allclose(ramp[..., 1], 0.5)  # no unusable pixel, no rim
     J[5, 10] = np.nan
-    holed = side_maps(J, np.where(np.isfinite(J), 0.5, np.nan), blur_px=0)
+    holed = side_maps(J, np.where(np.isfinite(J), 0.5, np.nan), blur_px=0, footprint_px=0.15)
+    assert np.allclose(side_maps(J, np.full_like(J, 0.5), blur_px=0)[..., 1], 0.5)  # default 0
     assert np.isnan(holed[5, 10, 1])
     assert np.isclose(holed[5, 9, 1], 0.5 + 0.15**2 * (8**2 + 0**2))
     assert np.isclose(holed[4, 10, 1], 0.5 + 0.15**2 * (2**2 + 10**2))

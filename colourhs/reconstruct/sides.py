@@ -29,15 +29,16 @@ from colourhs.geometry import model_coefficients
 from colourhs.reconstruct.dataterm import to_pixel
 
 BLUR_PX = 1.0  # Gaussian blur of the images before sampling, pixels (see side_maps)
-FOOTPRINT_PX = 0.15  # disagreement of two views' footprints at an edge, pixels (see side_maps)
-"""Why ``FOOTPRINT_PX`` holds on any rig: it is in pixels of the image sampled,
-the unit of the blur and of the interpolation; two cameras of a reciprocal
-pair see a surface foreshortened differently (by 10-20 % between cameras 12-30
-degrees apart on a surface slanted up to 50 degrees), so their 1-pixel blur
-kernels and their pixels cover patches that differ by about 0.15 pixel, and a
-sample across an edge is uncertain by that much of its gradient: far more
-than the sensor noise at any signal level, so such rows carry next to no
-weight whatever the noise."""
+FOOTPRINT_PX = 0.0  # footprint error at the edges of unusable regions, pixels (see side_maps)
+"""Why ``FOOTPRINT_PX`` is 0 by default: weighing down the rows at the edges of
+unusable regions (``side_maps``) removes the bias that a board's dark markers
+give its depth at low signal, but the same edges are the silhouettes of
+curved objects and sheets, whose depth they fix: on random and corner rigs
+with every nuisance those lost more than the boards gained. The depth's
+error bar (:mod:`colourhs.reconstruct.uncertainty`) covers the markers'
+offset instead. A rig whose captures are all boards may set it (0.15 pixel:
+two views 12-30 degrees apart see a slanted surface foreshortened 10-20 %
+differently, so their 1-pixel blur kernels differ by about that much)."""
 ORDER = 1  # interpolation of the sides: 1 bilinear, 3 cubic convolution (see helmholtz_sides)
 
 
