@@ -233,7 +233,7 @@ def _bayes_reconstruction(
     (:func:`colourhs.reconstruct.integrate.initial_surface`) and the consistent
     surface (:func:`_consistent_surface`), the rims eroded. Returns (H*W,) depth,
     (H*W, 3) normal, validity, confidence and each depth's 1-sigma uncertainty
-    (metres, :func:`colourhs.reconstruct.refine.depth_sigma`; NaN without the
+    (metres, :mod:`colourhs.reconstruct.uncertainty`; NaN without the
     refinement); adds the MRF's and the surface's figures to ``info``."""
     H, W = shape
     box, local = _mrf_box(pix, shape)
