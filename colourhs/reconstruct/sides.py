@@ -73,8 +73,8 @@ class HelmholtzSides:
         return len(self.cameras) // 2
 
 
-def noise_correlation(blur_px: float) -> np.ndarray:
-    """Correlation (4,) of Gaussian-blurred white noise between pixels 0..3 apart.
+def noise_correlation(blur_px: float, taps: int = 4) -> np.ndarray:
+    """Correlation (taps,) of Gaussian-blurred white noise between pixels 0..taps-1 apart.
 
     Blurring independent pixels with a Gaussian of sigma ``blur_px`` makes
     their noise a stationary field whose autocorrelation is a Gaussian of
@@ -84,7 +84,7 @@ def noise_correlation(blur_px: float) -> np.ndarray:
     between pixels averages partly independent noise, so its variance is
     lower than a pixel's by a factor that depends on the sub-pixel offset.
     """
-    k = np.arange(4.0)
+    k = np.arange(float(taps))
     return np.exp(-(k**2) / (4.0 * float(blur_px) ** 2))
 
 

@@ -16,7 +16,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from colourhs.linalg import _factor
-from colourhs.reconstruct.sides import HelmholtzSides
+from colourhs.reconstruct.sides import HelmholtzSides, noise_correlation
 
 VALLEY_BLOCK = 4  # blocks of the valley's uncertainty, in spline control spacings
 """Why ``VALLEY_BLOCK`` holds on any rig: in units of the spline's spacing
@@ -37,8 +37,8 @@ def valley_sigma(tried: dict, best: float, groups: np.ndarray, span: float) -> f
     own quadratic ``E_g(d) = a_g + b_g x + c_g x^2`` in ``x = d - best``
     through the trial depths within ``span`` of ``best`` (a search step: E's
     trial energies nearer each other differ by less than their fits' own
-    noise; ``tried``: delta
-    -> (per-pixel rho, prior energy, control points)), and the minimum's
+    noise; ``tried``: delta -> (per-pixel rho, prior energy, control
+    points)), and the minimum's
     variance is ``G / (G - 1) sum_g (b_g - mean b)^2 / (2 sum_g c_g + 2
     c_prior)^2``. Returns inf where E does not curve upwards there (the
     depth is not determined) and NaN with fewer than three trial depths.
@@ -75,8 +75,8 @@ def correlated_gain(sides: HelmholtzSides) -> float:
     rows: the sum of the noise's correlation over the 2D pixel lattice (1 unblurred)."""
     if not sides.blurred:
         return 1.0
-    k = np.arange(-int(np.ceil(6 * sides.blur_px)), int(np.ceil(6 * sides.blur_px)) + 1)
-    return float(np.sum(np.exp(-(k**2) / (4.0 * sides.blur_px**2))) ** 2)
+    corr = noise_correlation(sides.blur_px, int(np.ceil(6 * sides.blur_px)) + 1)
+    return float(corr[0] + 2.0 * corr[1:].sum()) ** 2
 
 
 def depth_sigma(problem, c, samples: int = SIGMA_SAMPLES, seed: int = 0) -> np.ndarray:
@@ -107,8 +107,8 @@ def depth_sigma(problem, c, samples: int = SIGMA_SAMPLES, seed: int = 0) -> np.n
     gain over the pixel lattice, ``(sum_k corr[|k|])^2`` (4 pi sigma^2 for a
     blur of sigma pixels; 1 without blur). Pixels whose rows are unusable get NaN.
     """
-    sc = problem.scale(c)
-    J, r, info = problem._residuals(c, robust=problem.robust, scale=sc)
+    J, r, info = problem._residuals(c, robust=problem.robust)  # its own robust scale
+    sc = info["scale"]
     level = sc / (problem.robust**2 * problem.sides.pairs)
     A = (problem.gram.matrix(info["jacobian_values"]) + problem.DtD * level).tocsc()
     Jc = (J @ problem.B).tocsr()
