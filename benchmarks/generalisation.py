@@ -16,22 +16,32 @@ and compares each depth map with the ground truth rendered into the
 reference camera. Nothing in the pipeline sees the seed, the preset or the
 ``gt/`` folder.
 
-Writes to ``benchmarks/results/``:
+Writes to ``benchmarks/results/`` (``--tag`` suffixes each name):
 
 - ``generalisation_seeds.csv``: one row per seed x scene x variant (frames of
   the sheet pooled): the set (the preset's name), depth median of the
   absolute errors and of the signed ones (``depth_signed_median_mm``:
   reconstructed minus true z-depth, a bias), RMS, p95 (mm), normal median
-  (deg), completeness (reconstructed / ground-truth-visible pixels), and per seed
-  the calibration errors (mu RMS log error, worst map; cross-talk residual
-  leak; chromaticity median).
-- ``generalisation_summary.json``: per scene x variant and metric the median
-  over seeds and the worst seed, the issue's targets beside them, and
-  whether the ablation order ``vh > ml_full > bayes_nocalib > bayes_ph >=
-  bayes_full`` held on every seed, on the depth median error and on the
-  RMS (``_rms``: the paper's statistic), with the links that broke.
+  (deg), completeness (reconstructed / ground-truth-visible pixels), the
+  depth files' error bars over the same pixels (``depth_sigma_median_mm``;
+  ``sigma_within_1/2/3``: share of pixels with ``|error| <= k sigma``; empty
+  without ``depth_sigma``, e.g. ``vh``), and per seed the calibration errors
+  (mu RMS log error, worst and median map, and the worst of mu = 1
+  uncalibrated; chromaticity median) and the rig's drawn settings.
+- ``generalisation_summary.json``: per set (the ``set`` column; ``all`` for
+  tables without it), per scene x variant and metric the median over the
+  set's rigs and the worst rig, issue 35's targets beside them with ``met``
+  (:data:`TARGETS`); the depth sigma's calibration per Bayesian variant
+  (:func:`sigma_calibration`); whether the ablation order ``vh > ml_full >
+  bayes_nocalib > bayes_ph >= bayes_full`` held on every rig, on the depth
+  median error and on the RMS (``_rms``: the paper's statistic), with the
+  links that broke and the rigs where ``ml_full > bayes_nocalib`` was not
+  applicable (:data:`ML_LINK_MU_LIMIT`); the calibration errors over the rigs.
+- ``generalisation_summary.md``: the same per set as tables
+  (:func:`summarise_markdown`).
 
-``--summarise CSV`` summarises an existing per-seed table again.
+``--summarise CSV [CSV ...]`` summarises existing per-seed tables again
+(concatenated: e.g. a random and a corner run), rendering nothing.
 
 One 640x480 seed takes about 10 minutes on 2 cores with ``--sheet-frames 1``
 (rendering about 1; measured: seeds 0-7 in 83 minutes).
@@ -50,18 +60,53 @@ import numpy as np
 import pandas as pd
 
 from colourhs.commands import frame_indices
+from colourhs.contract import GAUSSIAN_WITHIN, SIGMA_MULTIPLES
 from colourhs.variants import VARIANTS
 
 HERE = Path(__file__).parent
-TARGETS = {  # issue 11: median over seeds (worst seed within 2x)
-    ("plane", "bayes_ph", "depth_median_mm"): 0.3,
-    ("plane", "bayes_ph", "depth_rms_mm"): 1.0,
-    ("plane", "bayes_ph", "coverage"): 0.8,
-    ("statue", "bayes_full", "normal_median_deg"): 3.0,
-    ("statue", "bayes_full", "depth_median_mm"): 1.0,
-    ("toy", "bayes_full", "depth_median_mm"): 2.0,
-    ("sheet", "bayes_ph", "depth_median_mm"): 0.5,
+#: Issue 35's targets, per set: (scene, variant, metric) -> upper bounds on (the median
+#: over the set's rigs, the worst rig); for the signed median on its absolute value.
+TARGETS = {
+    ("plane", "bayes_ph", "depth_median_mm"): (0.1, 0.3),
+    ("plane", "bayes_ph", "depth_rms_mm"): (0.5, 1.0),
+    ("plane", "bayes_ph", "depth_signed_median_mm"): (0.05, 0.05),
+    ("sheet", "bayes_ph", "depth_median_mm"): (0.2, 0.5),
+    ("sheet", "bayes_ph", "depth_signed_median_mm"): (0.05, 0.05),
+    ("statue", "bayes_full", "depth_median_mm"): (0.5, 1.0),
+    ("statue", "bayes_full", "normal_median_deg"): (2.0, 3.0),
+    ("toy", "bayes_full", "depth_median_mm"): (1.0, 2.0),
 }
+#: Per-seed metrics summarised per scene x variant (those the table has).
+METRICS = (
+    "depth_median_mm",
+    "depth_signed_median_mm",
+    "depth_rms_mm",
+    "depth_p95_mm",
+    "normal_median_deg",
+    "coverage",
+    "depth_sigma_median_mm",
+    *(f"sigma_within_{k}" for k in SIGMA_MULTIPLES),
+)
+#: Metrics whose worst rig is the largest absolute value (kept with its sign).
+SIGNED_METRICS = ("depth_signed_median_mm",)
+#: Variants whose depth files carry a sigma to calibrate (issue 35's sigma target).
+BAYES_VARIANTS = ("bayes_nocalib", "bayes_ph", "bayes_full")
+#: Issue 35: each pooled sigma share within this of the Gaussian's (GAUSSIAN_WITHIN).
+SIGMA_TOLERANCE = 0.1
+#: Issue 35's decision: ml_full > bayes_nocalib is checked only on rigs whose uncalibrated mu
+#: (mu = 1) is within 2 % (``mu_uncalibrated_rms_log_worst <= 0.02``).
+ML_LINK_MU_LIMIT = 0.02  # a relative (dimensionless) error of mu: the same bound on any rig
+#: The ablation's links (a, b, tie): a's error above b's (at least b's, to 0.1 %, where tie).
+LINKS = (
+    ("vh", "ml_full", False),
+    ("ml_full", "bayes_nocalib", False),
+    ("bayes_nocalib", "bayes_ph", False),
+    ("bayes_ph", "bayes_full", True),
+)
+ML_LINK = "ml_full > bayes_nocalib"
+#: The markdown's rows: every (scene, variant) with a target, and ML on the plane
+#: (issue 35's decision on ML with exact data: reported, no target).
+MARKDOWN_ROWS = (*dict.fromkeys((s, v) for s, v, _ in TARGETS), ("plane", "ml_full"))
 
 
 def seeds_in_temp(seeds, prefix: str, run, out_csv: Path) -> list[dict]:
@@ -155,9 +200,19 @@ def calibration_errors(data: Path, files: dict) -> dict:
 
 
 def evaluate_variant(data, scene, frames, variant, files, chromatic, work) -> dict:
-    """Depth maps of one scene x variant over its frames, pooled against the ground truth."""
+    """Depth maps of one scene x variant over its frames, pooled against the ground truth.
+
+    Returns
+    -------
+    dict
+        :func:`colourhs.deptherrors.depth_summary` of the pooled pixels (less
+        ``truth_pixels``); ``depth_sigma_median_mm`` and ``sigma_within_1/2/3``
+        (:func:`colourhs.deptherrors.sigma_summary`) over the pooled pixels with both a
+        finite error and a finite ``depth_sigma`` (None where the files carry none:
+        ``vh``, files written before it); ``seconds``.
+    """
     from colourhs.capture import load_rig
-    from colourhs.deptherrors import depth_errors, depth_summary
+    from colourhs.deptherrors import depth_errors, depth_summary, sigma_summary
     from colourhs.depthfile import read_depth
     from colourhs.hull import visual_hull
     from colourhs.ply import load_mesh
@@ -165,6 +220,7 @@ def evaluate_variant(data, scene, frames, variant, files, chromatic, work) -> di
 
     rig = load_rig(data)
     errs, angs, truth = [], [], 0
+    sigma_errs, sigmas = [], []
     t0 = time.time()
     for frame in frames:
         h5 = work / scene / variant / f"{frame}.h5"
@@ -176,18 +232,26 @@ def evaluate_variant(data, scene, frames, variant, files, chromatic, work) -> di
                 data, scene, frame, h5, method, **variant_files(variant, files, chromatic)
             )
         gt = load_mesh(data / "scenes" / scene / "gt" / f"{frame}.ply")
-        err, ang, m = depth_errors(read_depth(h5), *gt, rig.image.width, rig.image.height)
+        depth = read_depth(h5)
+        err, ang, m = depth_errors(depth, *gt, rig.image.width, rig.image.height)
         ok = np.isfinite(err)
         errs.append(err[ok])
         angs.append(ang[ok])
         truth += m["truth_pixels"]
+        sigma = getattr(depth, "depth_sigma", None)
+        if sigma is not None:
+            sigma = np.asarray(sigma, float)
+            both = ok & np.isfinite(sigma)
+            sigma_errs.append(err[both])
+            sigmas.append(sigma[both])
     s = depth_summary(np.concatenate(errs), np.concatenate(angs), truth)
     s.pop("truth_pixels")
-    signed = np.concatenate(errs) * 1e3
-    return s | {
-        "depth_signed_median_mm": float(np.median(signed)) if len(signed) else None,
-        "seconds": time.time() - t0,
-    }
+    if sigmas:
+        s |= sigma_summary(np.concatenate(sigma_errs), np.concatenate(sigmas))
+    else:
+        s |= sigma_summary(np.empty(0), None)
+    s.pop("sigma_pixels")
+    return s | {"seconds": time.time() - t0}
 
 
 def run_seed(
@@ -249,51 +313,332 @@ def run_seed(
         shutil.rmtree(root, ignore_errors=True)
 
 
-def summarise(table: pd.DataFrame) -> dict:
-    metrics = ("depth_median_mm", "depth_rms_mm", "normal_median_deg", "coverage")
-    out = {"seeds": sorted(int(s) for s in table["seed"].unique()), "scenes": {}}
-    if "set" in table:  # tables written before the column have none
-        out["sets"] = sorted(str(s) for s in table["set"].unique())
+def worst_value(metric: str, values: np.ndarray) -> float:
+    """The worst of a metric's finite per-rig values.
+
+    The largest for errors, the smallest ``coverage``, the largest absolute value with
+    its sign for :data:`SIGNED_METRICS`, the furthest from the Gaussian's share
+    (:data:`GAUSSIAN_WITHIN`) for ``sigma_within_<k>``.
+    """
+    if metric == "coverage":
+        return float(values.min())
+    if metric in SIGNED_METRICS:
+        return float(values[np.argmax(np.abs(values))])
+    if metric.startswith("sigma_within_"):
+        expected = GAUSSIAN_WITHIN[int(metric.rsplit("_", 1)[1])]
+        return float(values[np.argmax(np.abs(values - expected))])
+    return float(values.max())
+
+
+def target_met(metric: str, median: float | None, worst: float | None, target) -> bool:
+    """Whether a median over rigs and the worst rig are within a target's upper bounds
+    (absolute values for :data:`SIGNED_METRICS`); False without values."""
+    if median is None or worst is None:
+        return False
+    if metric in SIGNED_METRICS:
+        median, worst = abs(median), abs(worst)
+    return bool(median <= target[0] and worst <= target[1])
+
+
+def metric_entry(scene: str, variant: str, metric: str, values) -> dict:
+    """Median over rigs, worst rig (:func:`worst_value`) and rigs with a value; the
+    target (None where none) and, where one exists, ``met``."""
+    v = np.asarray(values, float)
+    v = v[np.isfinite(v)]
+    entry = {
+        "median": float(np.median(v)) if v.size else None,
+        "worst": worst_value(metric, v) if v.size else None,
+        "rigs": int(v.size),
+        "target": None,
+    }
+    target = TARGETS.get((scene, variant, metric))
+    if target is not None:
+        entry["target"] = {"median": target[0], "worst": target[1]}
+        entry["met"] = target_met(metric, entry["median"], entry["worst"], target)
+    return entry
+
+
+def scene_summary(table: pd.DataFrame) -> dict:
+    """scene -> variant -> metric -> :func:`metric_entry` over one set's rows."""
+    out = {}
     for (scene, variant), g in table.groupby(["scene", "variant"]):
-        entry = {}
-        for m in metrics:
-            v = g[m].astype(float)
-            worst = v.min() if m == "coverage" else v.max()
-            entry[m] = {
-                "median": float(v.median()),
-                "worst": float(worst),
-                "target": TARGETS.get((scene, variant, m)),
+        out.setdefault(scene, {})[variant] = {
+            m: metric_entry(scene, variant, m, g[m].astype(float)) for m in METRICS if m in g
+        }
+    return out
+
+
+def sigma_calibration(table: pd.DataFrame) -> dict:
+    """Issue 35's sigma target per Bayesian variant over one set's rigs and scenes.
+
+    Each ``sigma_within_<k>`` is the mean of the per-row shares (one row per rig x
+    scene, each weighted equally whatever its pixel count, rows without a sigma left
+    out), ``met`` when within :data:`SIGMA_TOLERANCE` of the Gaussian's share
+    (:data:`GAUSSIAN_WITHIN`: 0.683, 0.954, 0.997); the variant's ``met`` when every
+    share's is (False without rows with a sigma).
+
+    Returns
+    -------
+    dict
+        variant -> ``sigma_within_<k>`` -> {``mean``, ``target``, ``tolerance``,
+        ``met``}, ``rows`` (rows with a sigma) and ``met``; variants the table lacks
+        are left out.
+    """
+    out = {}
+    for variant in BAYES_VARIANTS:
+        g = table[table["variant"] == variant]
+        if g.empty:
+            continue
+        entry, rows = {}, 0
+        for k, expected in GAUSSIAN_WITHIN.items():
+            col = f"sigma_within_{k}"
+            v = g[col].astype(float).to_numpy() if col in g else np.empty(0)
+            v = v[np.isfinite(v)]
+            rows = max(rows, int(v.size))
+            mean = float(v.mean()) if v.size else None
+            met = mean is not None and abs(mean - expected) <= SIGMA_TOLERANCE
+            entry[col] = {
+                "mean": mean,
+                "target": expected,
+                "tolerance": SIGMA_TOLERANCE,
+                "met": bool(met),
             }
-        out["scenes"].setdefault(scene, {})[variant] = entry
-    # The ablation order on the depth median and on the RMS (the paper's
-    # statistic, Section IV-A: RMS Hausdorff distance): which links break.
-    pairs = [("vh", "ml_full"), ("ml_full", "bayes_nocalib"), ("bayes_nocalib", "bayes_ph")]
-    complete = set(VARIANTS) <= set(table["variant"])  # the order needs every variant
-    for metric, suffix in (("depth_median_mm", ""), ("depth_rms_mm", "_rms")) if complete else ():
-        order, links = {}, {}
+        entry["rows"] = rows
+        entry["met"] = all(entry[f"sigma_within_{k}"]["met"] for k in GAUSSIAN_WITHIN)
+        out[variant] = entry
+    return out
+
+
+def ml_link_applicable(table: pd.DataFrame) -> dict:
+    """seed -> whether ``ml_full > bayes_nocalib`` is checked on that rig: its
+    uncalibrated mu within :data:`ML_LINK_MU_LIMIT` (not where it is unknown)."""
+    col = "mu_uncalibrated_rms_log_worst"
+    if col not in table:
+        return {seed: False for seed in table["seed"].unique()}
+    mu = table.groupby("seed")[col].first().astype(float)
+    return {seed: bool(np.isfinite(v) and v <= ML_LINK_MU_LIMIT) for seed, v in mu.items()}
+
+
+def broken_links(d: dict, ml_link: bool) -> list[str]:
+    """The ablation links that break on one rig x scene (``d``: variant -> metric);
+    ``ml_full > bayes_nocalib`` only where ``ml_link``."""
+    broken = []
+    for a, b, tie in LINKS:
+        name = f"{a} {'>=' if tie else '>'} {b}"
+        if name == ML_LINK and not ml_link:
+            continue
+        holds = d[a] >= d[b] * 0.999 if tie else d[a] > d[b]
+        if not holds:
+            broken.append(name)
+    return broken
+
+
+def ablation(table: pd.DataFrame) -> dict:
+    """The ablation order on one set's rigs, on the depth median and on the RMS.
+
+    The order needs every variant (an empty dict otherwise). ``ml_full >
+    bayes_nocalib`` is checked only on rigs where :func:`ml_link_applicable`
+    (issue 35's decision), elsewhere it is not applicable (not broken); the other
+    links on every rig.
+
+    Returns
+    -------
+    dict
+        Per statistic (suffix ``""``: depth median, ``_rms``: RMS, the paper's
+        Section IV-A statistic): ``ablation_order_holds`` (``seed/scene`` -> bool),
+        ``ablation_links_broken`` (``seed/scene`` -> links), ``ablation_order_all_seeds``
+        and ``ablation_broken_counts`` (link -> cases, ``cases``); and
+        ``ablation_ml_link_not_applicable`` (rigs where the ML link was not checked)
+        with their seeds (``ablation_ml_link_not_applicable_seeds``).
+    """
+    out = {}
+    if not set(VARIANTS) <= set(table["variant"]):
+        return out
+    applicable = ml_link_applicable(table)
+    for metric, suffix in (("depth_median_mm", ""), ("depth_rms_mm", "_rms")):
+        links = {}
         for (seed, scene), g in table.groupby(["seed", "scene"]):
             d = dict(zip(g["variant"], g[metric].astype(float), strict=True))
-            broken = [f"{a} > {b}" for a, b in pairs if not d[a] > d[b]]
-            if not d["bayes_ph"] >= d["bayes_full"] * 0.999:
-                broken.append("bayes_ph >= bayes_full")
-            links[f"{seed}/{scene}"] = broken
-            order[f"{seed}/{scene}"] = not broken
-        out[f"ablation_order_holds{suffix}"] = order
-        out[f"ablation_links_broken{suffix}"] = links
-        out[f"ablation_order_all_seeds{suffix}"] = all(order.values())
+            links[f"{seed}/{scene}"] = broken_links(d, applicable[seed])
         counts = {}
         for broken in links.values():
             for link in broken:
                 counts[link] = counts.get(link, 0) + 1
+        out[f"ablation_order_holds{suffix}"] = {k: not v for k, v in links.items()}
+        out[f"ablation_links_broken{suffix}"] = links
+        out[f"ablation_order_all_seeds{suffix}"] = not any(links.values())
         out[f"ablation_broken_counts{suffix}"] = counts | {"cases": len(links)}
+    skipped = sorted(int(seed) for seed, ok in applicable.items() if not ok)
+    out["ablation_ml_link_not_applicable"] = len(skipped)
+    out["ablation_ml_link_not_applicable_seeds"] = skipped
+    return out
+
+
+def calibration_summary(table: pd.DataFrame) -> dict:
+    """Median and worst (largest) calibration error over one set's rigs."""
     cols = ["mu_rms_log_worst", "mu_uncalibrated_rms_log_worst", "chromaticity_median_rel"]
     cal = table.groupby("seed")[[c for c in cols if c in table]].first()
-    out["calibration"] = {
+    return {
         c: {"median": float(cal[c].median()), "worst": float(cal[c].max())}
         for c in cal
         if cal[c].notna().any()
     }
+
+
+def set_names(table: pd.DataFrame) -> pd.Series:
+    """Each row's set: the ``set`` column, ``all`` where the table has none."""
+    if "set" not in table:  # tables written before the column have none
+        return pd.Series("all", index=table.index)
+    return table["set"].fillna("all").astype(str)
+
+
+def summarise(table: pd.DataFrame) -> dict:
+    """Per set: the scenes' metrics, the sigma calibration, the ablation, the calibration.
+
+    Parameters
+    ----------
+    table : DataFrame
+        Per-seed rows (``generalisation_seeds.csv``; several concatenated).
+
+    Returns
+    -------
+    dict
+        ``seeds`` (every set's), ``sets``: set -> {``seeds``, ``scenes``
+        (:func:`scene_summary`), ``sigma_calibration`` (:func:`sigma_calibration`),
+        the ablation's keys (:func:`ablation`), ``calibration``}; and the decisions'
+        thresholds (``ml_link_mu_limit``, ``sigma_tolerance``).
+    """
+    table = table.reset_index(drop=True)
+    sets = set_names(table)
+    out = {
+        "seeds": sorted({int(s) for s in table["seed"].unique()}),
+        "ml_link_mu_limit": ML_LINK_MU_LIMIT,
+        "sigma_tolerance": SIGMA_TOLERANCE,
+        "sets": {},
+    }
+    for name in sorted(sets.unique()):
+        g = table[sets == name]
+        out["sets"][name] = {
+            "seeds": sorted(int(s) for s in g["seed"].unique()),
+            "scenes": scene_summary(g),
+            "sigma_calibration": sigma_calibration(g),
+            **ablation(g),
+            "calibration": calibration_summary(g),
+        }
     return out
+
+
+def _pair(entry: dict | None, fmt: str) -> str:
+    """``median / worst`` of a metric entry, ``-`` where there is none."""
+    if not entry or entry["median"] is None:
+        return "-"
+    return f"{entry['median']:{fmt}} / {entry['worst']:{fmt}}"
+
+
+#: The markdown's metric columns: (metric, heading, format).
+MARKDOWN_COLUMNS = (
+    ("depth_median_mm", "depth median (mm)", ".3f"),
+    ("depth_rms_mm", "RMS (mm)", ".3f"),
+    ("depth_signed_median_mm", "signed median (mm)", "+.3f"),
+    ("normal_median_deg", "normal median (deg)", ".2f"),
+    ("coverage", "coverage", ".3f"),
+)
+SHORT_NAMES = {
+    "depth_median_mm": "depth",
+    "depth_rms_mm": "RMS",
+    "depth_signed_median_mm": "abs signed",
+    "normal_median_deg": "normal",
+}
+
+
+def _targets_text(scene: str, variant: str) -> str:
+    """A row's targets, e.g. ``depth <= 0.1 / 0.3``; ``-`` without any."""
+    parts = [
+        f"{SHORT_NAMES.get(m, m)} <= {t[0]:g} / {t[1]:g}"
+        for (s, v, m), t in TARGETS.items()
+        if (s, v) == (scene, variant)
+    ]
+    return "; ".join(parts) or "-"
+
+
+def _met_text(scene: str, variant: str, entries: dict) -> str:
+    """``yes``, ``no (the targets missed, in :data:`TARGETS`' order)`` or ``-`` without
+    targets."""
+    judged = [m for s, v, m in TARGETS if (s, v) == (scene, variant) and m in entries]
+    if not judged:
+        return "-"
+    missed = [SHORT_NAMES.get(m, m) for m in judged if not entries[m]["met"]]
+    return f"no ({', '.join(missed)})" if missed else "yes"
+
+
+def _scene_table(s: dict) -> list[str]:
+    """One set's table: a row per :data:`MARKDOWN_ROWS` entry the set has."""
+    head = ["scene", "variant", *(h for _, h, _ in MARKDOWN_COLUMNS), "target", "met"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for scene, variant in MARKDOWN_ROWS:
+        entries = s["scenes"].get(scene, {}).get(variant)
+        if entries is None:
+            continue
+        cells = [_pair(entries.get(m), fmt) for m, _, fmt in MARKDOWN_COLUMNS]
+        cells += [_targets_text(scene, variant), _met_text(scene, variant, entries)]
+        lines.append("| " + " | ".join([scene, variant, *cells]) + " |")
+    return lines
+
+
+def _sigma_table(s: dict) -> list[str]:
+    """One set's sigma calibration table (a row per Bayesian variant it has)."""
+    ks = list(GAUSSIAN_WITHIN)
+    head = ["variant", *(f"within {k} sigma" for k in ks), "rows", "target", "met"]
+    target = " / ".join(f"{GAUSSIAN_WITHIN[k]:.3f}" for k in ks) + f" +- {SIGMA_TOLERANCE:g}"
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for variant, e in s["sigma_calibration"].items():
+        means = [e[f"sigma_within_{k}"]["mean"] for k in ks]
+        cells = ["-" if v is None else f"{v:.3f}" for v in means]
+        met = "yes" if e["met"] else "no"
+        lines.append("| " + " | ".join([variant, *cells, str(e["rows"]), target, met]) + " |")
+    return lines
+
+
+def _ablation_lines(s: dict) -> list[str]:
+    """One set's ablation: broken links per statistic, rigs where the ML link was not
+    applicable."""
+    if "ablation_broken_counts" not in s:
+        return ["Not every variant ran: no ablation order."]
+    names = [f"{a} {'>=' if tie else '>'} {b}" for a, b, tie in LINKS]
+    head = ["statistic", "held on every rig x scene", *(f"`{n}` broken" for n in names), "cases"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for suffix, label in (("", "depth median"), ("_rms", "RMS")):
+        counts = s[f"ablation_broken_counts{suffix}"]
+        held = "yes" if s[f"ablation_order_all_seeds{suffix}"] else "no"
+        cells = [str(counts.get(n, 0)) for n in names]
+        lines.append("| " + " | ".join([label, held, *cells, str(counts["cases"])]) + " |")
+    skipped = s["ablation_ml_link_not_applicable_seeds"]
+    lines += [
+        "",
+        f"`{ML_LINK}` not applicable (uncalibrated mu error above {ML_LINK_MU_LIMIT:.0%}) on "
+        f"{len(skipped)} of {len(s['seeds'])} rigs"
+        + (f" (seeds {', '.join(map(str, skipped))})" if skipped else "")
+        + "; not counted as broken.",
+    ]
+    return lines
+
+
+def summarise_markdown(summary: dict) -> str:
+    """:func:`summarise`'s summary as markdown: per set a table of the scenes with
+    targets (and ML on the plane), each cell the median over rigs / the worst rig; the
+    sigma calibration; the ablation's broken links."""
+    lines = ["# Generalisation on randomised rigs", ""]
+    for name, s in summary["sets"].items():
+        seeds = ", ".join(map(str, s["seeds"]))
+        lines += [f"## Set `{name}` (seeds {seeds})", "", "Median over rigs / worst rig.", ""]
+        lines += _scene_table(s)
+        lines += ["", "### Sigma calibration", ""]
+        lines += ["Mean of the per-row shares (each rig x scene weighted equally).", ""]
+        lines += _sigma_table(s)
+        lines += ["", "### Ablation", ""]
+        lines += _ablation_lines(s)
+        lines.append("")
+    return "\n".join(lines)
 
 
 def main(argv=None) -> dict:
@@ -316,8 +661,10 @@ def main(argv=None) -> dict:
     p.add_argument(
         "--summarise",
         type=Path,
+        nargs="+",
         default=None,
-        help="only summarise this per-seed table (a generalisation_seeds CSV), rendering nothing",
+        help="only summarise these per-seed tables (generalisation_seeds CSVs, concatenated, "
+        "e.g. a random and a corner run), rendering nothing",
     )
     args = p.parse_args(argv)
     if args.summarise is None:
@@ -330,7 +677,7 @@ def main(argv=None) -> dict:
     out_dir.mkdir(exist_ok=True)
     csv = out_dir / f"generalisation_seeds{args.tag}.csv"
     if args.summarise is not None:
-        table = pd.read_csv(args.summarise)
+        table = pd.concat([pd.read_csv(path) for path in args.summarise], ignore_index=True)
     else:
         tables = []
         for seed in frame_indices(args.seeds):
@@ -338,9 +685,10 @@ def main(argv=None) -> dict:
                 run_seed(seed, args.preset, args.sheet_frames, args.keep, args.variants.split(","))
             )
             pd.concat(tables).to_csv(csv, index=False)  # after every seed: a partial run counts
-        table = pd.concat(tables)
+        table = pd.concat(tables, ignore_index=True)
     summary = summarise(table)
     (out_dir / f"generalisation_summary{args.tag}.json").write_text(json.dumps(summary, indent=2))
+    (out_dir / f"generalisation_summary{args.tag}.md").write_text(summarise_markdown(summary))
     print(json.dumps(summary, indent=2))
     return summary
 

@@ -21,6 +21,8 @@ if TYPE_CHECKING:
     import pandas as pd
 
 __all__ = [
+    "DROP_COLUMNS",
+    "DROP_REASONS",
     "EXTRA_COLUMNS",
     "GAUSSIAN_WITHIN",
     "KEY_COLUMNS",
@@ -47,6 +49,36 @@ SIGMA_MULTIPLES = (1, 2, 3)
 #: The share of a Gaussian error within k sigma, ``erf(k / sqrt(2))``: what a calibrated
 #: sigma gives (0.683, 0.954, 0.997).
 GAUSSIAN_WITHIN = {k: math.erf(k / math.sqrt(2.0)) for k in SIGMA_MULTIPLES}
+#: Why a pixel of the reference camera has no depth: code ``k + 1`` of a depth file's
+#: ``dropped`` dataset is ``DROP_REASONS[k]``; code 0 is a pixel with a depth (or, where
+#: the file has no ``dropped``, unknown). New reasons go at the end (the codes stay).
+#: :mod:`colourhs.depthfile` re-exports it; defined here so that the metrics' columns
+#: (:data:`DROP_COLUMNS`) need neither h5py nor numpy.
+DROP_REASONS = (
+    # not in the object's silhouette or lit region
+    "outside",
+    # too dark in the reference camera's reciprocal channels
+    "dark",
+    # saturated in the reference camera
+    "saturated",
+    # no chromaticity p at the pixel
+    "no_chromaticity",
+    # every depth hypothesis failed (unusable samples in another view, the facing
+    # test) or its cost was over the limit
+    "data_term",
+    # left out of the initial surface (depth edges, small components)
+    "surface",
+    # on a surface the refinement did not explain, and no hole filling filled it
+    "refinement",
+    # its depth's sigma exceeded the tolerance (flagged ``uncertain``)
+    "uncertain",
+    # eroded at the rim of what was reconstructed
+    "rims",
+)
+#: Share of the ground truth's pixels lost to each reason (``dropped_<reason>``, in
+#: :data:`DROP_REASONS`' order), then ``dropped_other``: lost without a reason (code 0).
+#: With ``coverage`` they add to 1 (:func:`colourhs.deptherrors.drop_summary`).
+DROP_COLUMNS = (*(f"dropped_{reason}" for reason in DROP_REASONS), "dropped_other")
 #: Every column ``metrics.csv`` must have (results contract, version 1).
 REQUIRED_COLUMNS = KEY_COLUMNS + METRIC_COLUMNS
 #: Extra metric columns that the evaluation writes after the contract's
@@ -68,6 +100,8 @@ EXTRA_COLUMNS = (
     *(f"sigma_within_{k}" for k in SIGMA_MULTIPLES),
     "expected_depth_error_mm",
     "uncertain_share",
+    # Where the ground truth's pixels without a depth went (``dropped`` of the depth file).
+    *DROP_COLUMNS,
 )
 
 

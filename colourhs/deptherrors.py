@@ -6,14 +6,16 @@ ground truth rendered into its reference camera
 stage (:mod:`colourhs.evaluate`) and the accuracy benchmarks. Where the depth
 file carries its per-pixel 1-sigma uncertainty (``depth_sigma``), the same
 pixels also say how well that sigma predicts the error (:func:`sigma_summary`);
-:func:`uncertainty_summary` needs no ground truth.
+:func:`uncertainty_summary` needs no ground truth. Where it carries why each pixel
+has no depth (``dropped``), :func:`drop_summary` says where the ground truth's
+pixels without a depth went.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from colourhs.contract import GAUSSIAN_WITHIN, SIGMA_MULTIPLES
+from colourhs.contract import DROP_COLUMNS, DROP_REASONS, GAUSSIAN_WITHIN, SIGMA_MULTIPLES
 from colourhs.depthfile import DepthMap
 from colourhs.raycast import render_depth_normals
 
@@ -22,6 +24,7 @@ __all__ = [
     "SIGMA_MULTIPLES",
     "depth_errors",
     "depth_summary",
+    "drop_summary",
     "sigma_summary",
     "uncertainty_summary",
 ]
@@ -149,6 +152,49 @@ def uncertainty_summary(depth_map: DepthMap) -> dict:
     return out
 
 
+def drop_summary(depth_map: DepthMap, truth_valid: np.ndarray) -> dict:
+    """Where the ground truth's pixels without a depth went: the share lost to each reason.
+
+    Parameters
+    ----------
+    depth_map : DepthMap
+        A depth map with its ``dropped`` codes (code ``k + 1``: ``DROP_REASONS[k]``).
+    truth_valid : ndarray of bool, shape (H, W)
+        Pixels where the ground truth has a depth (finite depth of
+        :func:`colourhs.raycast.render_depth_normals`).
+
+    Returns
+    -------
+    dict
+        ``dropped_<reason>`` for each reason of :data:`colourhs.contract.DROP_REASONS`:
+        the share (0 to 1, of the ground truth's pixels) without a finite depth whose
+        code is that reason; ``dropped_other``: the share without a finite depth and
+        with code 0 (lost without a reason). Codes of pixels that have a depth are
+        not counted, so the shares plus :func:`depth_summary`'s ``coverage`` (the share
+        with a finite depth) add to 1. All None where the map has no ``dropped`` or
+        the ground truth no pixel.
+
+    Raises
+    ------
+    ValueError
+        When ``truth_valid`` is not of the depth map's shape.
+    """
+    out = dict.fromkeys(DROP_COLUMNS)
+    truth = np.asarray(truth_valid, bool)
+    if truth.shape != depth_map.depth.shape:
+        raise ValueError(f"truth mask is {truth.shape}, the depth map {depth_map.depth.shape}")
+    total = int(truth.sum())
+    if depth_map.dropped is None or total == 0:
+        return out
+    lost = truth & ~np.isfinite(depth_map.depth)
+    codes = np.asarray(depth_map.dropped, np.intp)[lost]
+    counts = np.bincount(codes, minlength=len(DROP_REASONS) + 1)
+    for k, reason in enumerate(DROP_REASONS):
+        out[f"dropped_{reason}"] = float(counts[k + 1]) / total
+    out["dropped_other"] = float(counts[0]) / total
+    return out
+
+
 def depth_errors(
     depth_map: DepthMap,
     gt_vertices: np.ndarray,
@@ -183,8 +229,9 @@ def depth_errors(
     normal_error : ndarray, shape (H, W)
         Angle between reconstructed and true normals, degrees; NaN where either is missing.
     metrics : dict
-        :func:`depth_summary` of the two maps and :func:`sigma_summary` of the depth
-        errors and the depth map's ``depth_sigma``.
+        :func:`depth_summary` of the two maps, :func:`sigma_summary` of the depth
+        errors and the depth map's ``depth_sigma``, and :func:`drop_summary` of the
+        depth map over the ground truth's pixels.
     """
     width = depth_map.width if width is None else int(width)
     height = depth_map.height if height is None else int(height)
@@ -209,8 +256,10 @@ def depth_errors(
         n = n / np.linalg.norm(n, axis=2, keepdims=True)
         ang = np.degrees(np.arccos(np.clip(np.sum(n * gn, axis=2), -1.0, 1.0)))
     ang[~np.isfinite(err)] = np.nan
-    metrics = depth_summary(err, ang, int(np.isfinite(gd).sum()))
-    return err, ang, metrics | sigma_summary(err, depth_map.depth_sigma)
+    truth_valid = np.isfinite(gd)
+    metrics = depth_summary(err, ang, int(truth_valid.sum()))
+    metrics |= sigma_summary(err, depth_map.depth_sigma) | drop_summary(depth_map, truth_valid)
+    return err, ang, metrics
 
 
 # --------------------------------------------------------------------------- rule functions

@@ -6,8 +6,9 @@ hull), :func:`read_depth` reads and checks any file in the contract's layout
 (:class:`DepthMap`). Datasets ``depth`` (H, W) z-depth in metres along the
 reference camera (NaN = none), ``normal`` (H, W, 3) world unit normals,
 ``confidence`` and ``mask``, optionally ``depth_sigma`` (H, W) the depth's
-1-sigma uncertainty in metres and ``uncertain`` (H, W) the pixels left out of
-``mask`` for too large a sigma; attributes ``camera``, ``K``, ``R``, ``t``,
+1-sigma uncertainty in metres, ``uncertain`` (H, W) the pixels left out of
+``mask`` for too large a sigma and ``dropped`` (H, W) uint8 why each pixel has
+no depth (:data:`DROP_REASONS`); attributes ``camera``, ``K``, ``R``, ``t``,
 ``dist``, ``method`` and ``params`` (JSON).
 """
 
@@ -21,10 +22,24 @@ import h5py
 import numpy as np
 
 from colourhs.capture import Camera
+from colourhs.contract import DROP_REASONS
 from colourhs.geometry import camera_centre
 from colourhs.io import atomic_output, note_read
 
-__all__ = ["DepthMap", "DepthResult", "as_depth_map", "read_depth", "write_depth"]
+__all__ = [
+    "DATASETS",
+    "DROP_REASONS",
+    "DepthMap",
+    "DepthResult",
+    "as_depth_map",
+    "read_depth",
+    "write_depth",
+]
+
+# DROP_REASONS: why a pixel of the reference camera has no depth, code k + 1 of dataset
+# ``dropped`` naming DROP_REASONS[k] and code 0 a pixel with a depth. Defined, each
+# reason with its meaning, in colourhs.contract, where the metrics' columns
+# (``dropped_<reason>``) are named after it without importing h5py.
 
 
 @dataclass
@@ -49,6 +64,9 @@ class DepthResult:
     uncertain : ndarray of bool, shape (H, W), optional
         Pixels whose ``depth_sigma`` exceeded the configured tolerance: left out of
         ``mask`` and flagged here. None: nothing is written.
+    dropped : ndarray of uint8, shape (H, W), optional
+        Why each pixel has no depth: code ``k + 1`` is ``DROP_REASONS[k]``, 0 a pixel
+        with a depth. None: nothing is written.
     """
 
     depth: np.ndarray
@@ -58,15 +76,18 @@ class DepthResult:
     info: dict
     depth_sigma: np.ndarray | None = None
     uncertain: np.ndarray | None = None
+    dropped: np.ndarray | None = None
 
 
 def write_depth(path, result: DepthResult, camera: Camera, attrs: dict) -> None:
     """Write the results contract's depth HDF5 atomically.
 
     Datasets ``depth``, ``normal``, ``confidence`` and ``mask``, and ``depth_sigma``
-    (float32, metres) and ``uncertain`` (bool) where ``result`` has them (gzip);
-    attributes the camera's (``camera``, ``K``, ``R``, ``t``, ``dist``), ``units``
-    and ``attrs`` (non-scalars as JSON).
+    (float32, metres), ``uncertain`` (bool) and ``dropped`` (uint8 codes, with the
+    attribute ``reasons``: :data:`DROP_REASONS` as a JSON list, code ``k + 1`` naming
+    ``reasons[k]``) where ``result`` has them (gzip); attributes the camera's
+    (``camera``, ``K``, ``R``, ``t``, ``dist``), ``units`` and ``attrs`` (non-scalars
+    as JSON).
     """
     with atomic_output(path) as tmp, h5py.File(tmp, "w") as f:
         f.create_dataset("depth", data=result.depth, compression="gzip")
@@ -79,6 +100,10 @@ def write_depth(path, result: DepthResult, camera: Camera, attrs: dict) -> None:
         if result.uncertain is not None:
             uncertain = np.asarray(result.uncertain, bool)
             f.create_dataset("uncertain", data=uncertain, compression="gzip")
+        if result.dropped is not None:
+            codes = np.asarray(result.dropped, np.uint8)
+            dropped = f.create_dataset("dropped", data=codes, compression="gzip")
+            dropped.attrs["reasons"] = json.dumps(list(DROP_REASONS))
         f.attrs["camera"] = camera.name
         f.attrs["K"] = np.asarray(camera.K, float)
         f.attrs["R"] = np.asarray(camera.R, float)
@@ -109,6 +134,10 @@ class DepthMap:
     uncertain : ndarray of bool, shape (H, W), or None
         Pixels left out of ``mask`` because their sigma exceeded the configured
         tolerance; None where the file has no ``uncertain``.
+    dropped : ndarray of uint8, shape (H, W), or None
+        Why each pixel has no depth: code ``k + 1`` is ``DROP_REASONS[k]``, 0 a pixel
+        with a depth; None where the file has no ``dropped`` (files written before
+        it, the visual hull).
     camera : str
         Reference camera name.
     K : ndarray, shape (3, 3)
@@ -139,6 +168,7 @@ class DepthMap:
     path: str = ""
     depth_sigma: np.ndarray | None = None
     uncertain: np.ndarray | None = None
+    dropped: np.ndarray | None = None
 
     @property
     def height(self) -> int:
@@ -155,7 +185,7 @@ class DepthMap:
 
 
 #: The contract's datasets of a depth file (``depth`` and ``normal`` are required).
-DATASETS = ("depth", "normal", "confidence", "mask", "depth_sigma", "uncertain")
+DATASETS = ("depth", "normal", "confidence", "mask", "depth_sigma", "uncertain", "dropped")
 
 
 def _attr_array(attrs: dict, name, shape, path):
@@ -173,7 +203,8 @@ def _text(value) -> str:
 
 def _contents(path: Path) -> tuple[dict, dict]:
     """The contract's datasets (:data:`DATASETS`) and every attribute of depth file
-    ``path``, read in full.
+    ``path``, read in full; with ``dropped``, its attribute ``reasons`` too (as
+    ``dropped_reasons`` among the attributes; None where it has none).
 
     Raises
     ------
@@ -200,7 +231,51 @@ def _contents(path: Path) -> tuple[dict, dict]:
         data = {n: read(f"dataset {n!r}", lambda n=n: f[n][()]) for n in names}
         keys = read("the list of attributes", lambda: list(f.attrs))
         attrs = {k: read(f"attribute {k!r}", lambda k=k: f.attrs[k]) for k in keys}
+        if "dropped" in data:
+            attrs["dropped_reasons"] = read(
+                "attribute 'reasons' of dataset 'dropped'",
+                lambda: f["dropped"].attrs.get("reasons"),
+            )
     return data, attrs
+
+
+def _drop_codes(codes: np.ndarray, reasons, path) -> np.ndarray:
+    """A file's ``dropped`` codes in :data:`DROP_REASONS`' numbering.
+
+    Parameters
+    ----------
+    codes : ndarray of int
+        The dataset ``dropped``: code ``k + 1`` names ``reasons[k]``, 0 a pixel with a depth.
+    reasons : str, bytes or None
+        Its attribute ``reasons`` (a JSON list of names); None: :data:`DROP_REASONS`.
+    path : Path
+        The file, for the messages.
+
+    Returns
+    -------
+    ndarray of uint8
+        The codes, renumbered by name where the file lists its reasons in another order.
+
+    Raises
+    ------
+    ValueError
+        On a reason this version does not know, or a code naming no reason.
+    """
+    try:
+        names = DROP_REASONS if reasons is None else tuple(json.loads(_text(reasons)))
+    except json.JSONDecodeError as err:
+        raise ValueError(f"{path}: dataset 'dropped' has unreadable reasons ({err})") from err
+    unknown = [n for n in names if n not in DROP_REASONS]
+    if unknown:
+        raise ValueError(f"{path}: dataset 'dropped' names unknown reasons {unknown}")
+    codes = np.asarray(codes)
+    if codes.size and (codes.min() < 0 or codes.max() > len(names)):
+        raise ValueError(
+            f"{path}: dataset 'dropped' has codes {int(codes.min())} to {int(codes.max())}, "
+            f"expected 0 to {len(names)} (its reasons)"
+        )
+    table = np.array([0, *(DROP_REASONS.index(n) + 1 for n in names)], np.uint8)
+    return table[codes.astype(np.intp)]
 
 
 def read_depth(path: str | Path) -> DepthMap:
@@ -210,9 +285,9 @@ def read_depth(path: str | Path) -> DepthMap:
     ----------
     path : str or Path
         HDF5 file with datasets ``depth`` (H, W), ``normal`` (H, W, 3) and optionally
-        ``confidence``, ``mask``, ``depth_sigma`` and ``uncertain`` (H, W); attributes
-        ``camera``, ``K``, ``R``, ``t`` and optionally ``dist``, ``method``, ``params``
-        (JSON).
+        ``confidence``, ``mask``, ``depth_sigma``, ``uncertain`` and ``dropped`` (H, W);
+        attributes ``camera``, ``K``, ``R``, ``t`` and optionally ``dist``, ``method``,
+        ``params`` (JSON).
 
     Returns
     -------
@@ -223,8 +298,9 @@ def read_depth(path: str | Path) -> DepthMap:
     ValueError
         Naming the file, when it or one of its datasets or attributes does not read
         (truncated, a corrupt chunk: which one, with h5py's reason), a required dataset
-        or attribute is missing, a shape is wrong, or no pixel has a finite depth
-        ("no reconstructed pixels").
+        or attribute is missing, a shape is wrong, ``dropped`` has a code or reason
+        this version does not know, or no pixel has a finite depth ("no reconstructed
+        pixels").
     """
     path = Path(path)
     note_read(path)
@@ -246,10 +322,13 @@ def read_depth(path: str | Path) -> DepthMap:
     mask = np.asarray(data.get("mask", finite), bool)
     sigma = np.asarray(data["depth_sigma"], np.float32) if "depth_sigma" in data else None
     uncertain = np.asarray(data["uncertain"], bool) if "uncertain" in data else None
-    optional = (("depth_sigma", sigma), ("uncertain", uncertain))
+    dropped = np.asarray(data["dropped"]) if "dropped" in data else None
+    optional = (("depth_sigma", sigma), ("uncertain", uncertain), ("dropped", dropped))
     for name, a in (("confidence", confidence), ("mask", mask), *optional):
         if a is not None and a.shape != (h, w):
             raise ValueError(f"{path}: dataset {name!r} has shape {a.shape}, expected {(h, w)}")
+    if dropped is not None:
+        dropped = _drop_codes(dropped, attrs.get("dropped_reasons"), path)
     if "camera" not in attrs:
         raise ValueError(f"{path}: missing attribute 'camera'")
     camera = _text(attrs["camera"])
@@ -280,6 +359,7 @@ def read_depth(path: str | Path) -> DepthMap:
         str(path),
         depth_sigma=sigma,
         uncertain=uncertain,
+        dropped=dropped,
     )
 
 

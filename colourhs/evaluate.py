@@ -41,8 +41,16 @@ Reported per frame (:func:`evaluate_frame`, all in millimetres):
     among the reconstructed and flagged ones
     (:func:`colourhs.deptherrors.uncertainty_summary`).
 
+``dropped_outside``, ``dropped_dark``, ..., ``dropped_rims``, ``dropped_other``
+    Where the ground truth's pixels without a depth went: the share of the
+    pixels where the ground truth is visible lost to each reason of
+    :data:`colourhs.contract.DROP_REASONS` (the depth file's ``dropped``
+    codes), and lost without one; with ``coverage`` they add to 1
+    (:func:`colourhs.deptherrors.drop_summary`).
+
 The sigma columns are empty where the depth file has no ``depth_sigma`` or
-``uncertain`` (files written before them, the visual hull).
+``uncertain``, the ``dropped_*`` columns where it has no ``dropped`` (files
+written before them, the visual hull).
 
 Distances are point-to-surface distances from samples of one mesh to the
 closest point on the other's triangles (:func:`hausdorff`, the distances of
@@ -466,7 +474,9 @@ def evaluate_frame(
             "completeness_* = seen GT -> reconstruction; outside_share = share of the "
             "mesh vertices the reference camera sees that lie off the seen GT; "
             "sigma_within_k = share of the compared pixels with |depth error| <= k "
-            "depth_sigma; uncertain_share = flagged / (reconstructed + flagged) pixels",
+            "depth_sigma; uncertain_share = flagged / (reconstructed + flagged) pixels; "
+            "dropped_<reason> = share of the ground truth's pixels without depth for that "
+            "reason (dropped_other: for none), which with coverage add to 1",
             "seconds": time.perf_counter() - t0,
         }
     )

@@ -52,6 +52,7 @@ from colourhs.reporttables import (
     METRIC_COLUMNS,
     REQUIRED_COLUMNS,
     _aggregation_of,
+    drop_table,
     expected_error_table,
     find_benchmarks,
     format_number,
@@ -395,9 +396,11 @@ def build_report(
     expected depth error (the median ``depth_sigma``, with or without ground
     truth: :func:`colourhs.reporttables.expected_error_table`) and, with ground
     truth, how well sigma predicts the error
-    (:func:`colourhs.reporttables.sigma_calibration_table`), the
-    Figure 7 renders, error and sigma maps full width, the other figures as
-    thumbnails, a per-frame plot for sequences and links to the result files;
+    (:func:`colourhs.reporttables.sigma_calibration_table`) and where the
+    ground truth's pixels without a depth went
+    (:func:`colourhs.reporttables.drop_table`), the Figure 7 renders, error
+    and sigma maps full width, the other figures as thumbnails, a per-frame
+    plot for sequences and links to the result files;
     then timing, provenance, configuration and software versions.
 
     Parameters
@@ -500,6 +503,8 @@ def build_report(
         expected, calibration = expected_error_table(rows), sigma_calibration_table(rows)
         s["expected"] = _table(expected, "metrics") if len(expected) else ""
         s["sigma_calibration"] = _table(calibration, "metrics") if len(calibration) else ""
+        dropped = drop_table(metrics[metrics["scene"].astype(str) == scene])
+        s["dropped"] = _table(dropped, "metrics") if len(dropped) else ""
         if len(rows):
             t, _ = with_paper_columns(beside(rows))
             s["table"] = _table(t.drop(columns="scene"), "metrics")

@@ -24,6 +24,8 @@ import numpy as np
 import pandas as pd
 
 from colourhs.contract import (
+    DROP_COLUMNS,
+    DROP_REASONS,
     EXTRA_COLUMNS,
     GAUSSIAN_WITHIN,
     KEY_COLUMNS,
@@ -41,6 +43,7 @@ __all__ = [
     "KEY_COLUMNS",
     "METRIC_COLUMNS",
     "REQUIRED_COLUMNS",
+    "drop_table",
     "expected_error_table",
     "find_benchmarks",
     "format_number",
@@ -300,6 +303,49 @@ def sigma_calibration_table(summary: pd.DataFrame) -> pd.DataFrame:
         label[c]: GAUSSIAN_WITHIN[k] for c, k in zip(share, SIGMA_MULTIPLES, strict=True)
     }
     return pd.concat([table, pd.DataFrame([ideal])], ignore_index=True)[columns]
+
+
+def _percent(x) -> str:
+    """A share (0 to 1) as a percentage with one decimal, ``0.1234 -> "12.3"``; empty
+    for missing values."""
+    v = float(x)
+    return f"{100.0 * v:.1f}" if math.isfinite(v) else ""
+
+
+def drop_table(frames: pd.DataFrame) -> pd.DataFrame:
+    """Where the missing depth goes: per variant, the ground truth's pixels reconstructed
+    and lost to each reason, percent, from the per-frame metrics rows of one scene.
+
+    Parameters
+    ----------
+    frames : DataFrame
+        :func:`read_metrics`' rows of one scene (columns ``variant``, ``coverage``
+        and :data:`colourhs.contract.DROP_COLUMNS`; one row per frame and variant).
+
+    Returns
+    -------
+    DataFrame
+        Columns ``variant``, ``frames`` (the frames with the shares), ``reconstructed``
+        (``coverage``), one per reason of :data:`colourhs.contract.DROP_REASONS` and
+        ``other`` (lost without a reason): percent of the ground truth's pixels with
+        one decimal (text), the mean over the variant's frames that have the shares,
+        so that a row adds to 100 up to rounding. One row per variant with a share,
+        in the paper's order (:data:`VARIANT_ORDER`); empty when none has one (depth
+        files without ``dropped``, scenes without ground truth).
+    """
+    shares = ["coverage", *DROP_COLUMNS]
+    columns = ["variant", "frames", "reconstructed", *DROP_REASONS, "other"]
+    rows = frames[_has_values(frames, DROP_COLUMNS)]
+    if rows.empty:
+        return pd.DataFrame(columns=columns)
+    values = rows.reindex(columns=shares).apply(pd.to_numeric, errors="coerce")
+    values["variant"] = rows["variant"].astype(str)
+    out = []
+    for variant in _variant_sort_key(values["variant"]):
+        mean = values[values["variant"] == variant][shares].mean()
+        n = int((values["variant"] == variant).sum())
+        out.append([variant, n, *(_percent(mean[c]) for c in shares)])
+    return pd.DataFrame(out, columns=columns)
 
 
 # --------------------------------------------------------------------------- benchmarks

@@ -11,7 +11,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 from colourhs.capture import Camera
-from colourhs.contract import EXTRA_COLUMNS, GAUSSIAN_WITHIN
+from colourhs.contract import DROP_COLUMNS, EXTRA_COLUMNS, GAUSSIAN_WITHIN
 from colourhs.deptherrors import sigma_summary, uncertainty_summary
 from colourhs.depthfile import DepthResult, read_depth, write_depth
 from colourhs.evaluate import (
@@ -479,12 +479,14 @@ def test_evaluate_frame_sigma_columns(tmp_path):
         "expected_depth_error_mm": None,
         "uncertain_share": None,
     }
-    # metrics.csv: the new columns after the earlier extras, before method and same_as
+    # metrics.csv: the new columns after the earlier extras, before the dropped shares
+    # (test_dropped.py), method and same_as
     csv = tmp_path / "metrics.csv"
     metrics_table(sorted(out.glob("*.json")), csv)
     read = pd.read_csv(csv, dtype={"frame": str}).set_index("variant")
-    assert list(read.columns[-len(SIGMA_COLUMNS) - 2 :]) == [*SIGMA_COLUMNS, "method", "same_as"]
-    assert tuple(EXTRA_COLUMNS[-len(SIGMA_COLUMNS) :]) == SIGMA_COLUMNS
+    tail = [*SIGMA_COLUMNS, *DROP_COLUMNS, "method", "same_as"]
+    assert list(read.columns[-len(tail) :]) == tail
+    assert tuple(EXTRA_COLUMNS[-len(tail) + 2 :]) == (*SIGMA_COLUMNS, *DROP_COLUMNS)
     assert read.loc["b", "sigma_within_1"] == pytest.approx(info["sigma_within_1"], rel=1e-12)
     assert read.loc["c", "expected_depth_error_mm"] == pytest.approx(expected, abs=1e-6)
     assert read.loc["c", ["sigma_within_1", "depth_sigma_median_mm"]].isna().all()

@@ -188,7 +188,7 @@ def reconstruct(
         "pixels": int(len(pix)),
     }
     solve = _ml_reconstruction if method == "ml" else _bayes_reconstruction
-    z, nrm, ok, conf, sigma = solve(
+    z, nrm, ok, conf, sigma, stages = solve(
         frame, evaluate, rays, pix, depths, ref, pairs, (H, W), opts, info, progress, say
     )
     limit = MAX_SIGMA * np.abs(z) if opts.max_sigma_mm is None else opts.max_sigma_mm * 1e-3
@@ -200,6 +200,15 @@ def reconstruct(
     conf[~ok] = 0.0
     sigma = np.where(ok | uncertain, sigma, np.nan)
     info |= {"max_sigma_mm": opts.max_sigma_mm, "uncertain_pixels": int(uncertain.sum())}
+    in_fg = np.zeros(H * W, bool)
+    in_fg[pix] = True
+    dropped = drop_codes(
+        object_mask(frame, ref_i).ravel(),
+        in_fg,
+        _reference_unusable(frame, ref_i),
+        [*stages, ("uncertain", ~uncertain)],
+        ok,
+    )
     return DepthResult(
         z.reshape(H, W).astype(np.float32),
         nrm.reshape(H, W, 3).astype(np.float32),
@@ -208,7 +217,45 @@ def reconstruct(
         info | {"valid_pixels": int(ok.sum())},
         depth_sigma=sigma.reshape(H, W).astype(np.float32),
         uncertain=uncertain.reshape(H, W),
+        dropped=dropped.reshape(H, W),
     )
+
+
+def _reference_unusable(frame: Frame, ref: int) -> list[tuple[str, np.ndarray]]:
+    """The reference camera's own reasons (H*W,) why a pixel cannot have a depth:
+    saturated in some channel, no chromaticity p in some channel (coloured objects)."""
+    out = [("saturated", frame.saturated[ref].ravel())]
+    if frame.chroma is not None:
+        p = frame.chroma[ref]
+        out.append(("no_chromaticity", ~np.all(np.isfinite(p) & (p > 0), axis=0).ravel()))
+    return out
+
+
+def drop_codes(obj, fg, unusable, stages, ok) -> np.ndarray:
+    """Why each pixel (H*W,) has no depth: codes of :data:`colourhs.depthfile.DROP_REASONS`.
+
+    Beyond the paper (the accounting a rig owner needs to see where coverage
+    goes). ``obj`` is the object's silhouette or lit region, ``fg`` the
+    foreground reconstructed (``obj`` without the pixels too dark to
+    measure), ``unusable`` (reason, mask) pairs of the reference camera's
+    own causes, ``stages`` (reason, kept) pairs in the order the
+    reconstruction applied them, ``ok`` the pixels with a depth. A pixel
+    without depth gets the first of: ``outside`` (not in ``obj``), ``dark``
+    (not in ``fg``), the first of ``unusable`` that holds, else the last
+    stage that removed it (a hole filled at one stage and eroded at a later
+    one is the later's). Code 0: the pixel has a depth.
+    """
+    from colourhs.depthfile import DROP_REASONS
+
+    code = np.zeros(len(ok), np.uint8)
+    previous = fg
+    for reason, kept in stages:  # the last loss wins
+        code[previous & ~kept] = DROP_REASONS.index(reason) + 1
+        previous = kept
+    for reason, where in reversed([("outside", ~obj), ("dark", ~fg), *unusable]):
+        code[where] = DROP_REASONS.index(reason) + 1  # the first cause wins
+    code[ok] = 0
+    return code
 
 
 def _ml_reconstruction(
@@ -216,12 +263,14 @@ def _ml_reconstruction(
 ):
     """ML HS of the foreground ``pix``: the cost volume (no normals: ML HS takes its
     normals from its own minima), then :func:`_ml_solution`. Returns (H*W,) depth,
-    (H*W, 3) normal, validity, confidence and uncertainty; ``info`` is not changed."""
+    (H*W, 3) normal, validity, confidence, uncertainty and the stages that
+    removed pixels (:func:`drop_codes`); ``info`` is not changed."""
     cost = np.empty((len(pix), len(depths)), np.float32)
     evaluate(rays[pix], depths, show=progress, out=(cost, None, np.arange(len(pix))))
-    return _ml_solution(
+    z, nrm, ok, conf, sigma = _ml_solution(
         frame, cost, depths, pix, rays, ref, pairs, shape, opts.max_cost, opts.blur_px, say
     )
+    return z, nrm, ok, conf, sigma, [("data_term", ok)]
 
 
 def _bayes_reconstruction(
@@ -232,9 +281,10 @@ def _bayes_reconstruction(
     (:func:`_bayes_labelling`), the initial surface
     (:func:`colourhs.reconstruct.integrate.initial_surface`) and the consistent
     surface (:func:`_consistent_surface`), the rims eroded. Returns (H*W,) depth,
-    (H*W, 3) normal, validity, confidence and each depth's 1-sigma uncertainty
+    (H*W, 3) normal, validity, confidence, each depth's 1-sigma uncertainty
     (metres, :mod:`colourhs.reconstruct.uncertainty`; NaN without the
-    refinement); adds the MRF's and the surface's figures to ``info``."""
+    refinement) and the stages that removed pixels (:func:`drop_codes`); adds
+    the MRF's and the surface's figures to ``info``."""
     H, W = shape
     box, local = _mrf_box(pix, shape)
     h, w = box[1] - box[0], box[3] - box[2]
@@ -248,6 +298,7 @@ def _bayes_reconstruction(
         cost[local, labels], normals[local, labels], frac, depths, pix, shape, opts.max_cost
     )
     del cost, normals
+    stages = [("data_term", ok.copy())]
     sigma = np.full(H * W, np.nan)
     if opts.refine and ok.sum() > 10:
         # Wrong labels (a few labels off or worse) must not move the surface.
@@ -269,6 +320,7 @@ def _bayes_reconstruction(
             anchor,
             say,
         )
+        stages.append(("surface", ok.copy()))
         z, nrm, ok, weights, sigma, info["surface"] = _consistent_surface(
             frame,
             z,
@@ -282,8 +334,10 @@ def _bayes_reconstruction(
             say,
         )
         conf = np.where(ok, weights, 0.0).astype(np.float32)
+        stages.append(("refinement", ok.copy()))
     erode_px = max(1, round(W / 320)) if opts.erode_px is None else opts.erode_px
-    return z, nrm, _without_rims(ok, shape, erode_px), conf, sigma
+    ok = _without_rims(ok, shape, erode_px)
+    return z, nrm, ok, conf, sigma, [*stages, ("rims", ok)]
 
 
 def depth_hypotheses(
