@@ -60,7 +60,7 @@ import numpy as np
 import pandas as pd
 
 from colourhs.commands import frame_indices
-from colourhs.contract import GAUSSIAN_WITHIN, SIGMA_MULTIPLES
+from colourhs.contract import DROP_COLUMNS, GAUSSIAN_WITHIN, SIGMA_MULTIPLES
 from colourhs.variants import VARIANTS
 
 HERE = Path(__file__).parent
@@ -86,6 +86,7 @@ METRICS = (
     "coverage",
     "depth_sigma_median_mm",
     *(f"sigma_within_{k}" for k in SIGMA_MULTIPLES),
+    *DROP_COLUMNS,  # where the ground truth's pixels without a depth went
 )
 #: Metrics whose worst rig is the largest absolute value (kept with its sign).
 SIGNED_METRICS = ("depth_signed_median_mm",)
@@ -209,7 +210,9 @@ def evaluate_variant(data, scene, frames, variant, files, chromatic, work) -> di
         ``truth_pixels``); ``depth_sigma_median_mm`` and ``sigma_within_1/2/3``
         (:func:`colourhs.deptherrors.sigma_summary`) over the pooled pixels with both a
         finite error and a finite ``depth_sigma`` (None where the files carry none:
-        ``vh``, files written before it); ``seconds``.
+        ``vh``, files written before it); ``dropped_<reason>`` and ``dropped_other``
+        (:func:`colourhs.deptherrors.drop_summary`), shares of the frames' pooled
+        ground-truth pixels (None without ``dropped``); ``seconds``.
     """
     from colourhs.capture import load_rig
     from colourhs.deptherrors import depth_errors, depth_summary, sigma_summary
@@ -221,6 +224,7 @@ def evaluate_variant(data, scene, frames, variant, files, chromatic, work) -> di
     rig = load_rig(data)
     errs, angs, truth = [], [], 0
     sigma_errs, sigmas = [], []
+    lost = dict.fromkeys(DROP_COLUMNS, 0.0)
     t0 = time.time()
     for frame in frames:
         h5 = work / scene / variant / f"{frame}.h5"
@@ -238,6 +242,10 @@ def evaluate_variant(data, scene, frames, variant, files, chromatic, work) -> di
         errs.append(err[ok])
         angs.append(ang[ok])
         truth += m["truth_pixels"]
+        for c in DROP_COLUMNS:  # shares of this frame's truth -> pixels, pooled below
+            lost[c] = (
+                None if lost[c] is None or m[c] is None else lost[c] + m[c] * m["truth_pixels"]
+            )
         sigma = getattr(depth, "depth_sigma", None)
         if sigma is not None:
             sigma = np.asarray(sigma, float)
@@ -251,6 +259,7 @@ def evaluate_variant(data, scene, frames, variant, files, chromatic, work) -> di
     else:
         s |= sigma_summary(np.empty(0), None)
     s.pop("sigma_pixels")
+    s |= {c: None if v is None or not truth else v / truth for c, v in lost.items()}
     return s | {"seconds": time.time() - t0}
 
 

@@ -12,6 +12,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from colourhs.contract import DROP_COLUMNS
+
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
@@ -311,7 +313,12 @@ def test_evaluate_variant_pools_sigma_over_the_compared_pixels(monkeypatch, tmp_
 
     def depth_errors(depth, *args):
         err = np.array(errors[depth.frame])
-        return err, np.zeros_like(err), {"truth_pixels": 4}
+        lost = dict.fromkeys(DROP_COLUMNS, None if depth.depth_sigma is None else 0.0)
+        if depth.depth_sigma is not None:  # frame 0 lost one pixel outside, frame 1 two
+            lost["dropped_outside" if depth.frame == "000000" else "dropped_data_term"] = (
+                0.25 if depth.frame == "000000" else 0.5
+            )
+        return err, np.zeros_like(err), {"truth_pixels": 4} | lost
 
     monkeypatch.setattr(colourhs.depthfile, "read_depth", read_depth)
     monkeypatch.setattr(colourhs.deptherrors, "depth_errors", depth_errors)
@@ -326,6 +333,9 @@ def test_evaluate_variant_pools_sigma_over_the_compared_pixels(monkeypatch, tmp_
     assert m["depth_sigma_median_mm"] == pytest.approx(1.0)
     assert (m["sigma_within_1"], m["sigma_within_2"], m["sigma_within_3"]) == (0.5, 0.75, 0.75)
     assert "sigma_pixels" not in m and "truth_pixels" not in m
+    # Where the 3 lost pixels of 8 went, pooled over the frames' truth pixels.
+    assert (m["dropped_outside"], m["dropped_data_term"], m["dropped_rims"]) == (0.125, 0.25, 0)
     vh = gen.evaluate_variant(tmp_path, "plane", frames, "vh", {}, None, tmp_path)
     assert vh["depth_median_mm"] == pytest.approx(2.0)
     assert vh["depth_sigma_median_mm"] is None and vh["sigma_within_2"] is None
+    assert vh["dropped_outside"] is None
