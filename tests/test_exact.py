@@ -73,9 +73,10 @@ def _errors(root, scene, method):
     v, t, n = load_mesh(root / "scenes" / scene / "gt" / "000000.ply")
     gd, gn = render_depth_normals(v, t, n, ref, fr.rig.image.width, fr.rig.image.height)
     m = res.mask & np.isfinite(gd)
-    err = np.abs(res.depth[m] - gd[m]) * 1e3
+    signed = (res.depth[m] - gd[m]) * 1e3
     ang = np.degrees(np.arccos(np.clip(np.sum(res.normal[m] * gn[m], axis=1), -1, 1)))
-    return float(np.median(err)), float(np.median(ang)), m.sum() / np.isfinite(gd).sum()
+    cov = m.sum() / np.isfinite(gd).sum()
+    return float(np.median(np.abs(signed))), float(np.median(ang)), cov, float(np.median(signed))
 
 
 @pytest.mark.parametrize("scene", ["plane", "sheet"])
@@ -98,6 +99,11 @@ def test_exact_data_exact_answers(exact_rigs, scene):
       (interpolation, the renderer's pixel integration): the issue's
       0.05 mm is not reached by ML.
     - Bayesian never worse than ML: every case.
+    - No bias (issue 35): signed medians, Bayesian plane -0.009, 0.010, 0.031,
+      0.013, 0.008 mm, sheet 0.017, 0.001, 0.002, 0.001, 0.007 mm; ML plane
+      -0.006, 0.023, 0.008 mm. Issue 35's decision holds ML on exact data to
+      |signed median| <= 0.05 mm and a median within 0.15 mm (its narrow-baseline
+      corner rigs are reported by benchmarks/generalisation.py, not held).
 
     ML runs on the plane of ``ML_SEEDS`` only (the sheet's ML, 0.09-0.27 mm, was
     measured above, every seed worse than Bayesian): the suite stays under 15
@@ -107,18 +113,20 @@ def test_exact_data_exact_answers(exact_rigs, scene):
     for seed, root in exact_rigs.items():
         bayes = _errors(root, scene, "bayes")
         with_ml = scene == "plane" and seed in ML_SEEDS
-        ml = _errors(root, scene, "ml") if with_ml else (np.inf, np.inf, 1.0)
+        ml = _errors(root, scene, "ml") if with_ml else (np.inf, np.inf, 1.0, 0.0)
         print(f"seed {seed} {scene}: bayes {bayes} ml {ml}")
         rows.append(bayes + ml)
-    b_mm, b_deg, b_cov, m_mm, m_deg, _ = np.array(rows).T
+    b_mm, b_deg, b_cov, b_signed, m_mm, m_deg, _, m_signed = np.array(rows).T
     assert np.all(b_mm <= m_mm)
     assert np.median(b_mm) < 0.02  # measured 0.011 (plane), 0.011 (sheet)
     assert b_mm.max() < 0.045  # measured 0.035 (plane), 0.019 (sheet)
     assert b_deg.max() < 0.08 and b_cov.min() > 0.85  # measured 0.061 deg, 0.89
+    assert np.abs(b_signed).max() < 0.04  # measured 0.031 (plane), 0.017 (sheet)
     if scene == "plane":
         m_mm, m_deg = m_mm[np.isfinite(m_mm)], m_deg[np.isfinite(m_deg)]
         assert len(m_mm) == len(ML_SEEDS)
         assert np.median(m_mm) < 0.1 and m_mm.max() < 0.15  # measured 0.063, 0.108
+        assert np.abs(m_signed).max() <= 0.05  # measured 0.023 (0 where ML did not run)
         assert m_deg.max() < 0.07  # measured 0.032 (0.046 before)
 
 
