@@ -92,6 +92,8 @@ METRICS = (
 SIGNED_METRICS = ("depth_signed_median_mm",)
 #: Variants whose depth files carry a sigma to calibrate (issue 35's sigma target).
 BAYES_VARIANTS = ("bayes_nocalib", "bayes_ph", "bayes_full")
+#: The sigma calibration's entry of each scene's own variant (the one its targets name).
+OWN_VARIANT = "own variant per scene"
 #: Issue 35: each pooled sigma share within this of the Gaussian's (GAUSSIAN_WITHIN).
 SIGMA_TOLERANCE = 0.1
 #: Issue 35's decision: ml_full > bayes_nocalib is checked only on rigs whose uncalibrated mu
@@ -384,7 +386,10 @@ def sigma_calibration(table: pd.DataFrame) -> dict:
     scene, each weighted equally whatever its pixel count, rows without a sigma left
     out), ``met`` when within :data:`SIGMA_TOLERANCE` of the Gaussian's share
     (:data:`GAUSSIAN_WITHIN`: 0.683, 0.954, 0.997); the variant's ``met`` when every
-    share's is (False without rows with a sigma).
+    share's is (False without rows with a sigma). Besides each variant, the entry
+    :data:`OWN_VARIANT` holds each scene's own variant only (the one its targets
+    name: the calibration a rig owner runs it with), since an ablation's missing
+    calibration (mu = 1, p = 1) is an error no error bar of the data can see.
 
     Returns
     -------
@@ -394,8 +399,11 @@ def sigma_calibration(table: pd.DataFrame) -> dict:
         are left out.
     """
     out = {}
-    for variant in BAYES_VARIANTS:
-        g = table[table["variant"] == variant]
+    own = {(s, v) for s, v, _ in TARGETS}
+    groups = [(v, table[table["variant"] == v]) for v in BAYES_VARIANTS]
+    pairs = list(zip(table["scene"], table["variant"], strict=True))
+    groups.append((OWN_VARIANT, table[[p in own for p in pairs]]))
+    for name, g in groups:
         if g.empty:
             continue
         entry, rows = {}, 0
@@ -414,7 +422,7 @@ def sigma_calibration(table: pd.DataFrame) -> dict:
             }
         entry["rows"] = rows
         entry["met"] = all(entry[f"sigma_within_{k}"]["met"] for k in GAUSSIAN_WITHIN)
-        out[variant] = entry
+        out[name] = entry
     return out
 
 

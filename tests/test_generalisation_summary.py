@@ -214,8 +214,19 @@ def test_ml_link_checked_within_two_percent_and_other_links_everywhere(table):
 def test_sigma_calibration(table):
     s = gen.summarise(table)
     good, bad = s["sets"]["random"]["sigma_calibration"], s["sets"]["corner"]["sigma_calibration"]
-    assert list(good) == ["bayes_nocalib", "bayes_ph", "bayes_full"]  # not vh, ml_full
-    for variant in good:
+    variants = ["bayes_nocalib", "bayes_ph", "bayes_full"]  # not vh, ml_full
+    assert list(good) == [*variants, gen.OWN_VARIANT]
+    # Each scene's own variant: bayes_ph's plane and sheet, bayes_full's statue and toy.
+    own = good[gen.OWN_VARIANT]
+    assert own["rows"] == 12 and own["sigma_within_1"]["mean"] == pytest.approx(0.68)
+    wrong = table.copy()  # bayes_ph on the coloured scenes: not their own variant
+    wrong.loc[
+        (wrong["variant"] == "bayes_ph") & wrong["scene"].isin(["statue", "toy"]), "sigma_within_1"
+    ] = 0.1
+    again = gen.summarise(wrong)["sets"]["random"]["sigma_calibration"]
+    assert again[gen.OWN_VARIANT]["sigma_within_1"]["mean"] == pytest.approx(0.68)
+    assert again["bayes_ph"]["sigma_within_1"]["mean"] == pytest.approx((6 * 0.68 + 6 * 0.1) / 12)
+    for variant in variants:
         assert good[variant]["met"] is True and good[variant]["rows"] == 12
         assert good[variant]["sigma_within_2"]["mean"] == pytest.approx(0.95)
         assert good[variant]["sigma_within_1"]["target"] == pytest.approx(0.6827, abs=1e-4)
@@ -256,7 +267,7 @@ def test_markdown_has_one_table_per_set(table):
     assert "0.200 / 0.400" in plane and plane.endswith("| no (depth, RMS, abs signed) |")
     assert "| plane | ml_full | 1.000 / 5.000 |" in random
     rows = [line for line in random.splitlines() if line.startswith("| ")]
-    assert len(rows) == 3 + 5 + 3 + 2  # three headers; scenes, sigma and ablation rows
+    assert len(rows) == 3 + 5 + 4 + 2  # three headers; scenes, sigma and ablation rows
     assert "| bayes_full | 0.680 | 0.950 | 0.990 | 12 |" in random
     assert "| bayes_ph | 0.500 | 0.800 | 0.910 | 12 |" in corner
     assert "| depth median | no | 0 | 1 | 0 | 0 | 12 |" in random
