@@ -214,16 +214,20 @@ def evaluate_variant(data, scene, frames, variant, files, chromatic, work) -> di
         finite error and a finite ``depth_sigma`` (None where the files carry none:
         ``vh``, files written before it); ``dropped_<reason>`` and ``dropped_other``
         (:func:`colourhs.deptherrors.drop_summary`), shares of the frames' pooled
-        ground-truth pixels (None without ``dropped``); ``seconds``.
+        ground-truth pixels (None without ``dropped``); ``seconds``. A frame with
+        nothing reconstructed (a depth file :func:`read_depth` refuses) counts
+        every truth pixel as lost (``dropped_other``), not as an error.
     """
     from colourhs.capture import load_rig
     from colourhs.deptherrors import depth_errors, depth_summary, sigma_summary
     from colourhs.depthfile import read_depth
     from colourhs.hull import visual_hull
     from colourhs.ply import load_mesh
+    from colourhs.raycast import render_depth_normals
     from colourhs.reconstruct.frame import reconstruct_frame
 
     rig = load_rig(data)
+    size = (rig.image.width, rig.image.height)
     errs, angs, truth = [], [], 0
     sigma_errs, sigmas = [], []
     lost = dict.fromkeys(DROP_COLUMNS, 0.0)
@@ -238,8 +242,17 @@ def evaluate_variant(data, scene, frames, variant, files, chromatic, work) -> di
                 data, scene, frame, h5, method, **variant_files(variant, files, chromatic)
             )
         gt = load_mesh(data / "scenes" / scene / "gt" / f"{frame}.ply")
-        depth = read_depth(h5)
-        err, ang, m = depth_errors(depth, *gt, rig.image.width, rig.image.height)
+        try:
+            depth = read_depth(h5)
+        except ValueError as exc:  # nothing reconstructed: every truth pixel lost
+            if "no reconstructed pixels" not in str(exc):
+                raise
+            n = int(np.isfinite(render_depth_normals(*gt, rig.cameras[0], *size)[0]).sum())
+            truth += n
+            if lost["dropped_other"] is not None:
+                lost["dropped_other"] += n  # its reasons are in a file read_depth refuses
+            continue
+        err, ang, m = depth_errors(depth, *gt, *size)
         ok = np.isfinite(err)
         errs.append(err[ok])
         angs.append(ang[ok])
@@ -254,7 +267,8 @@ def evaluate_variant(data, scene, frames, variant, files, chromatic, work) -> di
             both = ok & np.isfinite(sigma)
             sigma_errs.append(err[both])
             sigmas.append(sigma[both])
-    s = depth_summary(np.concatenate(errs), np.concatenate(angs), truth)
+    empty = np.empty(0)
+    s = depth_summary(np.concatenate([empty, *errs]), np.concatenate([empty, *angs]), truth)
     s.pop("truth_pixels")
     if sigmas:
         s |= sigma_summary(np.concatenate(sigma_errs), np.concatenate(sigmas))

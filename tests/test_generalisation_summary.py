@@ -311,7 +311,7 @@ def test_evaluate_variant_pools_sigma_over_the_compared_pixels(monkeypatch, tmp_
         "000000": [[0.001, 0.001], [nan, 0.001]],
         "000001": [[0.001, 0.002], [0.001, 0.001]],
     }
-    rig = SimpleNamespace(image=SimpleNamespace(width=2, height=2))
+    rig = SimpleNamespace(image=SimpleNamespace(width=2, height=2), cameras=[None])
     monkeypatch.setattr(colourhs.capture, "load_rig", lambda data: rig)
     monkeypatch.setattr(colourhs.ply, "load_mesh", lambda path: (None, None, None))
     monkeypatch.setattr(colourhs.reconstruct.frame, "reconstruct_frame", lambda *a, **k: None)
@@ -346,6 +346,22 @@ def test_evaluate_variant_pools_sigma_over_the_compared_pixels(monkeypatch, tmp_
     assert "sigma_pixels" not in m and "truth_pixels" not in m
     # Where the 3 lost pixels of 8 went, pooled over the frames' truth pixels.
     assert (m["dropped_outside"], m["dropped_data_term"], m["dropped_rims"]) == (0.125, 0.25, 0)
+    # A frame with nothing reconstructed: its 4 truth pixels lost, not an error.
+    import colourhs.raycast
+
+    def refused(h5):
+        if h5.stem == "000001":
+            raise ValueError(f"{h5}: no reconstructed pixels (depth is empty or all NaN)")
+        return read_depth(h5)
+
+    monkeypatch.setattr(colourhs.depthfile, "read_depth", refused)
+    truth = np.array([[1.0, 1.0], [1.0, 1.0]])
+    monkeypatch.setattr(colourhs.raycast, "render_depth_normals", lambda *a: (truth, None))
+    empty = gen.evaluate_variant(tmp_path, "plane", frames, "bayes_ph", files, None, tmp_path)
+    assert empty["coverage"] == pytest.approx(3 / 8)  # frame 0's 3 of its 4, then 0 of 4
+    assert empty["dropped_outside"] == pytest.approx(1 / 8)
+    assert empty["dropped_other"] == pytest.approx(4 / 8)
+    monkeypatch.setattr(colourhs.depthfile, "read_depth", read_depth)
     vh = gen.evaluate_variant(tmp_path, "plane", frames, "vh", {}, None, tmp_path)
     assert vh["depth_median_mm"] == pytest.approx(2.0)
     assert vh["depth_sigma_median_mm"] is None and vh["sigma_within_2"] is None

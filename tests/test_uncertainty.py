@@ -8,12 +8,18 @@ import numpy as np
 from scipy.ndimage import gaussian_filter
 
 from colourhs.reconstruct.sides import (
+    RIM_SUPPORT,
     HelmholtzSides,
     noise_correlation,
     sample_sides,
     side_maps,
 )
-from colourhs.reconstruct.uncertainty import correlated_gain, filled_sigma, valley_sigma
+from colourhs.reconstruct.uncertainty import (
+    correlated_gain,
+    filled_sigma,
+    rim_valley_pull,
+    valley_sigma,
+)
 
 
 def _pinhole_sides(J, V, blur_px, order=1):
@@ -119,3 +125,57 @@ def test_filled_sigma_extrapolates_the_nearest_measured_one():
     hole[:, 2:4] = True
     out = filled_sigma(sigma.ravel(), hole.ravel(), (5, 6))
     assert np.allclose(out.reshape(5, 2), [[2e-3, 6e-3]] * 5)
+
+
+def test_samples_clear_of_every_edge():
+    """A half-plane of usable pixels (columns 10 on unusable): the 1-pixel blur
+    keeps samples whose kernel has 90 % of its weight on usable pixels (up to
+    column 8, whose kernel has 5.9 % on the unusable side; column 9 30 %) and,
+    with ``RIM_SUPPORT``, only those clear of the edge to a thousandth (up to
+    column 6, 0.013 %; column 7 0.46 %), with the same values where both keep
+    them."""
+    J = np.where(np.arange(20) < 10, 1.0 + 0.1 * np.arange(20), np.nan)[None, :].repeat(12, 0)
+    var = np.where(np.isfinite(J), 0.5, np.nan)
+    blurred = side_maps(J, var, blur_px=1.0)
+    clear = side_maps(J, var, blur_px=1.0, min_support=RIM_SUPPORT)
+    assert np.isfinite(blurred[6, :9, 0]).all() and np.isnan(blurred[6, 9:, 0]).all()
+    assert np.isfinite(clear[6, :7, 0]).all() and np.isnan(clear[6, 7:, 0]).all()
+    assert np.allclose(clear[:, :7], blurred[:, :7])
+
+
+def test_rim_valley_pull_is_the_move_of_the_minimum_less_its_noise():
+    """Pixels whose energies along the depth factor are parabolas with minima at
+    1e-3 (four clear pixels, weights 1, 2, 3, 3) and at -2e-3 (one rim pixel,
+    weight 2): E over all has its minimum at (9e-3 - 4e-3) / 11, over the clear
+    pixels at 1e-3. With the clear pixels in three blocks of equal weight they
+    agree (their minimum's scatter, ``valley_sigma``, is 0), so the bias is the
+    whole distance (to 1e-12). Clear pixels that disagree among themselves
+    (minima 3e-3, -1e-3, 1e-3: the same clear minimum) explain part of it by
+    their own noise: the bias is ``sqrt(d^2 - (s_clear^2 - s_all^2))``, less
+    than d, and 0 once their scatter exceeds d. 0 without rim pixels; NaN
+    with fewer than three trial depths or an energy that does not curve
+    upwards."""
+    deltas = [-0.004, -0.001, 0.0, 0.001, 0.004]
+    weight = np.array([1.0, 2.0, 3.0, 2.0, 3.0])
+    clear = np.array([True, True, True, False, True])
+
+    def tried(minimum):
+        return {d: (weight * (d - np.asarray(minimum)) ** 2, 5.0) for d in deltas}
+
+    agree = tried([1e-3, 1e-3, 1e-3, -2e-3, 1e-3])
+    one_block = np.array([0, 0, 1, 3, 2])  # clear blocks of weight 3 each
+    d = (9e-3 - 4e-3) / 11 - 1e-3  # the minimum over all less that over the clear
+    assert abs(rim_valley_pull(agree, 0.0, 0.004, clear, one_block) - abs(d)) < 1e-12
+    assert rim_valley_pull(agree, 0.0, 0.004, np.ones(5, bool), one_block) == 0.0
+    blocks = np.arange(5)
+    for spread, reduced in ((7e-3, True), (9e-3, False)):  # clear minimum still 1e-3
+        t = tried([spread, (3e-3 - spread) / 2, 1e-3, -2e-3, 1e-3])
+        s_all = valley_sigma(t, 0.0, blocks, 0.004)
+        inner = {k: (np.where(clear, v[0], np.nan), v[1]) for k, v in t.items()}
+        s_clear = valley_sigma(inner, 0.0, blocks, 0.004)
+        expected = np.sqrt(max(0.0, d * d - max(0.0, s_clear**2 - s_all**2)))
+        assert (0 < expected < abs(d)) if reduced else expected == 0.0
+        assert abs(rim_valley_pull(t, 0.0, 0.004, clear, blocks) - expected) < 1e-12
+    assert np.isnan(rim_valley_pull(agree, 0.0, 0.0005, clear, one_block))
+    concave = {k: (-weight * k * k, 0.0) for k in deltas}
+    assert np.isnan(rim_valley_pull(concave, 0.0, 0.004, clear, one_block))

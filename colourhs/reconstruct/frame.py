@@ -508,16 +508,29 @@ def _consistent_surface(
     """The depth from the agreement of geometry and eq. (5) (see :mod:`.surface`);
     ``say(text)`` reports its steps."""
     from colourhs.reconstruct.refine import refine_surface
-    from colourhs.reconstruct.sides import helmholtz_sides
+    from colourhs.reconstruct.sides import RIM_SUPPORT, helmholtz_sides
 
     H, W = frame.rig.image.height, frame.rig.image.width
     if say is not None:
         say("refinement: each reciprocal pair's images and noise, resampled for E")
     sides = helmholtz_sides(frame, frame.variance, pairs, blur_px=blur_px)
+    # The rows at the edges of unusable regions: their pull joins the sigma (rim_valley_pull).
+    clear = helmholtz_sides(frame, frame.variance, pairs, blur_px=blur_px, min_support=RIM_SUPPORT)
     footprint = np.abs(z) / float(ref.K[0, 0])
     fill = object_mask(frame, frame.rig.camera_names.index(ref.name)).ravel()
     zr, nr, sinfo = refine_surface(
-        z, ok, rays, ref.centre, (H, W), sides, footprint, spline_px, iterations, fill=fill, say=say
+        z,
+        ok,
+        rays,
+        ref.centre,
+        (H, W),
+        sides,
+        footprint,
+        spline_px,
+        iterations,
+        fill=fill,
+        clear_sides=clear,
+        say=say,
     )
     ok = (ok | sinfo["filled"]) & np.isfinite(zr) & sinfo["valid"]
     z = np.where(ok, zr, np.nan)

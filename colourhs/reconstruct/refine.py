@@ -31,6 +31,7 @@ from colourhs.reconstruct.uncertainty import (
     VALLEY_BLOCK,
     depth_sigma,
     filled_sigma,
+    rim_valley_pull,
     valley_sigma,
 )
 
@@ -324,7 +325,9 @@ def _kept_rows(rows, tried, take, pairs: int, active=None):
     return J, np.where(row, r1, r), kept
 
 
-def depth_search(problem: _Problem, c, step=SEARCH_STEP, max_steps=SEARCH_STEPS, say=None):
+def depth_search(
+    problem: _Problem, c, step=SEARCH_STEP, max_steps=SEARCH_STEPS, clear_sides=None, say=None
+):
     """Each surface's depth from the minimum of E along its family of shapes.
 
     Beyond the paper. Under noise E has a long, nearly flat valley: at each
@@ -342,7 +345,10 @@ def depth_search(problem: _Problem, c, step=SEARCH_STEP, max_steps=SEARCH_STEPS,
 
     Returns the control points at each surface's best depth (shape re-fitted),
     the factors (n_surfaces,) applied and the relative 1-sigma uncertainty
-    of each factor (:func:`valley_sigma`, from the trial depths' energies).
+    of each factor (:func:`valley_sigma`, from the trial depths' energies;
+    with ``clear_sides``, the sides with only the samples clear of every
+    edge usable, the rim rows' bias :func:`rim_valley_pull` added in
+    variance).
     ``say(text)``, if given, reports each trial depth (each is
     ``SEARCH_FITS`` LM steps).
     """
@@ -419,6 +425,15 @@ def depth_search(problem: _Problem, c, step=SEARCH_STEP, max_steps=SEARCH_STEPS,
     block = VALLEY_BLOCK * problem.spline.spacing
     groups = (g.rows // block).astype(np.int64) * (int(g.shape[1] // block) + 1) + g.cols // block
     sigma = np.array([valley_sigma(tried[k], best[k], groups[pixels[k]], step) for k in range(n)])
+    if clear_sides is not None:  # the rim rows' pull on each surface's depth mode
+        alt = copy.copy(problem)
+        alt.sides = clear_sides
+        clear = np.isfinite(alt.state(at(best), sc)[0])
+        pull = [
+            rim_valley_pull(tried[k], best[k], step, clear[pixels[k]], groups[pixels[k]])
+            for k in range(n)
+        ]
+        sigma = np.hypot(sigma, np.asarray(pull))
     return at(best), 1.0 + best, sigma
 
 
@@ -460,6 +475,7 @@ def refine_surface(
     fill: np.ndarray | None = None,
     search: bool = True,
     sigma_samples: int = SIGMA_SAMPLES,
+    clear_sides: HelmholtzSides | None = None,
     say=None,
 ) -> tuple[np.ndarray, np.ndarray, dict]:
     """Minimise E (module docstring) over a B-spline surface, from depths ``z0``.
@@ -486,6 +502,9 @@ def refine_surface(
         dark spots, pixels whose rows were unusable) are filled by
         :func:`fill_holes` (their weight, and so their confidence, is 0).
     sigma_samples : draws of :func:`depth_sigma` (0: no uncertainty, all NaN).
+    clear_sides : the sides with only the samples clear of every edge usable
+        (:data:`colourhs.reconstruct.sides.RIM_SUPPORT`): the rim rows' pull on
+        each surface's depth (:func:`rim_valley_pull`) joins the depths' sigma.
     say : called with a line of text at each step (progress), if given.
 
     Returns
@@ -495,9 +514,9 @@ def refine_surface(
     info : ``valid`` (H*W,) pixels of the result (without the surfaces
         that :func:`explained_surfaces` leaves out), ``weights`` (H*W,) final
         robust weights (0 where the rows were unusable), ``sigma`` (H*W,) each
-        depth's 1-sigma uncertainty (:func:`depth_sigma` and the depth
-        search's :func:`valley_sigma`, metres; :func:`filled_sigma` where the
-        rows were unusable and in filled holes), ``filled`` (H*W,)
+        depth's 1-sigma uncertainty (:func:`depth_sigma`, the depth search's
+        :func:`valley_sigma` with :func:`rim_valley_pull`, metres; :func:`filled_sigma`
+        where the rows were unusable and in filled holes), ``filled`` (H*W,)
         filled holes, ``energy`` after each step, ``depth_factors`` (the
         search's scale per surface), ``surfaces`` and ``control_points``.
     """
@@ -520,7 +539,9 @@ def refine_surface(
     if search:
         stride = search_stride(spacing)
         say(f"refinement: depth search along E's valley (pixel stride {stride})")
-        c, factors, valley = depth_search(problem.subsampled(stride), c, say=say)
+        c, factors, valley = depth_search(
+            problem.subsampled(stride), c, clear_sides=clear_sides, say=say
+        )
     say(f"refinement: {iterations} final LM steps")
     c, more, _ = problem.lm(c, iterations, say=say)
     z = B @ c

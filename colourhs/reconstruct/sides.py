@@ -39,6 +39,14 @@ error bar (:mod:`colourhs.reconstruct.uncertainty`) covers the markers'
 offset instead. A rig whose captures are all boards may set it (0.15 pixel:
 two views 12-30 degrees apart see a slanted surface foreshortened 10-20 %
 differently, so their 1-pixel blur kernels differ by about that much)."""
+BLUR_SUPPORT = 0.9  # least share of the blur kernel on usable pixels (see side_maps)
+RIM_SUPPORT = 0.999  # the same, for samples clear of every edge (see side_maps)
+"""Why ``BLUR_SUPPORT`` and ``RIM_SUPPORT`` hold on any rig: they are shares of
+the blur's kernel, in the image's own pixels whatever its size or the rig. A
+sample whose kernel reaches unusable pixels (a silhouette, a dark marker, a
+saturated patch) mixes the edge: above 0.9 it is still mostly the surface, and
+only above 0.999 (about 3 blur sigmas from the edge) is the edge's share below
+a thousandth of the sample."""
 ORDER = 1  # interpolation of the sides: 1 bilinear, 3 cubic convolution (see helmholtz_sides)
 
 
@@ -88,7 +96,7 @@ def noise_correlation(blur_px: float, taps: int = 4) -> np.ndarray:
     return np.exp(-(k**2) / (4.0 * float(blur_px) ** 2))
 
 
-def _blur(values: np.ndarray, sigma: float, min_support: float = 0.9) -> np.ndarray:
+def _blur(values: np.ndarray, sigma: float, min_support: float = BLUR_SUPPORT) -> np.ndarray:
     """NaN-aware Gaussian blur: normalised convolution; NaN where support < ``min_support``."""
     ok = np.isfinite(values)
     support = gaussian_filter(ok.astype(float), sigma)
@@ -97,7 +105,11 @@ def _blur(values: np.ndarray, sigma: float, min_support: float = 0.9) -> np.ndar
 
 
 def side_maps(
-    J: np.ndarray, var: np.ndarray, blur_px: float = BLUR_PX, footprint_px: float = FOOTPRINT_PX
+    J: np.ndarray,
+    var: np.ndarray,
+    blur_px: float = BLUR_PX,
+    footprint_px: float = FOOTPRINT_PX,
+    min_support: float = BLUR_SUPPORT,
 ) -> np.ndarray:
     """Stack (H, W, 2) of one Helmholtz camera: J and its noise variance.
 
@@ -119,11 +131,14 @@ def side_maps(
         error that does not fall with the sensor noise; without this term
         the robust weights drop such rows only while the noise is small
         against them, so a surface's depth moved with the noise level.
+    min_support : least share of the blur's kernel on usable pixels; below it the
+        sample is unusable (:data:`BLUR_SUPPORT`; :data:`RIM_SUPPORT` keeps only
+        samples clear of every edge, :func:`colourhs.reconstruct.uncertainty.rim_valley_pull`).
     """
     unusable = ~np.isfinite(J)
     if blur_px > 0:
-        J = _blur(J, blur_px)
-        var = _blur(var, blur_px) * min(1.0 / (4.0 * np.pi * blur_px**2), 1.0)
+        J = _blur(J, blur_px, min_support)
+        var = _blur(var, blur_px, min_support) * min(1.0 / (4.0 * np.pi * blur_px**2), 1.0)
     if footprint_px > 0 and unusable.any():
         from scipy.ndimage import binary_dilation
 
@@ -143,6 +158,7 @@ def helmholtz_sides(
     min_signal: float = MIN_SIGNAL,
     blur_px: float | None = None,
     order: int | None = None,
+    min_support: float = BLUR_SUPPORT,
 ) -> HelmholtzSides:
     """The sides of every reciprocal pair of a frame (see :class:`HelmholtzSides`).
 
@@ -151,7 +167,7 @@ def helmholtz_sides(
     :func:`colourhs.reconstruct.dataterm.pair_arrays`. J is unusable where
     the image is saturated, at or below ``min_signal``, outside the
     silhouette, or mu or p is not positive, as in the data term. ``blur_px``
-    (default :data:`BLUR_PX`): see :func:`side_maps`.
+    (default :data:`BLUR_PX`) and ``min_support``: see :func:`side_maps`.
 
     ``order`` (default :data:`ORDER`): 1 samples bilinearly, 3 by cubic
     convolution (Keys 1981, a = -1/2; beyond the paper). Bilinear
@@ -189,7 +205,7 @@ def helmholtz_sides(
             cam = frame.rig.cameras[c]
             cams.append(cam)
             light.append(cam.light_centre)
-            maps.append(side_maps(J, V, blur_px))
+            maps.append(side_maps(J, V, blur_px, min_support=min_support))
     return HelmholtzSides(cams, np.asarray(light), maps, blur_px > 0, order, blur_px)
 
 

@@ -5,8 +5,10 @@ Beyond the paper, which gives no error bar. Bayesian HS
 the Gauss-Newton covariance of the spline's control points
 (:func:`depth_sigma`, with the sides' correlated noise,
 :func:`correlated_gain`), the depth mode that E fixes weakly from the depth
-search's own trial energies (:func:`valley_sigma`), filled holes from their
-nearest measured depth (:func:`filled_sigma`). ML HS: the curvature of its
+search's own trial energies (:func:`valley_sigma`) and the pull of the rows
+at the edges of unusable regions on it, a model error
+(:func:`rim_valley_pull`), filled holes from their nearest measured depth
+(:func:`filled_sigma`); the parts add in variance. ML HS: the curvature of its
 chi-square cost along the ray (:func:`ml_sigma`).
 """
 
@@ -62,6 +64,59 @@ def valley_sigma(tried: dict, best: float, groups: np.ndarray, span: float) -> f
     if not curvature > 0:
         return float("inf")
     return float(np.sqrt(G / (G - 1) * np.sum((b - b.mean()) ** 2)) / curvature)
+
+
+def rim_valley_pull(
+    tried: dict, best: float, span: float, clear: np.ndarray, groups: np.ndarray
+) -> float:
+    """Relative bias of a surface's depth factor from its rim rows (E's valley).
+
+    Beyond the paper. A sample whose blur kernel reaches an unusable region
+    (a silhouette, a dark marker, a saturated patch) mixes the edge into the
+    surface, differently in the two views of a pair: a model error that
+    does not fall with the sensor noise, so the robust weights drop such
+    rows only on nearly exact data, and under noise they move the depth
+    mode (a bias, not scatter: on exact images with the noise model's
+    weights, the rows clear of every edge alone bring a statue's and a
+    sheet's depth back to the truth). E's Gauss-Newton model does not see
+    that move (it does not follow the valley), so it is measured on the
+    depth search's own energies: ``tried`` (delta -> per-pixel rho, prior
+    energy, ...) at the trial depths, ``clear`` (the surface's pixels) those
+    whose rows are clear of every edge. Quadratics through E over every
+    usable pixel and over the clear ones alone, at the trial depths within
+    ``span`` of ``best``, give two minima (each kept within those trial
+    depths, where the quadratics hold) a distance d apart. Without a rim
+    bias d is noise alone, with variance ``s_clear^2 - s_all^2`` (the clear
+    pixels' minimum is the less precise of two nested estimates of one
+    depth; each s from :func:`valley_sigma` with ``groups``), so the bias is
+    ``sqrt(max(0, d^2 - (s_clear^2 - s_all^2)))`` (a Hausman-type
+    difference): 0 where the clear pixels cannot tell it from their own
+    noise, or where no pixel is a rim's. NaN with fewer than three trial
+    depths or an energy over every pixel that does not curve upwards.
+    """
+    deltas = sorted(d for d in tried if abs(d - best) <= span * (1 + 1e-6))
+    if len(deltas) < 3:
+        return float("nan")
+    rho = np.array([tried[d][0] for d in deltas])
+    usable = np.all(np.isfinite(rho), axis=0)
+    inner = usable & clear
+    if inner.sum() == usable.sum():
+        return 0.0
+    prior = np.array([tried[d][1] for d in deltas])
+    x = np.asarray(deltas) - best
+    X = np.stack([np.ones_like(x), x, x * x], axis=1)
+    E = np.stack([rho[:, usable].sum(axis=1) + prior, rho[:, inner].sum(axis=1) + prior], axis=1)
+    coef, *_ = np.linalg.lstsq(X, E, rcond=None)
+    if not coef[2, 0] > 0:
+        return float("nan")
+    if not coef[2, 1] > 0:
+        return 0.0  # the clear pixels alone do not fix the depth: no bias can be told
+    vertex = np.clip(-coef[1] / (2.0 * coef[2]), x.min(), x.max())  # the fits hold there only
+    s_all = valley_sigma(tried, best, groups, span)
+    inner_only = {d: (np.where(inner, r[0], np.nan), *r[1:]) for d, r in tried.items()}
+    s_clear = valley_sigma(inner_only, best, groups, span)
+    noise = s_clear**2 - s_all**2 if np.isfinite(s_clear) and np.isfinite(s_all) else np.inf
+    return float(np.sqrt(max(0.0, (vertex[1] - vertex[0]) ** 2 - max(noise, 0.0))))
 
 
 SIGMA_SAMPLES = 64  # Monte Carlo draws of the control points' posterior (sigma to ~9 %)
