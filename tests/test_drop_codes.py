@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from colourhs.depthfile import DROP_REASONS
-from colourhs.reconstruct.frame import drop_codes
+from colourhs.reconstruct.drops import drop_codes
 
 
 def _code(name):

@@ -37,6 +37,7 @@ from colourhs.geometry import (
 from colourhs.io import sha256_files
 from colourhs.progress import bar, stage
 from colourhs.reconstruct.dataterm import INVALID_COST, data_term, pair_arrays, prepare_images
+from colourhs.reconstruct.drops import drop_codes, reference_unusable
 from colourhs.reconstruct.inputs import Frame, load_frame
 from colourhs.reconstruct.integrate import initial_surface
 from colourhs.reconstruct.options import (
@@ -205,7 +206,7 @@ def reconstruct(
     dropped = drop_codes(
         object_mask(frame, ref_i).ravel(),
         in_fg,
-        _reference_unusable(frame, ref_i),
+        reference_unusable(frame, ref_i),
         [*stages, ("uncertain", ~uncertain)],
         ok,
     )
@@ -221,50 +222,13 @@ def reconstruct(
     )
 
 
-def _reference_unusable(frame: Frame, ref: int) -> list[tuple[str, np.ndarray]]:
-    """The reference camera's own reasons (H*W,) why a pixel cannot have a depth:
-    saturated in some channel, no chromaticity p in some channel (coloured objects)."""
-    out = [("saturated", frame.saturated[ref].ravel())]
-    if frame.chroma is not None:
-        p = frame.chroma[ref]
-        out.append(("no_chromaticity", ~np.all(np.isfinite(p) & (p > 0), axis=0).ravel()))
-    return out
-
-
-def drop_codes(obj, fg, unusable, stages, ok) -> np.ndarray:
-    """Why each pixel (H*W,) has no depth: codes of :data:`colourhs.depthfile.DROP_REASONS`.
-
-    Beyond the paper (the accounting a rig owner needs to see where coverage
-    goes). ``obj`` is the object's silhouette or lit region, ``fg`` the
-    foreground reconstructed (``obj`` without the pixels too dark to
-    measure), ``unusable`` (reason, mask) pairs of the reference camera's
-    own causes, ``stages`` (reason, kept) pairs in the order the
-    reconstruction applied them, ``ok`` the pixels with a depth. A pixel
-    without depth gets the first of: ``outside`` (not in ``obj``), ``dark``
-    (not in ``fg``), the first of ``unusable`` that holds, else the last
-    stage that removed it (a hole filled at one stage and eroded at a later
-    one is the later's). Code 0: the pixel has a depth.
-    """
-    from colourhs.depthfile import DROP_REASONS
-
-    code = np.zeros(len(ok), np.uint8)
-    previous = fg
-    for reason, kept in stages:  # the last loss wins
-        code[previous & ~kept] = DROP_REASONS.index(reason) + 1
-        previous = kept
-    for reason, where in reversed([("outside", ~obj), ("dark", ~fg), *unusable]):
-        code[where] = DROP_REASONS.index(reason) + 1  # the first cause wins
-    code[ok] = 0
-    return code
-
-
 def _ml_reconstruction(
     frame, evaluate, rays, pix, depths, ref, pairs, shape, opts, info, progress, say
 ):
     """ML HS of the foreground ``pix``: the cost volume (no normals: ML HS takes its
     normals from its own minima), then :func:`_ml_solution`. Returns (H*W,) depth,
     (H*W, 3) normal, validity, confidence, uncertainty and the stages that
-    removed pixels (:func:`drop_codes`); ``info`` is not changed."""
+    removed pixels (:func:`.drops.drop_codes`); ``info`` is not changed."""
     cost = np.empty((len(pix), len(depths)), np.float32)
     evaluate(rays[pix], depths, show=progress, out=(cost, None, np.arange(len(pix))))
     z, nrm, ok, conf, sigma = _ml_solution(
@@ -283,7 +247,7 @@ def _bayes_reconstruction(
     surface (:func:`_consistent_surface`), the rims eroded. Returns (H*W,) depth,
     (H*W, 3) normal, validity, confidence, each depth's 1-sigma uncertainty
     (metres, :mod:`colourhs.reconstruct.uncertainty`; NaN without the
-    refinement) and the stages that removed pixels (:func:`drop_codes`); adds
+    refinement) and the stages that removed pixels (:func:`.drops.drop_codes`); adds
     the MRF's and the surface's figures to ``info``."""
     H, W = shape
     box, local = _mrf_box(pix, shape)
