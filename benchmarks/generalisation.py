@@ -279,6 +279,19 @@ def evaluate_variant(data, scene, frames, variant, files, chromatic, work) -> di
     return s | {"seconds": time.time() - t0}
 
 
+def _line(m: dict) -> str:
+    """One scene x variant's figures as a progress line (``-`` where there are none)."""
+
+    def f(key, fmt):
+        return "-" if m.get(key) is None else format(m[key], fmt)
+
+    return (
+        f"depth {f('depth_median_mm', '.3f')} mm (signed {f('depth_signed_median_mm', '+.3f')}) "
+        f"rms {f('depth_rms_mm', '.3f')} normal {f('normal_median_deg', '.2f')} deg "
+        f"coverage {f('coverage', '.3f')} ({m['seconds']:.0f} s)"
+    )
+
+
 def run_seed(
     seed: int, preset: str, sheet_frames: int, keep: Path | None, variants=tuple(VARIANTS)
 ) -> pd.DataFrame:
@@ -315,13 +328,7 @@ def run_seed(
                         **m,
                     }
                 )
-                print(
-                    f"seed {seed} {scene:7s} {variant:14s} depth {m['depth_median_mm']:.3f} "
-                    f"mm (signed {m['depth_signed_median_mm']:+.3f}) rms {m['depth_rms_mm']:.3f} "
-                    f"normal {m['normal_median_deg']:.2f} deg coverage {m['coverage']:.3f} "
-                    f"({m['seconds']:.0f} s)",
-                    flush=True,
-                )
+                print(f"seed {seed} {scene:7s} {variant:14s} {_line(m)}", flush=True)
         table = pd.DataFrame(rows)
         draw = json.loads((data / "gt" / "rig_model.json").read_text()).get("draw", {})
         for k, v in cal.items():

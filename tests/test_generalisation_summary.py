@@ -366,3 +366,15 @@ def test_evaluate_variant_pools_sigma_over_the_compared_pixels(monkeypatch, tmp_
     assert vh["depth_median_mm"] == pytest.approx(2.0)
     assert vh["depth_sigma_median_mm"] is None and vh["sigma_within_2"] is None
     assert vh["dropped_outside"] is None
+
+
+def test_progress_line_of_an_empty_reconstruction():
+    """A scene x variant with nothing reconstructed has no depth figures: its
+    progress line says so instead of stopping the run (corner seed 3's toy)."""
+    empty = {"depth_median_mm": None, "depth_signed_median_mm": None, "coverage": 0.0}
+    assert gen._line(empty | {"seconds": 3.2}) == (
+        "depth - mm (signed -) rms - normal - deg coverage 0.000 (3 s)"
+    )
+    full = {"depth_median_mm": 0.1234, "depth_signed_median_mm": -0.05, "depth_rms_mm": 0.2}
+    line = gen._line(full | {"normal_median_deg": 1.234, "coverage": 0.9, "seconds": 12.0})
+    assert line == "depth 0.123 mm (signed -0.050) rms 0.200 normal 1.23 deg coverage 0.900 (12 s)"
