@@ -30,7 +30,7 @@ Writes to ``benchmarks/results/`` (``--tag`` suffixes each name):
   uncalibrated; chromaticity median) and the rig's drawn settings.
 - ``generalisation_summary.json``: per set (the ``set`` column; ``all`` for
   tables without it), per scene x variant and metric the median over the
-  set's rigs and the worst rig, issue 35's targets beside them with ``met``
+  set's rigs and the worst rig, the accuracy targets beside them with ``met``
   (:data:`TARGETS`); the depth sigma's calibration per Bayesian variant
   (:func:`sigma_calibration`); whether the ablation order ``vh > ml_full >
   bayes_nocalib > bayes_ph >= bayes_full`` held on every rig, on the depth
@@ -64,7 +64,7 @@ from colourhs.contract import DROP_COLUMNS, GAUSSIAN_WITHIN, SIGMA_MULTIPLES
 from colourhs.variants import VARIANTS
 
 HERE = Path(__file__).parent
-#: Issue 35's targets, per set: (scene, variant, metric) -> upper bounds on (the median
+#: The accuracy targets, per set: (scene, variant, metric) -> upper bounds on (the median
 #: over the set's rigs, the worst rig); for the signed median on its absolute value.
 TARGETS = {
     ("plane", "bayes_ph", "depth_median_mm"): (0.1, 0.3),
@@ -90,13 +90,13 @@ METRICS = (
 )
 #: Metrics whose worst rig is the largest absolute value (kept with its sign).
 SIGNED_METRICS = ("depth_signed_median_mm",)
-#: Variants whose depth files carry a sigma to calibrate (issue 35's sigma target).
+#: Variants whose depth files carry a sigma to calibrate.
 BAYES_VARIANTS = ("bayes_nocalib", "bayes_ph", "bayes_full")
 #: The sigma calibration's entry of each scene's own variant (the one its targets name).
 OWN_VARIANT = "own variant per scene"
-#: Issue 35: each pooled sigma share within this of the Gaussian's (GAUSSIAN_WITHIN).
+#: Each pooled sigma share within this of the Gaussian's (GAUSSIAN_WITHIN).
 SIGMA_TOLERANCE = 0.1
-#: Issue 35's decision: ml_full > bayes_nocalib is checked only on rigs whose uncalibrated mu
+#: ml_full > bayes_nocalib is checked only on rigs whose uncalibrated mu
 #: (mu = 1) is within 2 % (``mu_uncalibrated_rms_log_worst <= 0.02``).
 ML_LINK_MU_LIMIT = 0.02  # a relative (dimensionless) error of mu: the same bound on any rig
 #: The ablation's links (a, b, tie): a's error above b's (at least b's, to 0.1 %, where tie).
@@ -108,7 +108,7 @@ LINKS = (
 )
 ML_LINK = "ml_full > bayes_nocalib"
 #: The markdown's rows: every (scene, variant) with a target, and ML on the plane
-#: (issue 35's decision on ML with exact data: reported, no target).
+#: (ML on a narrow baseline: reported beside, no target).
 MARKDOWN_ROWS = (*dict.fromkeys((s, v) for s, v, _ in TARGETS), ("plane", "ml_full"))
 
 
@@ -401,7 +401,7 @@ def scene_summary(table: pd.DataFrame) -> dict:
 
 
 def sigma_calibration(table: pd.DataFrame) -> dict:
-    """Issue 35's sigma target per Bayesian variant over one set's rigs and scenes.
+    """The sigma calibration target per Bayesian variant over one set's rigs and scenes.
 
     Each ``sigma_within_<k>`` is the mean of the per-row shares (one row per rig x
     scene, each weighted equally whatever its pixel count, rows without a sigma left
@@ -475,9 +475,9 @@ def ablation(table: pd.DataFrame) -> dict:
     """The ablation order on one set's rigs, on the depth median and on the RMS.
 
     The order needs every variant (an empty dict otherwise). ``ml_full >
-    bayes_nocalib`` is checked only on rigs where :func:`ml_link_applicable`
-    (issue 35's decision), elsewhere it is not applicable (not broken); the other
-    links on every rig.
+    bayes_nocalib`` is checked only on rigs where :func:`ml_link_applicable` (a
+    rig far from mu = 1 fails that link whatever ML does), elsewhere it is not
+    applicable (not broken); the other links on every rig.
 
     Returns
     -------

@@ -1,4 +1,4 @@
-"""Where the missing depth goes (issue 35, item 4): the depth file's ``dropped`` codes
+"""Where the missing depth goes: the depth file's ``dropped`` codes
 summarised against the ground truth (colourhs.deptherrors.drop_summary), the metrics
 columns ``dropped_<reason>`` (colourhs.evaluate, colourhs.contract) and the report's
 table (colourhs.reporttables.drop_table)."""

@@ -99,9 +99,9 @@ def test_exact_data_exact_answers(exact_rigs, scene):
       (interpolation, the renderer's pixel integration): the issue's
       0.05 mm is not reached by ML.
     - Bayesian never worse than ML: every case.
-    - No bias (issue 35): signed medians, Bayesian plane -0.009, 0.010, 0.031,
+    - No bias: signed medians, Bayesian plane -0.009, 0.010, 0.031,
       0.013, 0.008 mm, sheet 0.017, 0.001, 0.002, 0.001, 0.007 mm; ML plane
-      -0.006, 0.023, 0.008 mm. Issue 35's decision holds ML on exact data to
+      -0.006, 0.023, 0.008 mm. The project holds ML on exact data to
       |signed median| <= 0.05 mm and a median within 0.15 mm (its narrow-baseline
       corner rigs are reported by benchmarks/generalisation.py, not held).
 

@@ -1,4 +1,4 @@
-"""benchmarks/generalisation.py's summary (issue 35) on hand-made per-seed tables: the
+"""benchmarks/generalisation.py's summary on hand-made per-seed tables: the
 medians and worst rigs, the targets' ``met``, the sigma calibration, the ablation's
 not-applicable ML link and the markdown. Nothing is rendered."""
 
@@ -123,7 +123,7 @@ def test_medians_and_worst_rigs_per_set(table):
     assert (toy["median"], toy["worst"], toy["met"]) == (1.0, 2.0, True)
     assert r["sheet"]["bayes_ph"]["depth_median_mm"]["worst"] == 0.5
     assert r["sheet"]["bayes_ph"]["depth_median_mm"]["met"] is True
-    # ML on the plane (issue 35's decision on ML with exact data): reported, no target.
+    # ML on the plane (ML on a narrow baseline): reported, no target.
     ml = r["plane"]["ml_full"]
     assert (ml["depth_median_mm"]["median"], ml["depth_median_mm"]["worst"]) == (1.0, 5.0)
     assert ml["depth_signed_median_mm"]["worst"] == pytest.approx(-0.04)
