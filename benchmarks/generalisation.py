@@ -374,19 +374,21 @@ def target_met(metric: str, median: float | None, worst: float | None, target) -
 
 def metric_entry(scene: str, variant: str, metric: str, values) -> dict:
     """Median over rigs, worst rig (:func:`worst_value`) and rigs with a value; the
-    target (None where none) and, where one exists, ``met``."""
+    target (None where none) and, where one exists, ``met``: never where a rig has no
+    value (nothing reconstructed), which the median and the worst leave out."""
     v = np.asarray(values, float)
-    v = v[np.isfinite(v)]
+    finite = v[np.isfinite(v)]
     entry = {
-        "median": float(np.median(v)) if v.size else None,
-        "worst": worst_value(metric, v) if v.size else None,
-        "rigs": int(v.size),
+        "median": float(np.median(finite)) if finite.size else None,
+        "worst": worst_value(metric, finite) if finite.size else None,
+        "rigs": int(finite.size),
         "target": None,
     }
     target = TARGETS.get((scene, variant, metric))
     if target is not None:
         entry["target"] = {"median": target[0], "worst": target[1]}
-        entry["met"] = target_met(metric, entry["median"], entry["worst"], target)
+        met = target_met(metric, entry["median"], entry["worst"], target)
+        entry["met"] = met and finite.size == v.size
     return entry
 
 

@@ -123,6 +123,13 @@ def test_medians_and_worst_rigs_per_set(table):
     assert (toy["median"], toy["worst"], toy["met"]) == (1.0, 2.0, True)
     assert r["sheet"]["bayes_ph"]["depth_median_mm"]["worst"] == 0.5
     assert r["sheet"]["bayes_ph"]["depth_median_mm"]["met"] is True
+    # A rig with nothing reconstructed has no depth figures: the others may be within
+    # the targets, but the set's are not met.
+    empty = table.copy()
+    sel = (empty["set"] == "random") & (empty["scene"] == "toy") & (empty["seed"] == 0)
+    empty.loc[sel & (empty["variant"] == "bayes_full"), "depth_median_mm"] = np.nan
+    toy = gen.summarise(empty)["sets"]["random"]["scenes"]["toy"]["bayes_full"]
+    assert toy["depth_median_mm"]["rigs"] == 2 and toy["depth_median_mm"]["met"] is False
     # ML on the plane (ML on a narrow baseline): reported, no target.
     ml = r["plane"]["ml_full"]
     assert (ml["depth_median_mm"]["median"], ml["depth_median_mm"]["worst"]) == (1.0, 5.0)
