@@ -27,6 +27,19 @@ surface at any resolution, wide enough that neighbouring blocks share few
 control points and no noise (the sides' blur is a pixel)."""
 
 
+def _near_trials(tried: dict, best: float, span: float):
+    """The depth search's trial depths within ``span`` of ``best``: per-pixel rho
+    (trials, n), prior energies (trials,), offsets ``x = d - best`` and the
+    quadratic's design matrix [1, x, x^2]; None with fewer than three."""
+    deltas = sorted(d for d in tried if abs(d - best) <= span * (1 + 1e-6))
+    if len(deltas) < 3:
+        return None
+    rho = np.array([tried[d][0] for d in deltas])
+    prior = np.array([tried[d][1] for d in deltas])
+    x = np.asarray(deltas) - best
+    return rho, prior, x, np.stack([np.ones_like(x), x, x * x], axis=1)
+
+
 def valley_sigma(tried: dict, best: float, groups: np.ndarray, span: float) -> float:
     """Relative 1-sigma uncertainty of a surface's depth factor from the depth search.
 
@@ -45,19 +58,16 @@ def valley_sigma(tried: dict, best: float, groups: np.ndarray, span: float) -> f
     c_prior)^2``. Returns inf where E does not curve upwards there (the
     depth is not determined) and NaN with fewer than three trial depths.
     """
-    deltas = sorted(d for d in tried if abs(d - best) <= span * (1 + 1e-6))
-    if len(deltas) < 3:
+    near = _near_trials(tried, best, span)
+    if near is None:
         return float("nan")
-    rho = np.array([tried[d][0] for d in deltas])
-    prior = np.array([tried[d][1] for d in deltas])
+    rho, prior, _, X = near
     common = np.all(np.isfinite(rho), axis=0)
     _, grp = np.unique(groups[common], return_inverse=True)
     G = int(grp.max()) + 1 if len(grp) else 0
     if G < 2:
         return float("nan")
     Eg = np.stack([np.bincount(grp, r[common], G) for r in rho])  # (trials, G)
-    x = np.asarray(deltas) - best
-    X = np.stack([np.ones_like(x), x, x * x], axis=1)
     coef, *_ = np.linalg.lstsq(X, np.concatenate([Eg, prior[:, None]], axis=1), rcond=None)
     b, c = coef[1, :G], coef[2]
     curvature = 2.0 * c.sum()
@@ -94,17 +104,14 @@ def rim_valley_pull(
     noise, or where no pixel is a rim's. NaN with fewer than three trial
     depths or an energy over every pixel that does not curve upwards.
     """
-    deltas = sorted(d for d in tried if abs(d - best) <= span * (1 + 1e-6))
-    if len(deltas) < 3:
+    near = _near_trials(tried, best, span)
+    if near is None:
         return float("nan")
-    rho = np.array([tried[d][0] for d in deltas])
+    rho, prior, x, X = near
     usable = np.all(np.isfinite(rho), axis=0)
     inner = usable & clear
     if inner.sum() == usable.sum():
         return 0.0
-    prior = np.array([tried[d][1] for d in deltas])
-    x = np.asarray(deltas) - best
-    X = np.stack([np.ones_like(x), x, x * x], axis=1)
     E = np.stack([rho[:, usable].sum(axis=1) + prior, rho[:, inner].sum(axis=1) + prior], axis=1)
     coef, *_ = np.linalg.lstsq(X, E, rcond=None)
     if not coef[2, 0] > 0:
