@@ -214,7 +214,8 @@ def evaluate_variant(data, scene, frames, variant, files, chromatic, work) -> di
         finite error and a finite ``depth_sigma`` (None where the files carry none:
         ``vh``, files written before it); ``dropped_<reason>`` and ``dropped_other``
         (:func:`colourhs.deptherrors.drop_summary`), shares of the frames' pooled
-        ground-truth pixels (None without ``dropped``); ``seconds``. A frame with
+        ground-truth pixels (None without ``dropped``); ``reciprocity_defect_deg``, the
+        frames' median of the depth files' (None where they do not say); ``seconds``. A frame with
         nothing reconstructed (a depth file :func:`read_depth` refuses) counts
         every truth pixel as lost (``dropped_other``), not as an error.
     """
@@ -229,7 +230,7 @@ def evaluate_variant(data, scene, frames, variant, files, chromatic, work) -> di
     rig = load_rig(data)
     size = (rig.image.width, rig.image.height)
     errs, angs, truth = [], [], 0
-    sigma_errs, sigmas = [], []
+    sigma_errs, sigmas, defects = [], [], []
     lost = dict.fromkeys(DROP_COLUMNS, 0.0)
     t0 = time.time()
     for frame in frames:
@@ -253,6 +254,7 @@ def evaluate_variant(data, scene, frames, variant, files, chromatic, work) -> di
                 lost["dropped_other"] += n  # its reasons are in a file read_depth refuses
             continue
         err, ang, m = depth_errors(depth, *gt, *size)
+        defects.append((getattr(depth, "params", None) or {}).get("reciprocity_defect_deg"))
         ok = np.isfinite(err)
         errs.append(err[ok])
         angs.append(ang[ok])
@@ -276,6 +278,8 @@ def evaluate_variant(data, scene, frames, variant, files, chromatic, work) -> di
         s |= sigma_summary(np.empty(0), None)
     s.pop("sigma_pixels")
     s |= {c: None if v is None or not truth else v / truth for c, v in lost.items()}
+    known = [d for d in defects if d is not None]
+    s["reciprocity_defect_deg"] = float(np.median(known)) if known else None
     return s | {"seconds": time.time() - t0}
 
 

@@ -114,6 +114,8 @@ def _validate(args) -> int:
     from colourhs.capture import validate
 
     summary = validate(args.dataset, args.summary, progress=True)  # stderr: the log
+    for warning in summary["warnings"]:
+        print(f"warning: {warning}", file=sys.stderr)
     print(json.dumps(summary, indent=2))
     return 0
 

@@ -100,6 +100,9 @@ EXTRA_COLUMNS = (
     *(f"sigma_within_{k}" for k in SIGMA_MULTIPLES),
     "expected_depth_error_mm",
     "uncertain_share",
+    # Lights beside the lenses: the half-vector angle between a reciprocal pair's two
+    # readings, median over the reconstructed points (degrees; 0 when collocated).
+    "reciprocity_defect_deg",
     # Where the ground truth's pixels without a depth went (``dropped`` of the depth file).
     *DROP_COLUMNS,
 )

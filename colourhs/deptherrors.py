@@ -135,9 +135,18 @@ def uncertainty_summary(depth_map: DepthMap) -> dict:
         ``uncertain`` (flagged) pixels over the reconstructed (``mask`` with a
         finite depth, not flagged) plus the flagged ones. Each None where the file
         lacks its dataset (files written before them, the visual hull) or has no
-        such pixel.
+        such pixel. ``reciprocity_defect_deg``: the median over the reconstructed
+        points of the half-vector angle between a reciprocal pair's two readings
+        (the largest pair's; :meth:`colourhs.capture.Rig.reciprocity_defect`), 0
+        with collocated lights; a glossy surface's depth can be off by more than
+        its ``depth_sigma`` where it is not 0 (None where the file does not say).
     """
-    out = {"expected_depth_error_mm": None, "uncertain_share": None}
+    defect = (depth_map.params or {}).get("reciprocity_defect_deg")
+    out = {
+        "expected_depth_error_mm": None,
+        "uncertain_share": None,
+        "reciprocity_defect_deg": None if defect is None else float(defect),
+    }
     reconstructed = np.asarray(depth_map.mask, bool) & np.isfinite(depth_map.depth)
     if depth_map.depth_sigma is not None:
         sigma = np.asarray(depth_map.depth_sigma, float)

@@ -40,6 +40,12 @@ Reported per frame (:func:`evaluate_frame`, all in millimetres):
     and the share of pixels flagged ``uncertain`` (sigma over the tolerance)
     among the reconstructed and flagged ones
     (:func:`colourhs.deptherrors.uncertainty_summary`).
+``reciprocity_defect_deg``
+    Without ground truth too: with lights beside the lenses, the angle between
+    the half-vectors of a reciprocal pair's two readings (median over the
+    reconstructed points, the largest pair's; 0 with collocated lights). Eq. (3)
+    then holds for matte surfaces only: on a glossy one the depth can be off by
+    more than its sigma (:meth:`colourhs.capture.Rig.reciprocity_defect`).
 
 ``dropped_outside``, ``dropped_dark``, ..., ``dropped_rims``, ``dropped_other``
     Where the ground truth's pixels without a depth went: the share of the
@@ -475,6 +481,7 @@ def evaluate_frame(
             "mesh vertices the reference camera sees that lie off the seen GT; "
             "sigma_within_k = share of the compared pixels with |depth error| <= k "
             "depth_sigma; uncertain_share = flagged / (reconstructed + flagged) pixels; "
+            "reciprocity_defect_deg in degrees; "
             "dropped_<reason> = share of the ground truth's pixels without depth for that "
             "reason (dropped_other: for none), which with coverage add to 1",
             "seconds": time.perf_counter() - t0,

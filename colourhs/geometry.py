@@ -42,6 +42,37 @@ def light_centre(R: np.ndarray, t: np.ndarray, offset: np.ndarray) -> np.ndarray
     return R.T @ (np.asarray(offset, float) - np.asarray(t, float))
 
 
+def half_vector_defect(
+    X: np.ndarray, c_a: np.ndarray, l_a: np.ndarray, c_b: np.ndarray, l_b: np.ndarray
+) -> np.ndarray:
+    """Angle (radians) between the half-vectors of a reciprocal pair's two readings at ``X``.
+
+    Beyond the paper. Camera a lit by b's light sees the point ``X`` (..., 3)
+    at the half-vector ``h_ab = unit(unit(l_b - X) + unit(c_a - X))``, camera b
+    lit by a's light at ``h_ba = unit(unit(l_a - X) + unit(c_b - X))`` (``c``
+    the camera centres, ``l`` the light centres, metres). Helmholtz
+    reciprocity (eq. 3) makes the two BRDF values equal only when each light
+    sits at its camera's centre (the paper's collocated lights): then the
+    angle is 0. With lights beside the lenses a glossy lobe, a function of the
+    half-vector, is read at two half-vectors this far apart, and the two
+    readings differ by a share that no calibration can remove; a matte
+    (Lambertian) surface is unaffected.
+    """
+    X = np.asarray(X, float)
+
+    def unit(v):
+        return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+    def to(p):
+        return unit(np.asarray(p, float) - X)
+
+    h_ab = unit(to(l_b) + to(c_a))
+    h_ba = unit(to(l_a) + to(c_b))
+    # atan2 of the cross and dot products: accurate for the tiny angles of small offsets
+    cross = np.linalg.norm(np.cross(h_ab, h_ba), axis=-1)
+    return np.arctan2(cross, np.sum(h_ab * h_ba, axis=-1))
+
+
 def world_to_camera(X: np.ndarray, R: np.ndarray, t: np.ndarray) -> np.ndarray:
     """Camera coordinates R X + t of world points ``X`` (..., 3), metres."""
     return np.asarray(X, float) @ np.asarray(R, float).T + np.asarray(t, float)

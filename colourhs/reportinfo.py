@@ -135,7 +135,9 @@ def rig_summary(dataset) -> dict[str, str]:
 
     Keys: ``dataset folder``, ``cameras`` (name and light colour each),
     ``image`` (width x height, bit depth), ``calibration poses``,
-    ``chromatic objects``, ``frames per scene``.
+    ``chromatic objects``, ``frames per scene``, ``lights`` (collocated, or how
+    far beside the lenses and the reciprocity defect that costs,
+    :func:`colourhs.capture.rig.light_offset_warning`).
     """
     rig = dataset.rig
     cams = ", ".join(f"{c.name} ({c.light_colour} light)" for c in rig.cameras)
@@ -148,7 +150,24 @@ def rig_summary(dataset) -> dict[str, str]:
         "calibration poses": str(len(dataset.poses)),
         "chromatic objects": ", ".join(dataset.chromatic_objects) or "none",
         "frames per scene": frames,
+        "lights": _lights_line(rig),
     }
+
+
+def _lights_line(rig) -> str:
+    """Where the rig's lights are, and what a light beside its lens costs."""
+    from colourhs.capture.rig import light_offset_warning, reciprocity_defect_deg
+
+    offset = max(float(np.linalg.norm(c.light_offset)) for c in rig.cameras)
+    if offset == 0:
+        return "at the lens centres (collocated, as Helmholtz reciprocity assumes)"
+    defect = reciprocity_defect_deg(rig)
+    text = f"up to {offset * 1e3:.0f} mm beside the lenses"
+    if defect is not None:
+        text += f"; the reciprocal pairs' half-vectors up to {defect:.2f} deg apart"
+    if light_offset_warning(rig):
+        text += " (over the tolerance: a glossy surface's depth can be off by more than its sigma)"
+    return text
 
 
 def scene_descriptions(dataset) -> dict[str, str]:

@@ -67,14 +67,18 @@ AGGREGATION = {
     "normal_median_deg": "median",
     # a median sigma per frame, as depth_sigma_median_mm (which its name's pattern gives)
     "expected_depth_error_mm": "median",
+    # a median over each frame's points; the frames' median likewise
+    "reciprocity_defect_deg": "median",
 }
 
 #: The expected-error table's metric columns (:func:`expected_error_table`): the
-#: reconstruction's own median sigma and flagged share, which need no ground truth,
-#: then the measured errors beside them where there is ground truth.
+#: reconstruction's own median sigma and flagged share, and the lights' reciprocity
+#: defect (which the sigma does not cover), which need no ground truth, then the
+#: measured errors beside them where there is ground truth.
 EXPECTED_ERROR_COLUMNS = (
     "expected_depth_error_mm",
     "uncertain_share",
+    "reciprocity_defect_deg",
     "depth_sigma_median_mm",
     "depth_median_mm",
     "depth_signed_median_mm",

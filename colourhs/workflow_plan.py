@@ -17,6 +17,7 @@ IncompleteCheckpointException, and only its preset's chromatic objects are known
 from __future__ import annotations
 
 import shlex
+import sys
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -174,12 +175,15 @@ class WorkflowPlan:
 
     def check_captures(self) -> None:
         """Validate (every image decoded) each dataset :meth:`unvalidated_captures` names;
-        :class:`MalformedDatasetError` with the validator's message (file and problem)."""
+        :class:`MalformedDatasetError` with the validator's message (file and problem).
+        What is valid but costs accuracy (the summary's ``warnings``) goes to stderr."""
         for name in self.unvalidated_captures():
             try:
-                validate_dataset(self.dataset_path(name))
+                summary = validate_dataset(self.dataset_path(name))
             except CaptureFormatError as e:
                 raise MalformedDatasetError(name, e) from None
+            for warning in summary["warnings"]:
+                print(f"colourhs: dataset {name}: warning: {warning}", file=sys.stderr)
 
     def chromatic_objects(self, name: str) -> list[str]:
         """Coloured objects of a dataset: its chromatic objects but ``white``.

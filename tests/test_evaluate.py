@@ -365,6 +365,7 @@ SIGMA_COLUMNS = (
     "sigma_within_3",
     "expected_depth_error_mm",
     "uncertain_share",
+    "reciprocity_defect_deg",
 )
 
 
@@ -426,7 +427,9 @@ def _sigma_depth_map(tmp_path, gd, gnorm, camera):
         uncertain=uncertain,
     )
     path = tmp_path / "sigma.h5"
-    write_depth(path, result, camera, {"method": "bayes"})
+    write_depth(
+        path, result, camera, {"method": "bayes", "params": {"reciprocity_defect_deg": 0.25}}
+    )
     return path, np.where(mask, offset, np.nan), sigma
 
 
@@ -470,6 +473,8 @@ def test_evaluate_frame_sigma_columns(tmp_path):
     assert blind["depth_signed_median_mm"] is None
     assert blind["expected_depth_error_mm"] == info["expected_depth_error_mm"]
     assert blind["uncertain_share"] == info["uncertain_share"]
+    # the lights' reciprocity defect the reconstruction recorded, with or without truth
+    assert blind["reciprocity_defect_deg"] == info["reciprocity_defect_deg"] == 0.25
     # a depth file without sigma: every sigma column empty
     plain = _depth_map(tmp_path, "plain", gd + 1e-3, gnorm, cam)
     vh = evaluate_frame(plain, None, gt_ply, out / "c.json", variant="vh", **ids)
@@ -478,6 +483,7 @@ def test_evaluate_frame_sigma_columns(tmp_path):
     assert uncertainty_summary(read_depth(plain)) == {
         "expected_depth_error_mm": None,
         "uncertain_share": None,
+        "reciprocity_defect_deg": None,
     }
     # metrics.csv: the new columns after the earlier extras, before the dropped shares
     # (test_dropped.py), method and same_as

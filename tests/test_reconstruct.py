@@ -228,7 +228,30 @@ def test_depth_file_follows_the_contract(tiny_dataset, calib, tmp_path):
         assert "photometric" in f.attrs["calibration_sha256"]
         assert "energy" in f.attrs["params"]
     assert res.info["valid_pixels"] == mask.sum()
+    assert res.info["reciprocity_defect_deg"] == 0.0  # the tiny rig's lights are collocated
     assert not list(out.parent.glob("*.tmp*"))  # temporaries are .NAME.PID.tmp.h5
+
+
+def test_reconstruction_records_its_lights_defect(tiny_dataset, calib):
+    """With the lights 20 mm beside the lenses (the data unchanged) the frame's info
+    gives the median over its reconstructed points of each point's largest pair
+    defect, degrees (what metrics.csv's reciprocity_defect_deg reports)."""
+    from dataclasses import replace
+
+    fr = load_frame(tiny_dataset, "plane", "000000", **calib)
+    cams = tuple(
+        replace(c, light_offset=np.array([0.02 * np.cos(k), 0.02 * np.sin(k), 0.0]))
+        for k, c in enumerate(fr.rig.cameras)
+    )
+    fr.rig = replace(fr.rig, cameras=cams)
+    res = reconstruct(fr, "ml")
+    ref = fr.rig.camera(res.info["reference"])
+    z = res.depth.ravel()
+    ok = np.isfinite(z)
+    X = ref.centre + reference_rays(ref, 160, 120)[ok] * z[ok, None]
+    want = np.degrees(np.median(fr.rig.reciprocity_defect(X).max(axis=0)))
+    assert ok.sum() > 1000 and 0.1 < want < 2.0
+    assert res.info["reciprocity_defect_deg"] == pytest.approx(want, rel=1e-6)  # float32 depths
 
 
 def test_no_foreground_is_an_error(tiny_dataset, calib):

@@ -428,7 +428,10 @@ def _fake_dataset(root: Path):
     """A stand-in for colourhs.capture.Dataset with what the report reads."""
     from types import SimpleNamespace as NS
 
-    cams = tuple(NS(name=f"cam{i}", light_colour=c) for i, c in enumerate(("red", "green", "blue")))
+    cams = tuple(
+        NS(name=f"cam{i}", light_colour=c, light_offset=np.zeros(3))
+        for i, c in enumerate(("red", "green", "blue"))
+    )
     scenes = {
         "plane": NS(
             frames=("000000",),
@@ -509,6 +512,7 @@ def test_report_layout_provenance_and_links(tmp_path, metrics_csv, images):
     assert (
         rig["image"] == "640 x 480 px, 16 bit" and rig["frames per scene"] == "plane: 1, sheet: 4"
     )
+    assert rig["lights"].startswith("at the lens centres (collocated")
     assert "held-out &lt;board&gt; pose (static; white surface; ground truth)" in text
     assert "dynamic, 4 frames; chromatic object slinky; no ground truth" in text
     # result files, relative to the page
@@ -597,6 +601,7 @@ def test_report_expected_error_and_sigma_calibration(tmp_path, images):
                 "variant": "bayes_full",
                 "expected_depth_error_mm": (1.5, 2.5)[f],  # median over frames 2.00
                 "uncertain_share": (0.1, 0.3)[f],  # mean 0.200
+                "reciprocity_defect_deg": (0.2, 0.6)[f],  # median over frames 0.400
             }
         )
         rows.append({"scene": "sheet", "frame": frame, "variant": "vh"})  # no sigma
@@ -631,6 +636,7 @@ def test_report_expected_error_and_sigma_calibration(tmp_path, images):
             "variant": "bayes_full",
             "expected_depth_error_mm": "2.00",
             "uncertain_share": "0.200",
+            "reciprocity_defect_deg": "0.400",
             "depth_sigma_median_mm": "",
             "depth_median_mm": "",
             "depth_signed_median_mm": "",

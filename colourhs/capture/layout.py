@@ -25,6 +25,7 @@ from colourhs.capture.png import (
     read_image,
     read_mask,
 )
+from colourhs.capture.rig import light_offset_warning, reciprocity_defect_deg
 from colourhs.capture.rigjson import load_rig
 from colourhs.progress import bar
 
@@ -273,8 +274,11 @@ def validate(
     Returns
     -------
     dict summary: cameras with their light colours, reciprocal pairs, board
-    poses, chromatic objects, scenes with their frame counts, image count and
-    the fraction of saturated pixels.
+    poses, chromatic objects, scenes with their frame counts, image count, the
+    fraction of saturated pixels, the lights' reciprocity defect at the rig's
+    fixation point (degrees, :func:`colourhs.capture.rig.reciprocity_defect_deg`)
+    and ``warnings``: what is valid but costs accuracy
+    (:func:`colourhs.capture.rig.light_offset_warning`).
 
     Raises
     ------
@@ -324,6 +328,8 @@ def validate(
         },
         "images": len(paths),
         "saturated_fraction": n_saturated / max(n_pixels, 1),
+        "reciprocity_defect_deg": reciprocity_defect_deg(ds.rig),
+        "warnings": [w for w in (light_offset_warning(ds.rig),) if w],
     }
     if summary_json is not None:
         from colourhs.io import write_json

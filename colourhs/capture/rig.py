@@ -17,7 +17,15 @@ from pathlib import Path
 import numpy as np
 
 from colourhs.capture.base import COLOURS, UnknownNameError
-from colourhs.geometry import camera_centre, light_centre
+from colourhs.geometry import camera_centre, fixation_point, half_vector_defect, light_centre
+
+RECIPROCITY_DEFECT_TOLERANCE_DEG = 0.01
+"""Largest half-vector defect of a reciprocal pair (:meth:`Rig.reciprocity_defect`,
+degrees) that :func:`light_offset_warning` lets pass. Why it holds on any rig: an
+angle, so scaled by the rig (a light's offset over its distance); at it the two
+readings of a glossy lobe (GGX, roughness 0.1) differ by about 1 %, a mid-scale
+reading's sensor noise, so beyond it a glossy surface's rows carry an error the
+noise model does not have."""
 
 
 @dataclass(frozen=True)
@@ -232,6 +240,56 @@ class Rig:
             for i, a in enumerate(self.cameras)
             for b in self.cameras[i + 1 :]
         )
+
+    def fixation_point(self) -> np.ndarray:
+        """The point nearest (least squares) to every camera's optical axis, metres (3,):
+        the rig's working point. ValueError where the axes do not converge."""
+        axes = [np.asarray(c.R, float)[2] for c in self.cameras]
+        return fixation_point(axes, [c.centre for c in self.cameras])
+
+    def reciprocity_defect(self, X: np.ndarray) -> np.ndarray:
+        """Per reciprocal pair (rig order), the half-vector angle between the pair's two
+        readings at world points ``X`` (..., 3): shape (P, ...), radians, 0 with
+        collocated lights (:func:`colourhs.geometry.half_vector_defect`)."""
+        out = []
+        for p in self.reciprocal_pairs():
+            a, b = self.camera(p.cam_a), self.camera(p.cam_b)
+            out.append(half_vector_defect(X, a.centre, a.light_centre, b.centre, b.light_centre))
+        return np.stack(out)
+
+
+def light_offset_warning(rig: Rig, tolerance_deg: float | None = None) -> str | None:
+    """A warning where the rig's lights sit beside its lenses far enough to matter, else None.
+
+    Beyond the paper. The largest :meth:`Rig.reciprocity_defect` over the
+    reciprocal pairs at the rig's fixation point, against ``tolerance_deg``
+    (default :data:`RECIPROCITY_DEFECT_TOLERANCE_DEG`). Helmholtz reciprocity
+    (eq. 3) then holds for matte surfaces only; the depth of a glossy one can
+    be off by more than its ``depth_sigma``, which does not model it.
+    """
+    tolerance = RECIPROCITY_DEFECT_TOLERANCE_DEG if tolerance_deg is None else tolerance_deg
+    defect = reciprocity_defect_deg(rig)
+    if defect is None or defect <= tolerance:
+        return None
+    offset = max(float(np.linalg.norm(c.light_offset)) for c in rig.cameras)
+    return (
+        f"{rig.path}: the lights sit up to {offset * 1e3:.0f} mm beside the lenses; at the "
+        f"rig's fixation point a reciprocal pair's two readings see the surface at "
+        f"half-vectors up to {defect:.2f} degrees apart (over {tolerance:g}). Helmholtz "
+        "reciprocity then holds for matte surfaces only: the depth of a glossy surface can "
+        "be off by more than its depth_sigma. Put each light at its lens centre (or a ring "
+        "of lights around the lens)."
+    )
+
+
+def reciprocity_defect_deg(rig: Rig) -> float | None:
+    """The largest :meth:`Rig.reciprocity_defect` over the reciprocal pairs at the rig's
+    fixation point, degrees; None where the optical axes do not converge."""
+    try:
+        point = rig.fixation_point()
+    except ValueError:
+        return None
+    return float(np.degrees(rig.reciprocity_defect(point).max()))
 
 
 def _square_corners(centre: np.ndarray, side: float) -> np.ndarray:

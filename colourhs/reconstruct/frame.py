@@ -29,7 +29,6 @@ from colourhs.capture import (
 )
 from colourhs.depthfile import DepthResult, write_depth
 from colourhs.geometry import (
-    fixation_point,
     normalised_coordinates,
     pixel_grid,
     ray_directions,
@@ -58,10 +57,8 @@ def reference_rays(camera: Camera, width: int, height: int) -> np.ndarray:
 
 
 def working_depth(rig: Rig, ref: Camera) -> float:
-    """z-depth in ``ref`` of the fixation point (:func:`colourhs.geometry.fixation_point`)."""
-    x = fixation_point(
-        [np.asarray(c.R, float)[2] for c in rig.cameras], [c.centre for c in rig.cameras]
-    )
+    """z-depth in ``ref`` of the fixation point (:meth:`colourhs.capture.Rig.fixation_point`)."""
+    x = rig.fixation_point()
     return float((np.asarray(ref.R, float) @ x + np.asarray(ref.t, float))[2])
 
 
@@ -201,6 +198,9 @@ def reconstruct(
     conf[~ok] = 0.0
     sigma = np.where(ok | uncertain, sigma, np.nan)
     info |= {"max_sigma_mm": opts.max_sigma_mm, "uncertain_pixels": int(uncertain.sum())}
+    # Lights beside the lenses: how far apart each point's pair readings' half-vectors are.
+    defect = rig.reciprocity_defect(ref.centre + rays[ok] * z[ok, None]).max(axis=0, initial=0)
+    info["reciprocity_defect_deg"] = float(np.degrees(np.median(defect))) if ok.any() else None
     in_fg = np.zeros(H * W, bool)
     in_fg[pix] = True
     dropped = drop_codes(

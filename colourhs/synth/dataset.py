@@ -296,6 +296,7 @@ def synthesise(
     scenes: tuple[str, ...] | None = None,
     exact: bool = False,
     frames=None,
+    ranges=None,
 ) -> Path:
     """Render a synthetic colour HS dataset into ``out`` (capture format v1).
 
@@ -329,6 +330,10 @@ def synthesise(
         frame's shape (its phase is ``i / (sheet_frames - 1)``) and noise (drawn
         per image from ``seed`` and the image's path) do not depend on which other
         frames are rendered: its files equal those of a full render.
+    ranges : randomised presets: a :class:`colourhs.synth.randomranges.RandomRanges`
+        to draw from instead of the preset's named ranges (one range moved at a time,
+        as ``benchmarks/light_offset.py`` does; a quantity with its own random
+        stream, as the light offsets, leaves the rest of the seed's draw as it was).
 
     Returns
     -------
@@ -357,7 +362,7 @@ def synthesise(
             p.width,
             p.height,
             nuis,
-            RANGES_BY_NAME[p.random_ranges],
+            RANGES_BY_NAME[p.random_ranges] if ranges is None else ranges,
             n_poses=p.n_poses,
             sheet_frames=p.sheet_frames,
             statue_level=p.statue_level,

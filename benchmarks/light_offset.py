@@ -1,0 +1,155 @@
+"""What lights beside the lenses cost: the same rig and scenes with the light offset swept.
+
+Run: ``.venv/bin/python benchmarks/light_offset.py [--preset corner] [--seeds 1,5]
+[--offsets-mm 0,2,5,10,20,40] [--scenes sheet,statue,plane]``.
+
+Helmholtz reciprocity (eq. 3) equates the BRDF of a reciprocal pair's two
+readings only when each light sits at its camera's centre. With a light
+beside the lens the two readings see the surface at half-vectors
+:func:`colourhs.geometry.half_vector_defect` apart, which leaves matte
+surfaces exact and moves glossy ones. For every seed of ``--preset`` the
+rig, board, scenes and materials are drawn once; only the lights' offset
+from the lens changes (the same directions, every camera's offset of each
+magnitude in ``--offsets-mm``). To isolate that one effect every render has
+sensor noise (the seed's sensor) but no cross-talk, and the reconstruction
+has the TRUE calibration: mu maps (``gt/photometric.h5``, which with an
+offset light are exact at the scene's depth only) and, for the coloured
+statue, chromaticity; the noise model is the pipeline's
+(:func:`colourhs.noise.calibrate_noise` on the board poses).
+
+Writes ``benchmarks/results/light_offset.csv``: one row per seed x offset x
+scene with the rig's largest half-vector defect at its fixation point
+(degrees), the median over the reconstructed points of each point's largest
+pair defect, the depth median, signed median and RMS (mm), the median
+``depth_sigma`` (mm), the shares of pixels within 1 and 2 sigma, the
+coverage; and prints a median-over-seeds table.
+"""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from generalisation import seeds_in_temp
+
+from colourhs.commands import frame_indices
+
+HERE = Path(__file__).parent
+#: Scene -> the Bayesian variant a rig owner runs on it (white: bayes_ph; coloured:
+#: bayes_full, here with the true chromaticity).
+VARIANT = {"plane": "bayes_ph", "sheet": "bayes_ph", "statue": "bayes_full"}
+
+
+def run_offset(seed: int, preset, offset_m: float, scenes, root: Path) -> list[dict]:
+    """Render the seed's draw with every light ``offset_m`` beside its lens, reconstruct
+    each scene with the true calibration, and measure it against the ground truth."""
+    from colourhs.capture import load_rig
+    from colourhs.deptherrors import depth_errors
+    from colourhs.depthfile import read_depth
+    from colourhs.noise import calibrate_noise
+    from colourhs.ply import load_mesh
+    from colourhs.reconstruct.frame import reconstruct_frame
+    from colourhs.synth.dataset import synthesise
+    from colourhs.synth.randomranges import RANGES_BY_NAME
+    from colourhs.synth.rig import Nuisances
+
+    ranges = replace(RANGES_BY_NAME[preset.random_ranges], light_offset_m=(offset_m, offset_m))
+    data = root / f"offset-{offset_m * 1e3:g}mm"
+    synthesise(
+        data,
+        preset,
+        seed=seed,
+        nuisances=Nuisances().without("crosstalk"),
+        # the capture format needs board poses, a coloured scene its chromatic captures
+        parts=("photometric", "scenes", *(("chromatic",) if "statue" in scenes else ())),
+        scenes=tuple(scenes),
+        progress=False,
+        ranges=ranges,
+    )
+    noise = data / "noise.json"
+    calibrate_noise(data, noise, progress=False)
+    rig = load_rig(data)
+    at_fixation = float(np.degrees(rig.reciprocity_defect(rig.fixation_point()).max()))
+    rows = []
+    for scene in scenes:
+        variant = VARIANT[scene]
+        kw = {"photometric_h5": data / "gt" / "photometric.h5", "noise_json": noise}
+        chroma = data / "scenes" / scene / "gt" / "chromaticity.h5"
+        if variant == "bayes_full" and chroma.exists():
+            kw["chromaticity_h5"] = chroma
+        h5 = data / "out" / scene / f"{variant}.h5"
+        reconstruct_frame(data, scene, "000000", h5, "bayes", **kw)
+        depth = read_depth(h5)
+        gt = load_mesh(data / "scenes" / scene / "gt" / "000000.ply")
+        err, _, m = depth_errors(depth, *gt, rig.image.width, rig.image.height)
+        ok = np.isfinite(err)
+        e = err[ok] * 1e3
+        sigma = np.asarray(depth.depth_sigma, float)[ok] * 1e3
+        rows.append(
+            {
+                "preset": preset.name,
+                "seed": seed,
+                "offset_mm": offset_m * 1e3,
+                "scene": scene,
+                "variant": variant,
+                "defect_fixation_deg": at_fixation,
+                "defect_points_deg": _points_defect(rig, depth),
+                "depth_median_mm": float(np.median(np.abs(e))),
+                "depth_signed_median_mm": float(np.median(e)),
+                "depth_rms_mm": float(np.sqrt(np.mean(e * e))),
+                "depth_sigma_median_mm": float(np.nanmedian(sigma)),
+                "sigma_within_1": float(np.mean(np.abs(e) <= sigma)),
+                "sigma_within_2": float(np.mean(np.abs(e) <= 2 * sigma)),
+                "coverage": float(ok.sum() / m["truth_pixels"]),
+            }
+        )
+        print(
+            f"seed {seed} offset {offset_m * 1e3:g} mm {scene}: defect "
+            f"{rows[-1]['defect_points_deg']:.3f} deg, depth median "
+            f"{rows[-1]['depth_median_mm']:.3f} mm (signed "
+            f"{rows[-1]['depth_signed_median_mm']:+.3f}), sigma "
+            f"{rows[-1]['depth_sigma_median_mm']:.3f} mm",
+            flush=True,
+        )
+    return rows
+
+
+def _points_defect(rig, depth) -> float:
+    """Median over the reconstructed points of each point's largest pair defect, degrees."""
+    from colourhs.mesh import oriented_points
+
+    X, _ = oriented_points(depth)
+    return float(np.degrees(np.median(rig.reciprocity_defect(X).max(axis=0))))
+
+
+def main(argv=None) -> pd.DataFrame:
+    from colourhs.synth.dataset import PRESETS
+
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--preset", default="corner", help="a randomised preset (default corner)")
+    p.add_argument("--seeds", default="1,5", help="seeds, e.g. 1-3 or 1,5 (default 1,5)")
+    p.add_argument("--offsets-mm", default="0,2,5,10,20,40", help="light offsets, mm")
+    p.add_argument("--scenes", default="sheet,statue,plane", help="of plane, sheet, statue")
+    args = p.parse_args(argv)
+    preset = replace(PRESETS[args.preset], sheet_frames=1)
+    offsets = [float(v) * 1e-3 for v in args.offsets_mm.split(",")]
+    scenes = args.scenes.split(",")
+    out = HERE / "results" / "light_offset.csv"
+    out.parent.mkdir(exist_ok=True)
+
+    def run(seed, root):
+        return [row for o in offsets for row in run_offset(seed, preset, o, scenes, root)]
+
+    rows = seeds_in_temp(frame_indices(args.seeds), "colourhs-offset", run, out)
+    table = pd.DataFrame(rows)
+    cols = ["defect_points_deg", "depth_median_mm", "depth_signed_median_mm"]
+    cols += ["depth_sigma_median_mm", "sigma_within_1"]
+    print(table.groupby(["scene", "offset_mm"])[cols].median().round(3).to_string())
+    return table
+
+
+if __name__ == "__main__":
+    main()
