@@ -297,15 +297,32 @@ def _line(m: dict) -> str:
 
 
 def run_seed(
-    seed: int, preset: str, sheet_frames: int, keep: Path | None, variants=tuple(VARIANTS)
+    seed: int,
+    preset: str,
+    sheet_frames: int,
+    keep: Path | None,
+    variants=tuple(VARIANTS),
+    light_offset_m: tuple[float, float] | None = None,
 ) -> pd.DataFrame:
-    from colourhs.capture import open_dataset
-    from colourhs.synth.dataset import synthesise
+    """One rig of ``preset`` (seed ``seed``): render, calibrate, reconstruct and measure
+    every scene with each variant; ``light_offset_m`` replaces the preset's range of
+    the lights' offset from the lenses (the set is then named after it)."""
+    from dataclasses import replace
 
+    from colourhs.capture import open_dataset
+    from colourhs.synth.dataset import PRESETS, synthesise
+    from colourhs.synth.randomranges import RANGES_BY_NAME
+
+    ranges, name = None, preset
+    if light_offset_m is not None:
+        ranges = replace(
+            RANGES_BY_NAME[PRESETS[preset].random_ranges], light_offset_m=light_offset_m
+        )
+        name = f"{preset}, lights {light_offset_m[0] * 1e3:g}-{light_offset_m[1] * 1e3:g} mm"
     root = Path(tempfile.mkdtemp(prefix=f"colourhs-gen-{seed}-"))
     try:
         t0 = time.time()
-        data = synthesise(root / "data", preset, seed=seed, progress=False)
+        data = synthesise(root / "data", preset, seed=seed, progress=False, ranges=ranges)
         t_render = time.time() - t0
         files = calibrate(data, root / "calib")
         t_calib = time.time() - t0 - t_render
@@ -324,7 +341,7 @@ def run_seed(
                 )
                 rows.append(
                     {
-                        "set": preset,
+                        "set": name,
                         "seed": seed,
                         "scene": scene,
                         "variant": variant,
@@ -698,6 +715,12 @@ def main(argv=None) -> dict:
     p.add_argument("--keep", type=Path, default=None, help="keep datasets and results here")
     p.add_argument("--tag", default="", help="suffix of the output files")
     p.add_argument(
+        "--light-offset-mm",
+        default=None,
+        help="the lights' offset from the lenses, mm: 'A,B' draws it from U(A, B), '0' puts "
+        "every light at its lens (default: the preset's range)",
+    )
+    p.add_argument(
         "--variants",
         default=",".join(VARIANTS),
         help="variants to run (default all; the summary's ablation order needs all)",
@@ -717,6 +740,10 @@ def main(argv=None) -> dict:
         if args.preset not in PRESETS or not PRESETS[args.preset].randomised:
             randomised = ", ".join(k for k, v in PRESETS.items() if v.randomised)
             p.error(f"--preset {args.preset}: not a randomised preset ({randomised})")
+    offset = None
+    if args.light_offset_mm is not None:
+        ends = [float(v) * 1e-3 for v in args.light_offset_mm.split(",")]
+        offset = (ends[0], ends[-1])
     out_dir = HERE / "results"
     out_dir.mkdir(exist_ok=True)
     csv = out_dir / f"generalisation_seeds{args.tag}.csv"
@@ -726,7 +753,14 @@ def main(argv=None) -> dict:
         tables = []
         for seed in frame_indices(args.seeds):
             tables.append(
-                run_seed(seed, args.preset, args.sheet_frames, args.keep, args.variants.split(","))
+                run_seed(
+                    seed,
+                    args.preset,
+                    args.sheet_frames,
+                    args.keep,
+                    args.variants.split(","),
+                    offset,
+                )
             )
             pd.concat(tables).to_csv(csv, index=False)  # after every seed: a partial run counts
         table = pd.concat(tables, ignore_index=True)
