@@ -4,8 +4,9 @@ must cover what it does to the depth: a noise sweep on a corner rig.
 One ``corner-tiny`` rig (12-15 degree camera pairs, a board slanted 40-50
 degrees to the reference camera, 5,000-8,000 e- full well, strong barrel
 distortion) at 320x240, its plane rendered without noise and cross-talk,
-the true calibration (gt/photometric.h5); the lights collocated (an offset
-light makes mu depend on depth, which is not what this measures). The
+the true calibration (gt/photometric.h5); the lights collocated (a light
+beside its lens breaks Helmholtz reciprocity on glossy surfaces and makes
+mu depend on depth, which is not what this measures). The
 sensor noise is then added as the renderer makes it (Poisson electrons
 and Gaussian read noise, :func:`colourhs.synth.rig.sensor`) with the noise
 scaled by k = 0.5, 1, 2 and 4 (full well / k^2, read noise / k), three
