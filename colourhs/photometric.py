@@ -96,6 +96,7 @@ from colourhs.photometric_solve import (
     Grid,
     coverage,
     eq7_residual_rms,
+    pair_ratio_sigma,
     shading_basis,
     shading_coordinates,
     solve_mu_grids,
@@ -116,9 +117,11 @@ __all__ = [
     "load_views",
     "mu_map_errors",
     "pair_ratio_errors",
+    "pair_ratio_sigma",
     "photometric_maps",
     "pixel_footprint_m",
     "read_mu_maps",
+    "read_ratio_sigma",
     "resolve_params",
     "shading_basis",
     "shading_coordinates",
@@ -255,6 +258,8 @@ def calibrate(rig: Rig, views: list[PoseView], *, progress: bool = False, **para
     (same keys -> (H, W) bool calibrated region), ``offsets`` (pair ->
     eq. 6 relative log scale applied), ``counts`` (eq. 6 samples per map),
     ``residual_rms`` (RMS of the eq. 7 residuals per map, log units),
+    ``ratio_sigma`` (pair -> 1-sigma of its log ratio mu_a / mu_b,
+    :func:`pair_ratio_sigma`; NaN with fewer than four poses),
     ``shading`` (camera -> {"maps": [the two keys], "order", "coefficients"}:
     the fitted log colour shading, first map over second, at the image
     corner), ``grid`` and ``params``.
@@ -282,9 +287,15 @@ def calibrate(rig: Rig, views: list[PoseView], *, progress: bool = False, **para
     }
     ny, nx = grid.shape
     stage(f"photometric: solving for {2 * len(pairs)} maps of {ny} x {nx} nodes", enabled=progress)
-    grids, shading, offs = solve_mu_grids(
-        pairs, grid, bases, opts["smoothness"], opts["coupling"], opts["shading_prior"]
-    )
+
+    def solve(samples):
+        return solve_mu_grids(
+            samples, grid, bases, opts["smoothness"], opts["coupling"], opts["shading_prior"]
+        )
+
+    grids, shading, offs = solve(pairs)
+    stage("photometric: the pair ratios' uncertainty (jackknife over poses)", enabled=progress)
+    ratio_sigma = pair_ratio_sigma(pairs, grid, lambda samples: solve(samples)[0])
     stage("photometric: dense maps, calibrated regions, eq. (7) residuals", enabled=progress)
     out = {
         "maps": {},
@@ -294,10 +305,12 @@ def calibrate(rig: Rig, views: list[PoseView], *, progress: bool = False, **para
         "counts": {},
         "residual_rms": {},
         "shading": {},
+        "ratio_sigma": {},
     }
     for p, (ka, kb, s) in enumerate(pairs):
         name = f"{ka[0]}/{COLOURS[ka[1]]}~{kb[0]}/{COLOURS[kb[1]]}"
         out["offsets"][name] = offs[p]
+        out["ratio_sigma"][name] = float(ratio_sigma[p])
         for key in (ka, kb):
             k = f"{key[0]}/{COLOURS[key[1]]}"
             g = grids[key]
@@ -333,8 +346,9 @@ def photometric_maps(
     The HDF5 file holds one float32 (H, W) mu map per Helmholtz camera at
     ``<camera>/<colour>``, its control grid at ``grid/<camera>/<colour>``
     (log mu), the calibrated region at ``calibrated/<camera>/<colour>``, and
-    as attributes the parameters, the pair offsets, the fitted colour
-    shading per camera and a hash of the inputs. Written atomically: no
+    as attributes the parameters, the pair offsets, the pairs' log-ratio
+    uncertainty (``pair_log_ratio_sigma``, JSON: pair -> 1 sigma, null where
+    unknown), the fitted colour shading per camera and a hash of the inputs. Written atomically: no
     partial file on error. ``progress``: bars over the board poses and the pairs
     and a line per step on stderr (:mod:`colourhs.progress`; 21 s in all at
     1280 x 960). Returns :func:`calibrate`'s result, whose ``maps`` and ``calibrated``
@@ -363,11 +377,23 @@ def photometric_maps(
         f.attrs["pair_offsets"] = json.dumps(result["offsets"])
         f.attrs["constraints"] = json.dumps(result["counts"])
         f.attrs["residual_rms_log"] = json.dumps(result["residual_rms"])
+        f.attrs["pair_log_ratio_sigma"] = json.dumps(result["ratio_sigma"])
         f.attrs["colour_shading"] = json.dumps(result["shading"])
         f.attrs["poses"] = json.dumps([v.name for v in views])
         f.attrs["inputs_sha256"] = sha256_files(inputs)
         f.attrs["crosstalk_unmixed"] = bool(crosstalk_json)
     return result
+
+
+def read_ratio_sigma(path: str | Path) -> dict[str, float]:
+    """Pair name (``"<cam>/<colour>~<cam>/<colour>"``) -> 1-sigma of its log ratio
+    mu_a / mu_b from a photometric.h5; empty where the file has none (ground truth,
+    files written before it), NaN where it is unknown."""
+    with h5py.File(path) as f:
+        text = f.attrs.get("pair_log_ratio_sigma")
+    if text is None:
+        return {}
+    return {k: float("nan") if v is None else float(v) for k, v in json.loads(text).items()}
 
 
 def read_mu_maps(path: str | Path) -> dict[str, np.ndarray]:

@@ -299,3 +299,46 @@ def eq7_residual_rms(samples: KappaSamples, grid: Grid, lam_a: np.ndarray) -> fl
     # sum over pairs j < k of (p_j - p_k)^2 = n * sum_j (p_j - mean)^2 per pixel
     pairs = np.sum(n * (n - 1) / 2)
     return float(np.sqrt(np.sum(n * ss) / pairs)) if pairs else float("nan")
+
+
+def pair_ratio_sigma(
+    pairs: list[tuple[tuple[str, int], tuple[str, int], KappaSamples]],
+    grid: Grid,
+    solve,
+) -> np.ndarray:
+    """1-sigma uncertainty (P,) of each pair's log ratio lambda_a - lambda_b (eq. 6).
+
+    Beyond the paper. The HS constraint (eq. 5) weighs a pair's two sides by
+    mu_a and mu_b, and a smooth surface's depth moves far with their ratio
+    (:func:`colourhs.reconstruct.uncertainty.ratio_sensitivity`); an error of
+    the calibration shared by a board pose's samples (its plane, its
+    unmixing) does not average out over them. So the uncertainty is the
+    jackknife over the board poses: ``solve(pairs)`` (the grids of
+    :func:`solve_mu_grids` as the calibration calls it) once without each
+    pose, each pair's ratio averaged over all its samples' pixels, and
+    ``(n - 1) / n`` times the sum of the squared deviations from their mean.
+    NaN with fewer than four poses (too few to tell a spread).
+    """
+    poses = np.unique(np.concatenate([s.pose for _, _, s in pairs]))
+    if len(poses) < 4:
+        return np.full(len(pairs), np.nan)
+    theta = []
+    for j in poses:
+        without = [
+            (
+                ka,
+                kb,
+                KappaSamples(*(getattr(s, f)[s.pose != j] for f in KappaSamples.__annotations__)),
+            )
+            for ka, kb, s in pairs
+        ]
+        grids = solve(without)
+        theta.append(
+            [
+                np.mean(grid.interpolate(grids[ka], s.uv_a) - grid.interpolate(grids[kb], s.uv_b))
+                for ka, kb, s in pairs
+            ]
+        )
+    theta = np.asarray(theta)
+    n = len(poses)
+    return np.sqrt((n - 1) / n * np.sum((theta - theta.mean(axis=0)) ** 2, axis=0))

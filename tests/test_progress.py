@@ -61,6 +61,7 @@ def test_calibration_stages_show_progress(tiny_dataset, tmp_path, capsys):
     steps = [line for line in lines if not ("%|" in line or line.startswith("cam"))]
     assert [s.split(" [")[0].split(" of ")[0] for s in steps] == [
         "photometric: solving for 6 maps",
+        "photometric: the pair ratios' uncertainty (jackknife over poses)",
         "photometric: dense maps, calibrated regions, eq. (7) residuals",
         "photometric: writing ph.h5",
     ]

@@ -494,6 +494,7 @@ def _consistent_surface(
         iterations,
         fill=fill,
         clear_sides=clear,
+        ratio_sigma=frame.mu_ratio_sigma,
         say=say,
     )
     ok = (ok | sinfo["filled"]) & np.isfinite(zr) & sinfo["valid"]

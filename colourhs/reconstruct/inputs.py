@@ -34,6 +34,9 @@ class Frame:
     chroma: np.ndarray | None  # (C, 3, H, W) float32
     variance: np.ndarray | None = None  # (C, 3, H, W) noise variance of ``images``
     inputs: list = field(default_factory=list)  # files read, for provenance
+    # (P,) 1-sigma of each pair's log ratio mu_a / mu_b (the photometric calibration's
+    # jackknife), None where the calibration does not say (no calibration, true maps)
+    mu_ratio_sigma: np.ndarray | None = None
 
 
 def load_frame(
@@ -65,19 +68,23 @@ def load_frame(
         inputs.append(path)
         if use_masks and sc.has_masks:
             sils.append(read_mask(ds.mask_image(scene, frame, cam), rig.image))
-    mu = None
+    mu = ratio_sigma = None
     pair_cams, pair_ch = pair_arrays(rig)
     if photometric_h5:
-        from colourhs.photometric import read_mu_maps
+        from colourhs.photometric import read_mu_maps, read_ratio_sigma
 
         maps = read_mu_maps(photometric_h5)
         names = rig.camera_names
-        mu = np.stack(
-            [
-                [maps[f"{names[a]}/{COLOURS[ca]}"], maps[f"{names[b]}/{COLOURS[cb]}"]]
-                for (a, b), (ca, cb) in zip(pair_cams, pair_ch, strict=True)
-            ]
-        ).astype(np.float32)
+        keys = [
+            (f"{names[a]}/{COLOURS[ca]}", f"{names[b]}/{COLOURS[cb]}")
+            for (a, b), (ca, cb) in zip(pair_cams, pair_ch, strict=True)
+        ]
+        mu = np.stack([[maps[ka], maps[kb]] for ka, kb in keys]).astype(np.float32)
+        sigmas = read_ratio_sigma(photometric_h5)
+        if sigmas:
+            ratio_sigma = np.array(
+                [sigmas.get(f"{ka}~{kb}", sigmas.get(f"{kb}~{ka}", np.nan)) for ka, kb in keys]
+            )
     chroma = None
     if chromaticity_h5:
         note_read(chromaticity_h5)
@@ -105,4 +112,5 @@ def load_frame(
         None if chroma is None else chroma.astype(np.float32),
         np.stack(variance).transpose(0, 3, 1, 2).astype(np.float32),
         inputs,
+        ratio_sigma,
     )

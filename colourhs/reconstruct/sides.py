@@ -81,6 +81,16 @@ class HelmholtzSides:
         return len(self.cameras) // 2
 
 
+def with_side_scaled(sides: HelmholtzSides, j: int, factor: float) -> HelmholtzSides:
+    """The same sides with side ``j``'s J (and its noise) scaled by ``factor``: the
+    log ratio mu_a / mu_b of pair ``j // 2`` moved by ``+-log(factor)`` (side a: +)."""
+    maps = list(sides.maps)
+    maps[j] = maps[j] * np.array([factor, factor * factor])
+    return HelmholtzSides(
+        sides.cameras, sides.light, maps, sides.blurred, sides.order, sides.blur_px
+    )
+
+
 def noise_correlation(blur_px: float, taps: int = 4) -> np.ndarray:
     """Correlation (taps,) of Gaussian-blurred white noise between pixels 0..taps-1 apart.
 

@@ -126,6 +126,70 @@ def rim_valley_pull(
     return float(np.sqrt(max(0.0, (vertex[1] - vertex[0]) ** 2 - max(noise, 0.0))))
 
 
+RATIO_STEP = 1e-6
+"""Log step of a pair's ratio in :func:`ratio_sensitivity`. Why it holds on any
+rig: a share of the intensities, so the same on any sensor and scale, far below
+any sensor's relative noise (a 16-bit sample's is above 1e-5), so that E's
+change is its derivative even where the rows sit on the robust function's
+knee, and far above the rounding of E's float64 terms."""
+
+
+def ratio_sensitivity(problem, tried, best, span, pixels, at, scale, step=RATIO_STEP):
+    """How far each surface's depth factor moves per unit log ratio of each pair.
+
+    Beyond the paper. On a smooth surface the depth is the mode E fixes
+    weakly (:func:`valley_sigma`), and a pair's ratio mu_a / mu_b (eq. 5's
+    weights, from the photometric calibration) enters it as the distances'
+    fall-off does: a small error of the ratio moves the valley's minimum far.
+    Linearised on the depth search's own trials: with pair p's side a scaled by
+    ``exp(step)``, E at each trial depth within ``span`` of ``best`` changes by
+    ``step g(x)`` (the shape's re-fit is of second order there); with E's
+    quadratic ``a + b x + c x^2`` the minimum moves by ``-step g'(x) / (2 c)``.
+
+    ``problem`` (``refine._Problem``), ``tried`` (per surface: delta -> (per-pixel
+    rho, prior, control points)), ``best`` (n,), ``pixels`` (per surface: its
+    pixels' mask), ``at(deltas)`` (the control points at one delta per surface),
+    ``scale`` (the robust scale the trials used). Returns (n, P) relative shifts
+    per unit log ratio; NaN where a surface has fewer than three trials there or
+    E does not curve upwards.
+    """
+    import copy as _copy
+
+    from colourhs.reconstruct.sides import with_side_scaled
+
+    n, P = len(tried), problem.sides.pairs
+    near = [_near_trials(tried[k], best[k], span) for k in range(n)]
+    deltas = [
+        np.asarray(best[k]) + near[k][2] if near[k] is not None else np.array([best[k]])
+        for k in range(n)
+    ]
+    steps = max(len(d) for d in deltas)
+    out = np.full((n, P), np.nan)
+    for p in range(P):
+        alt = _copy.copy(problem)
+        alt.sides = with_side_scaled(problem.sides, 2 * p, float(np.exp(step)))
+        change = [np.full(len(d), np.nan) for d in deltas]
+        for i in range(steps):
+            rho, _ = alt.state(at([d[min(i, len(d) - 1)] for d in deltas]), scale)
+            for k in range(n):
+                if near[k] is None or i >= len(deltas[k]):
+                    continue
+                r0, r1 = near[k][0][i], rho[pixels[k]]
+                both = np.isfinite(r0) & np.isfinite(r1)
+                change[k][i] = np.sum(r1[both] - r0[both])
+        for k in range(n):
+            if near[k] is None:
+                continue
+            rho0, prior, x, X = near[k]
+            common = np.all(np.isfinite(rho0), axis=0)
+            E = rho0[:, common].sum(axis=1) + prior
+            c = np.linalg.lstsq(X, E, rcond=None)[0][2]
+            g = np.polyfit(x, change[k], 1)[0]
+            if c > 0:
+                out[k, p] = -g / (2.0 * c) / step
+    return out
+
+
 SIGMA_SAMPLES = 64  # Monte Carlo draws of the control points' posterior (sigma to ~9 %)
 """Why ``SIGMA_SAMPLES`` holds on any rig: it is a count of draws, whose
 relative error in a standard deviation is ``1 / sqrt(2 (n - 1))`` whatever
