@@ -7,7 +7,10 @@ the Gauss-Newton covariance of the spline's control points
 :func:`correlated_gain`), the depth mode that E fixes weakly from the depth
 search's own trial energies (:func:`valley_sigma`) and the pull of the rows
 at the edges of unusable regions on it, a model error
-(:func:`rim_valley_pull`), filled holes from their nearest measured depth
+(:func:`rim_valley_pull`), and the move of that mode that the calibrated
+pair ratios' uncertainty allows (:func:`ratio_sensitivity`, the ratios'
+sigma from :func:`colourhs.photometric_solve.pair_ratio_sigma`), filled
+holes from their nearest measured depth
 (:func:`filled_sigma`); the parts add in variance. ML HS: the curvature of its
 chi-square cost along the ray (:func:`ml_sigma`).
 """
