@@ -259,7 +259,7 @@ def calibrate(rig: Rig, views: list[PoseView], *, progress: bool = False, **para
     eq. 6 relative log scale applied), ``counts`` (eq. 6 samples per map),
     ``residual_rms`` (RMS of the eq. 7 residuals per map, log units),
     ``ratio_sigma`` (pair -> 1-sigma of its log ratio mu_a / mu_b,
-    :func:`pair_ratio_sigma`; NaN with fewer than four poses),
+    :func:`pair_ratio_sigma`; None with fewer than four poses),
     ``shading`` (camera -> {"maps": [the two keys], "order", "coefficients"}:
     the fitted log colour shading, first map over second, at the image
     corner), ``grid`` and ``params``.
@@ -310,7 +310,8 @@ def calibrate(rig: Rig, views: list[PoseView], *, progress: bool = False, **para
     for p, (ka, kb, s) in enumerate(pairs):
         name = f"{ka[0]}/{COLOURS[ka[1]]}~{kb[0]}/{COLOURS[kb[1]]}"
         out["offsets"][name] = offs[p]
-        out["ratio_sigma"][name] = float(ratio_sigma[p])
+        sigma = float(ratio_sigma[p])
+        out["ratio_sigma"][name] = sigma if np.isfinite(sigma) else None  # JSON null
         for key in (ka, kb):
             k = f"{key[0]}/{COLOURS[key[1]]}"
             g = grids[key]

@@ -242,3 +242,13 @@ def test_pair_ratio_sigma_covers_the_noise(tmp_path):
     for pair, err in errors.items():
         assert 0 < sigma[pair] < 0.001, (pair, sigma[pair])
         assert abs(err) < 1.5 * sigma[pair], (pair, err, sigma[pair])
+
+
+def test_pair_ratio_sigma_needs_four_poses(tiny_calibration):
+    """Three board poses are too few for a spread: no sigma (JSON null), and a
+    frame calibrated so has no ratio term in its error bar."""
+    rig, views, *_ = tiny_calibration
+    result = calibrate(rig, views[:3], **TINY)
+    assert len(result["ratio_sigma"]) == 3
+    assert all(v is None for v in result["ratio_sigma"].values())
+    assert all(0 < v < 0.005 for v in calibrate(rig, views[:4], **TINY)["ratio_sigma"].values())
