@@ -17,11 +17,13 @@ chi-square cost along the ray (:func:`ml_sigma`).
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 import scipy.sparse as sp
 
 from colourhs.linalg import _factor
-from colourhs.reconstruct.sides import HelmholtzSides, noise_correlation
+from colourhs.reconstruct.sides import HelmholtzSides, noise_correlation, with_side_scaled
 
 VALLEY_BLOCK = 4  # blocks of the valley's uncertainty, in spline control spacings
 """Why ``VALLEY_BLOCK`` holds on any rig: in units of the spline's spacing
@@ -156,10 +158,6 @@ def ratio_sensitivity(problem, tried, best, span, pixels, at, scale, step=RATIO_
     per unit log ratio; NaN where a surface has fewer than three trials there or
     E does not curve upwards.
     """
-    import copy as _copy
-
-    from colourhs.reconstruct.sides import with_side_scaled
-
     n, P = len(tried), problem.sides.pairs
     near = [_near_trials(tried[k], best[k], span) for k in range(n)]
     deltas = [
@@ -169,7 +167,7 @@ def ratio_sensitivity(problem, tried, best, span, pixels, at, scale, step=RATIO_
     steps = max(len(d) for d in deltas)
     out = np.full((n, P), np.nan)
     for p in range(P):
-        alt = _copy.copy(problem)
+        alt = copy.copy(problem)
         alt.sides = with_side_scaled(problem.sides, 2 * p, float(np.exp(step)))
         change = [np.full(len(d), np.nan) for d in deltas]
         for i in range(steps):
