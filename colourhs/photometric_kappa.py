@@ -91,6 +91,10 @@ class KappaSamples:
         _, g = np.unique(self.uv_b, axis=0, return_inverse=True)
         return np.bincount(g.ravel())[g.ravel()] > 1
 
+    def subset(self, keep: np.ndarray) -> KappaSamples:
+        """The samples where ``keep`` (N,) bool is true."""
+        return KappaSamples(*(getattr(self, f)[keep] for f in KappaSamples.__annotations__))
+
     def swapped(self) -> KappaSamples:
         """The same samples as seen from b: ``log kappa_ba = -log kappa_ab``."""
         return KappaSamples(self.uv_b, self.uv_a, -self.log_kappa, self.pose)

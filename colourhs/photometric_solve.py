@@ -310,29 +310,23 @@ def pair_ratio_sigma(
 
     Beyond the paper. The HS constraint (eq. 5) weighs a pair's two sides by
     mu_a and mu_b, and a smooth surface's depth moves far with their ratio
-    (:func:`colourhs.reconstruct.uncertainty.ratio_sensitivity`); an error of
-    the calibration shared by a board pose's samples (its plane, its
-    unmixing) does not average out over them. So the uncertainty is the
+    (:func:`colourhs.reconstruct.uncertainty.ratio_sensitivity`); an error
+    shared by a board pose's samples (its plane's pose, its share of the
+    sensor noise) does not average out over them. So the uncertainty is the
     jackknife over the board poses: ``solve(pairs)`` (the grids of
     :func:`solve_mu_grids` as the calibration calls it) once without each
     pose, each pair's ratio averaged over all its samples' pixels, and
     ``(n - 1) / n`` times the sum of the squared deviations from their mean.
-    NaN with fewer than four poses (too few to tell a spread).
+    An error shared by every pose (the cross-talk unmixing's) does not show
+    in it: a lower bound. NaN with fewer than four poses (too few to tell a
+    spread).
     """
     poses = np.unique(np.concatenate([s.pose for _, _, s in pairs]))
     if len(poses) < 4:
         return np.full(len(pairs), np.nan)
     theta = []
     for j in poses:
-        without = [
-            (
-                ka,
-                kb,
-                KappaSamples(*(getattr(s, f)[s.pose != j] for f in KappaSamples.__annotations__)),
-            )
-            for ka, kb, s in pairs
-        ]
-        grids = solve(without)
+        grids = solve([(ka, kb, s.subset(s.pose != j)) for ka, kb, s in pairs])
         theta.append(
             [
                 np.mean(grid.interpolate(grids[ka], s.uv_a) - grid.interpolate(grids[kb], s.uv_b))
