@@ -254,7 +254,7 @@ def evaluate_variant(data, scene, frames, variant, files, chromatic, work) -> di
                 lost["dropped_other"] += n  # its reasons are in a file read_depth refuses
             continue
         err, ang, m = depth_errors(depth, *gt, *size)
-        defects.append((getattr(depth, "params", None) or {}).get("reciprocity_defect_deg"))
+        defects.append((depth.params or {}).get("reciprocity_defect_deg"))
         ok = np.isfinite(err)
         errs.append(err[ok])
         angs.append(ang[ok])

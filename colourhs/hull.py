@@ -46,8 +46,9 @@ from colourhs.capture import (
     CaptureFormatError,
     open_dataset,
 )
+from colourhs.capture.rig import cameras_fixation_point
 from colourhs.carving import _focal, any_inside, carve, carve_field, grid_shape
-from colourhs.geometry import fixation_point, mesh_volume
+from colourhs.geometry import mesh_volume
 from colourhs.hullmesh import (
     depth_bounds,
     hull_depth,
@@ -105,9 +106,8 @@ def axes_centre(cameras: list[Camera]) -> np.ndarray:
     ValueError
         With fewer than two cameras, or optical axes (nearly) parallel.
     """
-    axes = [np.asarray(cam.R, float)[2] for cam in cameras]  # optical axes, world frame
     try:
-        return fixation_point(axes, [cam.centre for cam in cameras])
+        return cameras_fixation_point(cameras)
     except ValueError as err:
         raise ValueError(f"{err}: pass explicit hull bounds") from None
 

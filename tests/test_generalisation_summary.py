@@ -327,7 +327,7 @@ def test_evaluate_variant_pools_sigma_over_the_compared_pixels(monkeypatch, tmp_
     def read_depth(h5):
         vh = h5.parent.name == "vh"
         sigma = None if vh else np.array(sigmas[h5.stem], np.float32)
-        return SimpleNamespace(frame=h5.stem, depth_sigma=sigma)
+        return SimpleNamespace(frame=h5.stem, depth_sigma=sigma, params={})
 
     def depth_errors(depth, *args):
         err = np.array(errors[depth.frame])

@@ -243,9 +243,8 @@ class Rig:
 
     def fixation_point(self) -> np.ndarray:
         """The point nearest (least squares) to every camera's optical axis, metres (3,):
-        the rig's working point. ValueError where the axes do not converge."""
-        axes = [np.asarray(c.R, float)[2] for c in self.cameras]
-        return fixation_point(axes, [c.centre for c in self.cameras])
+        the rig's working point (:func:`cameras_fixation_point`)."""
+        return cameras_fixation_point(self.cameras)
 
     def reciprocity_defect(self, X: np.ndarray) -> np.ndarray:
         """Per reciprocal pair (rig order), the half-vector angle between the pair's two
@@ -256,6 +255,14 @@ class Rig:
             a, b = self.camera(p.cam_a), self.camera(p.cam_b)
             out.append(half_vector_defect(X, a.centre, a.light_centre, b.centre, b.light_centre))
         return np.stack(out)
+
+
+def cameras_fixation_point(cameras) -> np.ndarray:
+    """The point nearest (least squares) to the optical axes of ``cameras`` (the third
+    row of each R), metres (3,). ValueError with fewer than two cameras or (nearly)
+    parallel axes (:func:`colourhs.geometry.fixation_point`)."""
+    axes = [np.asarray(c.R, float)[2] for c in cameras]
+    return fixation_point(axes, [c.centre for c in cameras])
 
 
 def light_offset_warning(rig: Rig, tolerance_deg: float | None = None) -> str | None:
