@@ -48,6 +48,7 @@ RECONSTRUCT_PARAMS = {
 PHOTOMETRIC_PARAMS = {
     "grid_spacing_px": (float, "mu control-grid spacing, pixels (default: 1 deg of field)"),
     "step_px": (int, "sample spacing, pixels (default: the grid spacing / 7)"),
+    "box_px": (int, "each reading the mean of a box this wide, pixels (default: the step, odd)"),
     "smoothness": (float, "curvature regulariser, relative to one eq. (6) row"),
     "coupling": (float, "gradient penalty on the difference of a camera's two maps"),
     "margin_m": (float, "margin around markers and board edges, metres (default 2 px)"),

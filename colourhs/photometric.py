@@ -135,6 +135,7 @@ DEFAULTS = {
     "min_grid_px": 8.0,
     "step_px": None,
     "samples_per_cell": 7,
+    "box_px": None,
     "margin_m": None,
     "margin_px": 2.0,
     "min_cos": 0.3,
@@ -159,6 +160,12 @@ DEFAULTS = {
 - ``step_px`` None: ``grid_spacing_px / samples_per_cell`` rounded, at
   least 1; ``samples_per_cell`` 7: about 50 samples per cell and pose per
   direction, so the sample count per node does not depend on the resolution.
+- ``box_px`` None: the sample step rounded up to odd (a box centred on the
+  sample's pixel): each reading is the mean of the box around its pixel
+  (:func:`colourhs.photometric_kappa.box_means`, beyond the paper), so the
+  samples use every pixel's reading whatever the step; 1 reads the pixel
+  alone. The board is smooth on a box of a few pixels on any rig, since the
+  box is a fraction of a grid cell (``samples_per_cell``).
 - ``margin_m`` None: ``margin_px`` 2 pixel footprints (the larger of the two
   cameras', :func:`pixel_footprint_m`) around markers and board edges:
   edges blur over a pixel or two in any camera, so the margin is set in
@@ -235,6 +242,9 @@ def resolve_params(rig: Rig, **params) -> dict:
     if opts["step_px"] is None:
         opts["step_px"] = max(1, round(opts["grid_spacing_px"] / opts["samples_per_cell"]))
     opts["step_px"] = int(opts["step_px"])
+    if opts["box_px"] is None:
+        opts["box_px"] = opts["step_px"] | 1
+    opts["box_px"] = int(opts["box_px"])
     opts["shading_order"] = int(opts["shading_order"])
     return opts
 

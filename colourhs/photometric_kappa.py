@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from colourhs.capture import Board, Camera, Rig
@@ -119,8 +120,29 @@ def pixel_footprint_m(x: np.ndarray, n: np.ndarray, cam: Camera) -> np.ndarray:
     return r / (f * np.maximum(cos, 1e-6))
 
 
+def box_means(view: PoseView, camera: str, channel: int, box: int) -> tuple[np.ndarray, np.ndarray]:
+    """One channel of a pose image averaged over ``box`` x ``box`` pixels, and where the box
+    holds a saturated pixel.
+
+    Beyond the paper: a sample of eq. (6) reads the mean of the box around its
+    pixel instead of the pixel alone, so that samples ``box`` pixels apart use
+    every pixel's reading (the noise variance of a sample falls by box^2)
+    without more rows in the least squares. The board's intensity is smooth
+    away from markers and edges (which the margin keeps out), so the box mean
+    equals the centre value to second order in the box size.
+    """
+    img = np.ascontiguousarray(view.images[camera][..., channel], dtype=np.float32)
+    sat = view.saturated[camera].astype(np.float32)
+    if box <= 1:
+        return img, sat > 0
+    size = (box, box)
+    mean = cv2.blur(img, size, borderType=cv2.BORDER_REFLECT)
+    return mean, cv2.blur(sat, size, borderType=cv2.BORDER_REFLECT) > 0
+
+
 def _log_kappa_at(view: PoseView, board: Board, a: Camera, b: Camera, ch_a, ch_b, uv_b, opts):
     """log kappa (eq. 6) at the board points seen by pixels ``uv_b`` of b; NaN if unusable."""
+    box = int(opts.get("box_px") or 1)
     origin, d = backproject(uv_b, b.K, b.dist, b.R, b.t)
     n = view.normal
     x, s = ray_plane_intersection(origin, d, view.t, n)
@@ -130,14 +152,17 @@ def _log_kappa_at(view: PoseView, board: Board, a: Camera, b: Camera, ch_a, ch_b
     else:
         with np.errstate(invalid="ignore"):
             foot = np.maximum(pixel_footprint_m(x, n, a), pixel_footprint_m(x, n, b))
-        margin = opts["margin_px"] * np.nan_to_num(foot, nan=np.inf)
+        # the box's half-width on top: no box reaches a marker or the board's edge
+        margin = (opts["margin_px"] + box // 2) * np.nan_to_num(foot, nan=np.inf)
     with np.errstate(invalid="ignore"):
         ok = (s > 0) & board.white(xy, margin)
     uv_a = project(x, a.K, a.dist, a.R, a.t)
-    i_a = sample_bilinear(view.images[a.name][..., ch_a], uv_a)
-    i_b = sample_bilinear(view.images[b.name][..., ch_b], uv_b)
-    sat = sample_bilinear(view.saturated[a.name].astype(float), uv_a) > 0
-    sat |= sample_bilinear(view.saturated[b.name].astype(float), uv_b) > 0
+    img_a, sat_a = box_means(view, a.name, ch_a, box)
+    img_b, sat_b = box_means(view, b.name, ch_b, box)
+    i_a = sample_bilinear(img_a, uv_a)
+    i_b = sample_bilinear(img_b, uv_b)
+    sat = sample_bilinear(sat_a.astype(float), uv_a) > 0
+    sat |= sample_bilinear(sat_b.astype(float), uv_b) > 0
     for c in (a, b):
         v = c.light_centre - x
         with np.errstate(invalid="ignore"):
@@ -153,8 +178,10 @@ def kappa_samples(views: list[PoseView], rig: Rig, a: str, b: str, opts: dict) -
     """eq. (6) samples of the pair (a, b) at pixels of b on a grid of step ``opts["step_px"]``.
 
     ``opts`` needs ``step_px``, ``min_cos``, ``min_signal`` and ``margin_px``
-    (or ``margin_m``), see :data:`colourhs.photometric.DEFAULTS`. Camera a's
-    channel is the one of b's light and vice versa.
+    (or ``margin_m``), and takes ``box_px`` (each reading the mean of a box
+    of that many pixels square, :func:`box_means`; default 1, the pixel), see
+    :data:`colourhs.photometric.DEFAULTS`. Camera a's channel is the one of
+    b's light and vice versa.
     """
     A, B = rig.camera(a), rig.camera(b)
     ch_a, ch_b = B.light_channel, A.light_channel

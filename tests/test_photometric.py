@@ -220,7 +220,18 @@ def _pair_ratio_errors(result, truth, rig, views) -> dict:
     return out
 
 
-def test_pair_ratio_sigma_covers_the_noise(tmp_path):
+@pytest.fixture(scope="module")
+def tiny_noxt(tmp_path_factory):
+    """The tiny rig with its sensor noise and no cross-talk; its views at the true poses."""
+    from colourhs.synth.rig import Nuisances
+
+    tmp = tmp_path_factory.mktemp("noxt")
+    root = synthesise(tmp / "d", "tiny", nuisances=Nuisances().without("crosstalk"), progress=False)
+    rig, views = load_views(root, true_poses_csv(root, tmp / "poses.csv"), None)
+    return rig, views, read_mu_maps(root / "gt" / "photometric.h5")
+
+
+def test_pair_ratio_sigma_covers_the_noise(tiny_noxt):
     """The jackknife over the board poses (:func:`pair_ratio_sigma`) against the truth
     on the tiny rig with its sensor noise and no cross-talk (true poses): every pair's
     mean log-ratio error within 1.5 of its sigmas (measured 0.2-0.8; errors 0.009-0.010
@@ -228,15 +239,9 @@ def test_pair_ratio_sigma_covers_the_noise(tmp_path):
     With cross-talk and no noise, the calibrated unmixing leaves errors of 0.066-0.088
     % against sigmas of 0.005-0.042 % (1.6-17 sigmas): the error bar's ratio term is
     a lower bound where the cross-talk calibration errs."""
-    from colourhs.synth.rig import Nuisances
-
-    root = synthesise(
-        tmp_path / "d", "tiny", nuisances=Nuisances().without("crosstalk"), progress=False
-    )
-    poses = true_poses_csv(root, tmp_path / "poses.csv")
-    rig, views = load_views(root, poses, None)
+    rig, views, truth = tiny_noxt
     result = calibrate(rig, views, **TINY)
-    errors = _pair_ratio_errors(result, read_mu_maps(root / "gt" / "photometric.h5"), rig, views)
+    errors = _pair_ratio_errors(result, truth, rig, views)
     sigma = result["ratio_sigma"]
     assert set(errors) == set(sigma)
     for pair, err in errors.items():
@@ -252,3 +257,38 @@ def test_pair_ratio_sigma_needs_four_poses(tiny_calibration):
     assert len(result["ratio_sigma"]) == 3
     assert all(v is None for v in result["ratio_sigma"].values())
     assert all(0 < v < 0.005 for v in calibrate(rig, views[:4], **TINY)["ratio_sigma"].values())
+
+
+def test_box_means_are_centre_values_of_smooth_images():
+    """A box mean of a linear ramp is its centre value; a saturated pixel flags its boxes."""
+    from colourhs.photometric import PoseView
+    from colourhs.photometric_kappa import box_means
+
+    v, u = np.mgrid[0:40, 0:50].astype(float)
+    img = np.stack([0.2 + 0.004 * u + 0.003 * v] * 3, axis=-1)
+    sat = np.zeros((40, 50), bool)
+    sat[20, 25] = True
+    view = PoseView("p", np.eye(3), np.zeros(3), {"c": img}, {"c": sat})
+    mean, flagged = box_means(view, "c", 1, 5)
+    assert np.allclose(mean[2:-2, 2:-2], img[2:-2, 2:-2, 1], atol=1e-6)
+    assert flagged[18:23, 23:28].all() and flagged.sum() == 25
+    same, _ = box_means(view, "c", 1, 1)
+    assert np.array_equal(same, img[..., 1].astype(np.float32))
+
+
+def test_box_readings_use_every_pixel(tiny_noxt):
+    """Samples 3 px apart reading 3 x 3 box means are as good as samples at every pixel.
+
+    Tiny rig, sensor noise, no cross-talk, true poses; RMS over the pairs of the
+    mean log-ratio error against the truth, measured: every pixel 0.0096 %, every
+    third pixel alone 0.033 %, every third pixel with its box 0.011 %.
+    """
+    rig, views, truth = tiny_noxt
+
+    def rms(**kw):
+        errors = _pair_ratio_errors(calibrate(rig, views, **TINY, **kw), truth, rig, views)
+        return float(np.sqrt(np.mean(np.square(list(errors.values())))))
+
+    boxed, alone = rms(step_px=3), rms(step_px=3, box_px=1)
+    assert boxed < 1.5e-4
+    assert alone > 2.5e-4
