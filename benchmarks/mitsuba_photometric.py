@@ -1,0 +1,276 @@
+"""Photometric calibration on board captures rendered by Mitsuba 3, against ground truth.
+
+The calibration (paper section III-C) was written beside this project's own
+renderer; this benchmark feeds it board poses that an independent renderer
+made. For every seed it draws a ``random`` (or ``corner``) rig that Mitsuba's
+camera and light can model (no lens distortion, square pixels, isotropic point
+lights; light offsets ``--light-offset-mm``), renders its photometric
+captures with :mod:`colourhs.synth.render` and, for every ``--renders``
+entry, again with Mitsuba (:mod:`colourhs.synth.mitsuba`), adding the same
+channel sensitivity, cross-talk (off here, as in ``photometric_random``'s
+``noxt``) and sensor noise (the same draw per image). Each dataset is
+calibrated from its marker poses and scored against ``gt/photometric.h5``
+like ``benchmarks/photometric_random.py``: the worst map's RMS log error (one
+scale per pair removed) and the pair ratio mu_a / mu_b on the held-out plane
+pose.
+
+Renders (``--renders``, comma separated): ``ours``; ``diffuse-box`` (a
+Lambertian board, box pixel filter: the same model as ours, so the two must
+agree); ``diffuse-gaussian`` (Mitsuba's default pixel filter); ``glossy-box``
+and ``glossy-gaussian`` (a white board under a GGX-rough dielectric coat,
+``--roughness``: reciprocal, so with collocated lights eq. (6) still holds,
+but its highlights saturate and with lights beside the lenses it breaks);
+``spot-box`` (a Lambertian board lit by Mitsuba's spot lights along the
+optical axes, ``--spot-rel CUTOFF,BEAM``: a profile flat to BEAM, then
+linear in angle to zero at CUTOFF, both relative to the cameras' mean
+half-diagonal field of view, so the kink falls inside the images on every
+rig; no LED of the rig's own family has one; its true mu maps are written for
+it).
+
+Run from the project root (needs ``pip install mitsuba``)::
+
+    .venv/bin/python benchmarks/mitsuba_photometric.py --seeds 0-3
+    .venv/bin/python benchmarks/mitsuba_photometric.py --seeds 0-3 --light-offset-mm 20,40
+
+Writes ``benchmarks/results/mitsuba_photometric_<tag>.json`` (one row per
+seed, render and map or pair) and prints the median and worst seed per render.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pandas as pd
+
+from colourhs import photometric as ph
+from colourhs.commands import frame_indices
+
+HERE = Path(__file__).parent
+ROOT = HERE.parent
+sys.path.insert(0, str(HERE))
+from photometric_random import poses_csvs, score  # noqa: E402
+
+RENDERS = {
+    "diffuse-box": dict(material="diffuse", pixel_filter="box"),
+    "diffuse-gaussian": dict(material="diffuse", pixel_filter="gaussian"),
+    "glossy-box": dict(material="roughplastic", pixel_filter="box"),
+    "glossy-gaussian": dict(material="roughplastic", pixel_filter="gaussian"),
+    "spot-box": dict(material="diffuse", pixel_filter="box", spot=True),
+}
+
+
+def draw(preset_name: str, seed: int, offset_m: tuple[float, float]):
+    """The seed's preset, ranges, nuisances and draw, restricted to what Mitsuba models."""
+    from colourhs.synth.dataset import PRESETS
+    from colourhs.synth.randomrig import RANGES_BY_NAME, draw_random
+    from colourhs.synth.rig import Nuisances
+
+    p = PRESETS[preset_name]
+    ranges = replace(
+        RANGES_BY_NAME[p.random_ranges],
+        k1=(0.0, 0.0),
+        k2=(0.0, 0.0),
+        tangential_sd=0.0,
+        rational=0.0,
+        thin_prism_sd=0.0,
+        skew_rel=0.0,
+        aspect_rel=0.0,
+        light_offset_m=offset_m,
+    )
+    nuis = Nuisances(light_falloff=False, crosstalk=False)
+    d = draw_random(
+        seed,
+        p.width,
+        p.height,
+        nuis,
+        ranges,
+        n_poses=p.n_poses,
+        sheet_frames=p.sheet_frames,
+        statue_level=p.statue_level,
+    )
+    return p, ranges, nuis, d
+
+
+def half_diagonal_deg(rig) -> float:
+    """The cameras' mean angle between the optical axis and an image corner, degrees."""
+    angles = [
+        np.degrees(np.arctan(np.hypot(rig.width, rig.height) / 2 / cam.K[0, 0]))
+        for cam in rig.cameras
+    ]
+    return float(np.mean(angles))
+
+
+def render_ours(out: Path, preset, seed, nuis, ranges) -> Path:
+    """Our renderer's photometric captures (and ground truth) of the seed."""
+    from colourhs.synth.dataset import synthesise
+
+    if not (out / "rig.json").exists():
+        t = time.time()
+        synthesise(
+            out,
+            preset,
+            seed,
+            nuis,
+            parts=("photometric",),
+            ranges=ranges,
+            progress=False,
+            overwrite=True,
+        )
+        print(f"rendered {out.name} in {time.time() - t:.0f} s", flush=True)
+    return out
+
+
+def render_mitsuba(out: Path, ours: Path, d, seed: int, opts) -> Path:
+    """A copy of ``ours`` whose photometric images Mitsuba rendered."""
+    from colourhs.synth.dataset import _image_rng, write_png
+    from colourhs.synth.mitsuba import camera_signal, render_board, true_mu_maps
+    from colourhs.synth.rig import sensor
+
+    if (out / "rig.json").exists():
+        return out
+    t = time.time()
+    tmp = out.with_name(out.name + ".partial")
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir(parents=True)
+    shutil.copy(ours / "rig.json", tmp / "rig.json")
+    shutil.copytree(ours / "gt", tmp / "gt")
+    with h5py.File(tmp / "gt" / "photometric.h5", "w") as f:
+        f.attrs["note"] = "mu = rho / sigma (eq. 2) of Mitsuba's lights, on pixel centres"
+        for key, mu in true_mu_maps(d.rig, opts).items():
+            f.create_dataset(key, data=mu, compression="gzip")
+    image = json.loads((ours / "rig.json").read_text())["image"]
+    for k, (R, t_b) in enumerate(d.poses[:-1]):
+        transport = render_board(d.rig, d.board, R, t_b, opts)
+        for cam in d.rig.cameras:
+            rel = f"photometric/pose{k:02d}/{cam.name}.png"
+            signal = camera_signal(cam, transport[cam.name])
+            dn = sensor(
+                signal,
+                _image_rng(seed, rel),
+                d.rig.nuisances,
+                image["bit_depth"],
+                image["black_level"],
+                image["white_level"],
+            )
+            write_png(tmp / rel, dn)
+    shutil.rmtree(out, ignore_errors=True)
+    tmp.rename(out)
+    print(f"rendered {out.name} with Mitsuba in {time.time() - t:.0f} s", flush=True)
+    return out
+
+
+def run(args) -> pd.DataFrame:
+    from colourhs.synth.mitsuba import BoardRender
+
+    rows = []
+    offset_m = tuple(x / 1000 for x in args.light_offset_mm)
+    for seed in args.seeds:
+        p, ranges, nuis, d = draw(args.preset, seed, offset_m)
+        tag = f"{args.preset}-{seed}-off{args.light_offset_mm[0]:g}-{args.light_offset_mm[1]:g}"
+        ours = render_ours(args.root / f"{tag}-ours", p, seed, nuis, ranges)
+        board_poses = json.loads((ours / "gt" / "board_poses.json").read_text())
+        gt = {k: (np.array(v["R"]), np.array(v["t"])) for k, v in board_poses.items()}
+        for name in args.renders:
+            data = ours
+            if name != "ours":
+                kw = dict(RENDERS[name])
+                if kw.pop("spot", False):
+                    half = half_diagonal_deg(d.rig)
+                    kw["spot_cutoff_deg"], kw["spot_beam_deg"] = (r * half for r in args.spot_rel)
+                opts = BoardRender(**kw, roughness=args.roughness, samples_per_pixel=args.spp)
+                data = render_mitsuba(args.root / f"{tag}-{name}", ours, d, seed, opts)
+            truth = ph.read_mu_maps(data / "gt" / "photometric.h5")
+            csvs = poses_csvs(data, args.root / "work" / data.name)
+            rig, views = ph.load_views(data, csvs["marker"], None)
+            t = time.time()
+            result = ph.calibrate(rig, views)
+            maps, pairs = score(result, truth, rig, gt, [v.name for v in views])
+            base = {
+                "seed": seed,
+                "render": name,
+                "light_offset_mm": list(args.light_offset_mm),
+                "seconds": time.time() - t,
+            }
+            rows += [base | {"kind": "map"} | r for r in maps]
+            rows += [base | {"kind": "pair"} | r for r in pairs]
+            worst = max(r["rms_log_error"] for r in maps)
+            plane = max(r["rms_log_error"] for r in pairs if r["points"] == "plane")
+            print(
+                f"seed {seed} {name:17s} worst map {100 * worst:.2f} %, "
+                f"plane pair ratio {100 * plane:.3f} %",
+                flush=True,
+            )
+    return pd.DataFrame(rows)
+
+
+def summary(df: pd.DataFrame) -> pd.DataFrame:
+    """Per render: median and worst seed of the worst map and of the plane's pair ratio."""
+    out = []
+    for name, g in df.groupby("render", sort=False):
+        m = g[g.kind == "map"].groupby("seed").rms_log_error.max()
+        pr = g[(g.kind == "pair") & (g.points == "plane")].groupby("seed").rms_log_error.max()
+        out.append(
+            {
+                "render": name,
+                "seeds": m.size,
+                "worst_map_median_%": 100 * m.median(),
+                "worst_map_worst_%": 100 * m.max(),
+                "pair_ratio_plane_median_%": 100 * pr.median(),
+                "pair_ratio_plane_worst_%": 100 * pr.max(),
+            }
+        )
+    return pd.DataFrame(out)
+
+
+def main(argv=None) -> pd.DataFrame:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--seeds", type=frame_indices, default=frame_indices("0-3"))
+    ap.add_argument("--preset", choices=("random", "corner", "random-tiny"), default="random")
+    ap.add_argument(
+        "--renders",
+        type=lambda s: s.split(","),
+        default=["ours", *RENDERS],
+        help="ours and any of " + ", ".join(RENDERS),
+    )
+    ap.add_argument(
+        "--light-offset-mm",
+        type=lambda s: tuple(float(x) for x in (s.split(",") * 2)[:2]),
+        default=(0.0, 0.0),
+        help="range A,B of the lights' distance from the lens centres (mm)",
+    )
+    ap.add_argument(
+        "--spot-rel",
+        type=lambda s: tuple(float(x) for x in s.split(",")),
+        default=(1.5, 0.5),
+        help="spot-box's cutoff and beam width, of the cameras' half-diagonal field of view",
+    )
+    ap.add_argument("--roughness", type=float, default=0.2, help="GGX alpha of the glossy coat")
+    ap.add_argument("--spp", type=int, default=16, help="Mitsuba's samples per pixel")
+    ap.add_argument("--root", type=Path, default=ROOT / "data" / "mitsuba_photometric")
+    ap.add_argument("--tag", default=None)
+    args = ap.parse_args(argv)
+    unknown = set(args.renders) - {"ours", *RENDERS}
+    if unknown:
+        ap.error(f"unknown renders {sorted(unknown)}")
+    df = run(args)
+    a, b = args.light_offset_mm
+    tag = args.tag or f"{args.preset}_offset{a:g}-{b:g}"
+    (HERE / "results").mkdir(exist_ok=True)
+    path = HERE / "results" / f"mitsuba_photometric_{tag}.json"
+    path.write_text(df.to_json(orient="records", indent=1))
+    with pd.option_context("display.width", 200, "display.max_columns", 20):
+        print(summary(df).round(3).to_string(index=False))
+    print(f"wrote {path}")
+    return df
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
