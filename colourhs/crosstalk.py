@@ -244,6 +244,20 @@ def calibrate_crosstalk(
     return out
 
 
+def load_mixing_sd(path: str | Path) -> dict[str, np.ndarray]:
+    """Camera name -> (3, 3) standard errors of the LED mixing M (``led_mixing_sd``).
+
+    Empty when the file has none (a constant or filter-only calibration, whose
+    error against the LEDs is not known).
+    """
+    data = json.loads(Path(path).read_text())
+    return {
+        cam: np.asarray(v["led_mixing_sd"], float)
+        for cam, v in data["cameras"].items()
+        if "led_mixing_sd" in v
+    }
+
+
 def load_crosstalk(path: str | Path, light: str = "led") -> dict:
     """Camera name -> mixing from a file written by :func:`calibrate_crosstalk`.
 

@@ -82,12 +82,13 @@ import h5py
 import numpy as np
 
 from colourhs.capture import COLOURS, Rig, open_dataset, read_image
-from colourhs.crosstalk import load_crosstalk, unmix
+from colourhs.crosstalk import load_crosstalk, load_mixing_sd, unmix
 from colourhs.io import atomic_output, note_read, sha256_files
 from colourhs.photometric_errors import board_points, mu_map_errors, pair_ratio_errors
 from colourhs.photometric_kappa import (
     KappaSamples,
     PoseView,
+    crosstalk_ratio_sigma,
     kappa,
     kappa_samples,
     pixel_footprint_m,
@@ -111,6 +112,7 @@ __all__ = [
     "board_points",
     "calibrate",
     "coverage",
+    "crosstalk_ratio_sigma",
     "eq7_residual_rms",
     "kappa",
     "kappa_samples",
@@ -249,7 +251,14 @@ def resolve_params(rig: Rig, **params) -> dict:
     return opts
 
 
-def calibrate(rig: Rig, views: list[PoseView], *, progress: bool = False, **params) -> dict:
+def calibrate(
+    rig: Rig,
+    views: list[PoseView],
+    *,
+    mixing_sd: dict[str, np.ndarray] | None = None,
+    progress: bool = False,
+    **params,
+) -> dict:
     """Photometric calibration of every Helmholtz camera (eqs. 6-8, module docstring).
 
     Parameters (keyword, see :data:`DEFAULTS` for each value and why it
@@ -260,7 +269,10 @@ def calibrate(rig: Rig, views: list[PoseView], *, progress: bool = False, **para
     and ``shading_prior`` weights and ``shading_order`` (see
     :func:`solve_mu_grids`; ``shading_order=0`` is the paper's coupling,
     the two maps of a camera equal up to a constant), ``min_support``
-    calibrated-region threshold. ``progress``: a bar over the reciprocal pairs'
+    calibrated-region threshold. ``mixing_sd``: camera -> (3, 3) standard
+    errors of the cross-talk mixing the views were unmixed with
+    (:func:`colourhs.crosstalk.load_mixing_sd`), for the ratios' cross-talk
+    term. ``progress``: a bar over the reciprocal pairs'
     samples and a line per later step, on stderr (:mod:`colourhs.progress`).
 
     Returns a dict with ``maps`` ("<camera>/<colour>" -> (H, W) float32 mu),
@@ -268,8 +280,11 @@ def calibrate(rig: Rig, views: list[PoseView], *, progress: bool = False, **para
     (same keys -> (H, W) bool calibrated region), ``offsets`` (pair ->
     eq. 6 relative log scale applied), ``counts`` (eq. 6 samples per map),
     ``residual_rms`` (RMS of the eq. 7 residuals per map, log units),
-    ``ratio_sigma`` (pair -> 1-sigma of its log ratio mu_a / mu_b,
-    :func:`pair_ratio_sigma`; None with fewer than four poses),
+    ``ratio_sigma`` (pair -> 1-sigma of its log ratio mu_a / mu_b: the
+    jackknife over poses, :func:`pair_ratio_sigma`, and the unmixing's error,
+    :func:`crosstalk_ratio_sigma`, in quadrature; None with fewer than four
+    poses), ``ratio_sigma_parts`` (pair -> {"poses", "crosstalk"}: the two
+    terms),
     ``shading`` (camera -> {"maps": [the two keys], "order", "coefficients"}:
     the fitted log colour shading, first map over second, at the image
     corner), ``grid`` and ``params``.
@@ -316,12 +331,19 @@ def calibrate(rig: Rig, views: list[PoseView], *, progress: bool = False, **para
         "residual_rms": {},
         "shading": {},
         "ratio_sigma": {},
+        "ratio_sigma_parts": {},
     }
     for p, (ka, kb, s) in enumerate(pairs):
         name = f"{ka[0]}/{COLOURS[ka[1]]}~{kb[0]}/{COLOURS[kb[1]]}"
         out["offsets"][name] = offs[p]
-        sigma = float(ratio_sigma[p])
+        jack = float(ratio_sigma[p])
+        xt = crosstalk_ratio_sigma(s, views, rig.camera(ka[0]), rig.camera(kb[0]), mixing_sd or {})
+        sigma = float(np.hypot(jack, xt))
         out["ratio_sigma"][name] = sigma if np.isfinite(sigma) else None  # JSON null
+        out["ratio_sigma_parts"][name] = {
+            "poses": jack if np.isfinite(jack) else None,
+            "crosstalk": xt,
+        }
         for key in (ka, kb):
             k = f"{key[0]}/{COLOURS[key[1]]}"
             g = grids[key]
@@ -359,16 +381,20 @@ def photometric_maps(
     (log mu), the calibrated region at ``calibrated/<camera>/<colour>``, and
     as attributes the parameters, the pair offsets, the pairs' log-ratio
     uncertainty (``pair_log_ratio_sigma``, JSON: pair -> 1 sigma, null where
-    unknown), the fitted colour shading per camera and a hash of the inputs. Written atomically: no
-    partial file on error. ``progress``: bars over the board poses and the pairs
-    and a line per step on stderr (:mod:`colourhs.progress`; 21 s in all at
-    1280 x 960). Returns :func:`calibrate`'s result, whose ``maps`` and ``calibrated``
-    the command draws as the paper's Figure 3 (:func:`colourhs.figures.mu_maps_figure`):
-    calibration modules do not import the figures.
+    unknown; ``pair_log_ratio_sigma_parts``: its jackknife and cross-talk
+    terms; the cross-talk calibration's ``led_mixing_sd`` feeds the second),
+    the fitted colour shading per camera and a hash of the inputs. Written
+    atomically: no partial file on error. ``progress``: bars over the board
+    poses and the pairs and a line per step on stderr
+    (:mod:`colourhs.progress`). Returns :func:`calibrate`'s result, whose
+    ``maps`` and ``calibrated`` the command draws as the paper's Figure 3
+    (:func:`colourhs.figures.mu_maps_figure`): calibration modules do not
+    import the figures.
     """
     t0 = perf_counter()
     rig, views = load_views(dataset_dir, poses_csv, crosstalk_json, progress)
-    result = calibrate(rig, views, progress=progress, **params)
+    mixing_sd = load_mixing_sd(crosstalk_json) if crosstalk_json else None
+    result = calibrate(rig, views, mixing_sd=mixing_sd, progress=progress, **params)
     ds = open_dataset(dataset_dir, check_images=False, scenes=())
     inputs = [ds.photometric_image(v.name, c) for v in views for c in rig.camera_names]
     inputs += [Path(poses_csv)] + ([Path(crosstalk_json)] if crosstalk_json else [])
@@ -389,6 +415,7 @@ def photometric_maps(
         f.attrs["constraints"] = json.dumps(result["counts"])
         f.attrs["residual_rms_log"] = json.dumps(result["residual_rms"])
         f.attrs["pair_log_ratio_sigma"] = json.dumps(result["ratio_sigma"])
+        f.attrs["pair_log_ratio_sigma_parts"] = json.dumps(result["ratio_sigma_parts"])
         f.attrs["colour_shading"] = json.dumps(result["shading"])
         f.attrs["poses"] = json.dumps([v.name for v in views])
         f.attrs["inputs_sha256"] = sha256_files(inputs)

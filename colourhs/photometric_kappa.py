@@ -195,3 +195,54 @@ def kappa_samples(views: list[PoseView], rig: Rig, a: str, b: str, opts: dict) -
         ok = np.isfinite(lk)
         parts.append(KappaSamples(uv_a[ok], uv_b[ok], lk[ok], np.full(ok.sum(), j)))
     return KappaSamples.concatenate(parts)
+
+
+def crosstalk_ratio_sigma(
+    samples: KappaSamples,
+    views: list[PoseView],
+    a: Camera,
+    b: Camera,
+    mixing_sd: dict[str, np.ndarray],
+) -> float:
+    """1-sigma of a pair's log ratio mu_a / mu_b from the unmixing's error (beyond the paper).
+
+    The board images are unmixed as J = M^-1 I (:mod:`colourhs.crosstalk`); an
+    error dM of camera k's mixing leaves ``d log J_c = -sum_m dM[c, m] J_m / J_c``
+    in its channel c (to first order, M near the identity). Every sample of
+    eq. (6) reads camera a's channel of b's light and camera b's channel of
+    a's light, so log kappa moves by the difference of two such terms, and the
+    pair's ratio (fitted to the samples' mean, its constant c_ab included) by
+    their mean over the samples. The same dM on every pose: the jackknife over
+    poses cannot see it. With independent errors of standard deviation
+    ``mixing_sd[k][c, m]`` (the cross-talk calibration's ``led_mixing_sd``),
+    ``sigma^2 = sum_m (sd_a[c_b, m] mean(J_m / J_c_b))^2 + (the same for b)``.
+
+    Parameters
+    ----------
+    samples : the pair's eq. (6) samples (``uv_a`` in camera a, ``uv_b`` in b).
+    views : the board poses the samples index, with unmixed images.
+    a, b : the pair's cameras.
+    mixing_sd : camera name -> (3, 3) standard errors of M; a camera absent
+        contributes nothing.
+
+    Returns
+    -------
+    float, log units; 0 when neither camera has standard errors.
+    """
+    var = 0.0
+    for cam, partner, uv in ((a, b, samples.uv_a), (b, a, samples.uv_b)):
+        sd = mixing_sd.get(cam.name)
+        if sd is None or len(uv) == 0:
+            continue
+        c = partner.light_channel
+        ratios = np.zeros((len(uv), 3))
+        for j, view in enumerate(views):
+            on = samples.pose == j
+            if not on.any():
+                continue
+            img = view.images[cam.name]
+            J = np.stack([sample_bilinear(img[..., k], uv[on]) for k in range(3)], axis=1)
+            ratios[on] = J / J[:, c : c + 1]
+        mean = ratios.mean(axis=0)
+        var += sum((sd[c, m] * mean[m]) ** 2 for m in range(3) if m != c)
+    return float(np.sqrt(var))
