@@ -25,7 +25,9 @@ optical axes, ``--spot-rel CUTOFF,BEAM``: a profile flat to BEAM, then
 linear in angle to zero at CUTOFF, both relative to the cameras' mean
 half-diagonal field of view, so the kink falls inside the images on every
 rig; no LED of the rig's own family has one; its true mu maps are written for
-it).
+it); ``diffuse-floor`` (the Lambertian board above a white floor,
+``--floor-rel`` of the working distance below the origin, path traced with
+one bounce: light that reaches the board via the floor).
 
 Run from the project root (needs ``pip install mitsuba``)::
 
@@ -64,6 +66,7 @@ RENDERS = {
     "glossy-box": dict(material="roughplastic", pixel_filter="box"),
     "glossy-gaussian": dict(material="roughplastic", pixel_filter="gaussian"),
     "spot-box": dict(material="diffuse", pixel_filter="box", spot=True),
+    "diffuse-floor": dict(material="diffuse", pixel_filter="box", floor=True),
 }
 
 
@@ -185,6 +188,9 @@ def run(args) -> pd.DataFrame:
                 if kw.pop("spot", False):
                     half = half_diagonal_deg(d.rig)
                     kw["spot_cutoff_deg"], kw["spot_beam_deg"] = (r * half for r in args.spot_rel)
+                if kw.pop("floor", False):
+                    distance = np.mean([np.linalg.norm(c.centre) for c in d.rig.cameras])
+                    kw["floor_m"] = args.floor_rel * float(distance)
                 opts = BoardRender(**kw, roughness=args.roughness, samples_per_pixel=args.spp)
                 data = render_mitsuba(args.root / f"{tag}-{name}", ours, d, seed, opts)
             truth = ph.read_mu_maps(data / "gt" / "photometric.h5")
@@ -251,6 +257,12 @@ def main(argv=None) -> pd.DataFrame:
         type=lambda s: tuple(float(x) for x in s.split(",")),
         default=(1.5, 0.5),
         help="spot-box's cutoff and beam width, of the cameras' half-diagonal field of view",
+    )
+    ap.add_argument(
+        "--floor-rel",
+        type=float,
+        default=0.3,
+        help="diffuse-floor's floor below the origin, of the working distance",
     )
     ap.add_argument("--roughness", type=float, default=0.2, help="GGX alpha of the glossy coat")
     ap.add_argument("--spp", type=int, default=16, help="Mitsuba's samples per pixel")

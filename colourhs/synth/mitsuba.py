@@ -60,6 +60,11 @@ class BoardRender:
         LED profiles; :func:`spot_profile`).
     texel_m : size of a texel of the board's printed texture, metres (a tenth
         of a millimetre is finer than any pixel footprint at working distance).
+    floor_m : ``None``: the board alone. Else a white Lambertian floor (2 m
+        square, the board's white albedo) this far below the world origin,
+        across the first camera's image-down axis, and Mitsuba's path tracer
+        with one bounce: light that reaches the board through the floor, which
+        eq. (6)'s direct-light kappa does not model.
     """
 
     material: str = "diffuse"
@@ -69,6 +74,7 @@ class BoardRender:
     texel_m: float = 1e-4
     spot_cutoff_deg: float | None = None
     spot_beam_deg: float | None = None
+    floor_m: float | None = None
 
 
 def spot_profile(cos_theta: np.ndarray, cutoff_deg: float, beam_deg: float) -> np.ndarray:
@@ -138,6 +144,28 @@ def _board_bsdf(mi, board: dict, opts: BoardRender) -> dict:
     else:
         raise ValueError(f"unknown board material {opts.material!r}")
     return {"type": "twosided", "bsdf": bsdf}
+
+
+def _floor(mi, cam: CameraModel, distance_m: float) -> dict:
+    """A 2 m white Lambertian square ``distance_m`` below the origin, facing up."""
+    down = cam.R[1]  # the camera's image-down axis in the world
+    x_axis = cam.R[0]
+    z_axis = np.cross(x_axis, down)
+    A = np.eye(4)
+    # the rectangle's normal (+z local) points up, towards the board
+    A[:3, :3] = np.stack([x_axis, z_axis, -down], axis=1)
+    A[:3, 3] = distance_m * down
+    return {
+        "type": "rectangle",
+        "to_world": mi.ScalarTransform4f(A.tolist()),
+        "bsdf": {
+            "type": "twosided",
+            "bsdf": {
+                "type": "diffuse",
+                "reflectance": {"type": "rgb", "value": [sc.WHITE_ALBEDO] * 3},
+            },
+        },
+    }
 
 
 def _light(mi, li, cam: CameraModel, opts: BoardRender) -> dict:
@@ -252,16 +280,17 @@ def render_board(
     }
     # One scene per light: Mitsuba's direct integrator picks one emitter per
     # sample, which would add noise between the bands.
+    shapes = {"board": board_shape}
+    integrator = {"type": "direct"}
+    if opts.floor_m is not None:
+        shapes["floor"] = _floor(mi, rig.cameras[0], opts.floor_m)
+        integrator = {"type": "path", "max_depth": 3}
     scenes = []
     for li, cam in zip(rig.lights, rig.cameras, strict=True):
         scenes.append(
             mi.load_dict(
-                {
-                    "type": "scene",
-                    "integrator": {"type": "direct"},
-                    "board": board_shape,
-                    "light": _light(mi, li, cam, opts),
-                }
+                {"type": "scene", "integrator": integrator, "light": _light(mi, li, cam, opts)}
+                | shapes
             )
         )
     out = {}
