@@ -75,6 +75,7 @@ names of the others.
 from __future__ import annotations
 
 import json
+import warnings
 from pathlib import Path
 from time import perf_counter
 
@@ -96,6 +97,7 @@ from colourhs.photometric_kappa import (
 from colourhs.photometric_solve import (
     Grid,
     coverage,
+    eq7_noise_rms,
     eq7_residual_rms,
     pair_ratio_sigma,
     shading_basis,
@@ -113,6 +115,7 @@ __all__ = [
     "calibrate",
     "coverage",
     "crosstalk_ratio_sigma",
+    "eq7_noise_rms",
     "eq7_residual_rms",
     "kappa",
     "kappa_samples",
@@ -130,6 +133,13 @@ __all__ = [
     "solve_mu_grids",
 ]
 
+
+MODEL_RATIO_WARN = 1.3
+"""Largest eq. (7) residual RMS over the part its noise explains before
+:func:`calibrate` warns. A ratio of two spreads, so the same on any rig and
+noise level; captures that follow eq. (6) give about 1 (from thousands of
+sample pairs, within a few per cent), and 1.3 is a disagreement between poses
+of 0.83 times the noise."""
 
 DEFAULTS = {
     "grid_spacing_px": None,
@@ -280,6 +290,9 @@ def calibrate(
     (same keys -> (H, W) bool calibrated region), ``offsets`` (pair ->
     eq. 6 relative log scale applied), ``counts`` (eq. 6 samples per map),
     ``residual_rms`` (RMS of the eq. 7 residuals per map, log units),
+    ``noise_rms`` (the part of it the readings' noise explains,
+    :func:`eq7_noise_rms`), ``warnings`` (:func:`model_warnings`, also
+    issued as Python warnings),
     ``ratio_sigma`` (pair -> 1-sigma of its log ratio mu_a / mu_b: the
     jackknife over poses, :func:`pair_ratio_sigma`, and the unmixing's error,
     :func:`crosstalk_ratio_sigma`, in quadrature; None with fewer than four
@@ -329,6 +342,7 @@ def calibrate(
         "offsets": {},
         "counts": {},
         "residual_rms": {},
+        "noise_rms": {},
         "shading": {},
         "ratio_sigma": {},
         "ratio_sigma_parts": {},
@@ -354,6 +368,7 @@ def calibrate(
             out["calibrated"][k] = coverage(grid, own[key].uv_a[t], opts["min_support"])
             out["counts"][k] = len(s.log_kappa)
             out["residual_rms"][k] = eq7_residual_rms(own[key], grid, g)
+            out["noise_rms"][k] = eq7_noise_rms(own[key], grid, g, opts["step_px"], opts["box_px"])
     for cam, beta in shading.items():
         k1, k2 = sorted(k for k in grids if k[0] == cam)
         out["shading"][cam] = {
@@ -363,7 +378,35 @@ def calibrate(
         }
     out["grid"] = grid
     out["params"] = opts
+    out["warnings"] = model_warnings(out["residual_rms"], out["noise_rms"])
+    for text in out["warnings"]:
+        warnings.warn(text, stacklevel=2)
     return out
+
+
+def model_warnings(residual_rms: dict, noise_rms: dict) -> list[str]:
+    """Warnings for maps whose eq. (7) residuals exceed what their noise explains.
+
+    A ratio above :data:`MODEL_RATIO_WARN` names the maps and the ratio (the
+    board poses disagree with eq. (6) beyond noise; module
+    :func:`eq7_noise_rms`). Empty when every map is within it.
+    """
+    ratios = {
+        k: residual_rms[k] / noise_rms[k]
+        for k in residual_rms
+        if np.isfinite(noise_rms.get(k, np.nan)) and noise_rms[k] > 0
+    }
+    high = {k: r for k, r in ratios.items() if r > MODEL_RATIO_WARN}
+    if not high:
+        return []
+    listed = ", ".join(f"{k} {r:.2f}x" for k, r in sorted(high.items()))
+    return [
+        "photometric: the board poses disagree with eq. (6) beyond their noise "
+        f"(eq. 7 residual over its noise: {listed}; above {MODEL_RATIO_WARN}): light that "
+        "eq. (6) does not model reaches the board (interreflections from nearby surfaces, "
+        "room light) or the board is glossy with lights beside the lenses; the mu maps "
+        "may be off by per cents"
+    ]
 
 
 def photometric_maps(
@@ -414,6 +457,8 @@ def photometric_maps(
         f.attrs["pair_offsets"] = json.dumps(result["offsets"])
         f.attrs["constraints"] = json.dumps(result["counts"])
         f.attrs["residual_rms_log"] = json.dumps(result["residual_rms"])
+        f.attrs["noise_rms_log"] = json.dumps(result["noise_rms"])
+        f.attrs["warnings"] = json.dumps(result["warnings"])
         f.attrs["pair_log_ratio_sigma"] = json.dumps(result["ratio_sigma"])
         f.attrs["pair_log_ratio_sigma_parts"] = json.dumps(result["ratio_sigma_parts"])
         f.attrs["colour_shading"] = json.dumps(result["shading"])

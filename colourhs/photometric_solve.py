@@ -301,6 +301,41 @@ def eq7_residual_rms(samples: KappaSamples, grid: Grid, lam_a: np.ndarray) -> fl
     return float(np.sqrt(np.sum(n * ss) / pairs)) if pairs else float("nan")
 
 
+def eq7_noise_rms(
+    samples: KappaSamples, grid: Grid, lam_a: np.ndarray, step: int, box: int
+) -> float:
+    """The eq. (7) residual RMS that the readings' own noise explains (beyond the paper).
+
+    Two samples of one pose ``step`` pixels apart on b's grid differ, once the
+    fitted map is removed, by their noise alone (the model is smooth over a
+    step; a disagreement shared by a pose cancels). The robust spread of those
+    differences (MAD), corrected for the overlap of the two boxes (their noise
+    is correlated over ``(box - step) / box`` of a box), gives one sample's
+    noise sigma; an eq. (7) residual, a difference of two samples on two poses,
+    has sqrt(2) sigma. :func:`eq7_residual_rms` well above it means the poses
+    disagree with eq. (6) beyond noise: light eq. (6) does not model
+    (interreflections, ambient light), or a glossy board with lights beside the
+    lenses. NaN without neighbouring samples.
+    """
+    p = samples.log_kappa - grid.interpolate(lam_a, samples.uv_a)
+    uv = np.rint(samples.uv_b / step).astype(np.int64)
+    key = (samples.pose.astype(np.int64) * (1 << 20) + uv[:, 1]) * (1 << 20) + uv[:, 0]
+    order = np.argsort(key)
+    diffs = []
+    for shift in (1, 1 << 20):  # the neighbour one step right, one step down
+        j = np.searchsorted(key[order], key + shift)
+        j = np.minimum(j, len(key) - 1)
+        hit = key[order][j] == key + shift
+        diffs.append(p[order][j][hit] - p[hit])
+    d = np.concatenate(diffs)
+    if len(d) < 10:
+        return float("nan")
+    mad = 1.4826 * np.median(np.abs(d - np.median(d)))
+    overlap = max(box - step, 0) / box
+    sample_sigma = mad / np.sqrt(2.0 * (1.0 - overlap))
+    return float(np.sqrt(2.0) * sample_sigma)
+
+
 def pair_ratio_sigma(
     pairs: list[tuple[tuple[str, int], tuple[str, int], KappaSamples]],
     grid: Grid,

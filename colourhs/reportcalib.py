@@ -60,13 +60,16 @@ def crosstalk_table(crosstalk_json: str | Path) -> pd.DataFrame:
 def photometric_table(photometric_h5: str | Path) -> pd.DataFrame:
     """Per Helmholtz camera (map ``<camera>/<colour>``) of ``photometric.h5``:
     ``constraints`` (eq. 7 rows that constrain it), ``residual_rms_log`` (the fit's
-    residual RMS, natural log of mu) and ``calibrated_share`` (share of the image
-    where the data determine mu)."""
+    residual RMS, natural log of mu), ``noise_rms_log`` (the part of it the
+    readings' noise explains; NaN in files written before it), ``residual_over_noise``
+    (about 1 where the board poses follow eq. 6) and ``calibrated_share`` (share
+    of the image where the data determine mu)."""
     import h5py
 
     with h5py.File(photometric_h5, "r") as f:
         counts = json.loads(f.attrs["constraints"])
         residual = json.loads(f.attrs["residual_rms_log"])
+        noise = json.loads(f.attrs.get("noise_rms_log", "{}"))
         share = {k: float(np.mean(f["calibrated"][k][()])) for k in counts if k in f["calibrated"]}
     return pd.DataFrame(
         [
@@ -74,6 +77,8 @@ def photometric_table(photometric_h5: str | Path) -> pd.DataFrame:
                 "map": k,
                 "constraints": int(counts[k]),
                 "residual_rms_log": float(residual[k]),
+                "noise_rms_log": float(noise.get(k, np.nan)),
+                "residual_over_noise": float(residual[k]) / float(noise.get(k, np.nan)),
                 "calibrated_share": share.get(k, np.nan),
             }
             for k in counts
@@ -144,8 +149,11 @@ def calibration_diagnostics(calib_dir: str | Path, dataset=None) -> list[dict]:
             {
                 "title": "Photometric fit",
                 "note": "photometric.h5: eq. (7) constraints per Helmholtz camera, the fit's "
-                "residual RMS (natural log of mu; 0.01 is about 1 %) and the share of the "
-                "image where the board determined mu.",
+                "residual RMS (natural log of mu; 0.01 is about 1 %), the part of it the "
+                "readings' noise explains and their ratio (about 1 where the board poses "
+                "follow eq. (6); above 1.3 the calibration warns: interreflections, room "
+                "light, or a glossy board with lights beside the lenses) and the share of "
+                "the image where the board determined mu.",
                 "table": photometric_table(photometric),
             }
         )

@@ -109,6 +109,11 @@ def test_tiny_mu_maps_within_one_and_a_half_percent(tiny_calibration):
     assert cal.rms_log_error.max() < 0.005
     assert none.rms_log_error.min() > 5 * cal.rms_log_error.max()
     assert (cal.calibrated_fraction > 0.28).all()
+    # The board poses follow eq. (6): the eq. (7) residuals are their noise
+    # (residual over noise measured 1.03-1.06), and no warning.
+    ratios = [result["residual_rms"][k] / result["noise_rms"][k] for k in result["residual_rms"]]
+    assert all(0.95 < r < 1.15 for r in ratios), ratios
+    assert result["warnings"] == []
 
 
 def test_both_pairs_of_a_camera_are_needed(tiny_calibration):
@@ -347,3 +352,68 @@ def test_ratio_sigma_with_crosstalk_term_is_calibrated(tmp_path):
     rms = float(np.sqrt(np.mean(np.square(z_total))))
     assert 0.5 < rms < 1.5, z_total
     assert np.sqrt(np.mean(np.square(z_jack))) > 5
+
+
+def _grid_samples(rng, n_poses, step, noise, pose_field=None):
+    """Eq. (6) samples on a step-pixel grid of b, a = b's pixels, log kappa = noise
+    (+ a smooth per-pose field), for a zero map."""
+    from colourhs.photometric import KappaSamples
+
+    u, v = np.meshgrid(np.arange(0, 200, step, dtype=float), np.arange(0, 150, step, dtype=float))
+    uv = np.stack([u.ravel(), v.ravel()], axis=1)
+    parts = []
+    for j in range(n_poses):
+        lk = rng.normal(0, noise, len(uv))
+        if pose_field is not None:
+            lk += pose_field(j, uv)
+        parts.append(KappaSamples(uv, uv, lk, np.full(len(uv), j)))
+    return KappaSamples.concatenate(parts)
+
+
+def test_eq7_noise_rms_explains_noise_and_not_pose_disagreement():
+    """Noise alone: residual / noise = 1 (measured 1.00); a smooth field that differs
+    between poses (RMS 0.5 noise sigma per pose): measured 1.13; 1 noise sigma: 1.48,
+    and a warning."""
+    from colourhs.photometric import eq7_noise_rms, eq7_residual_rms, model_warnings
+
+    rng = np.random.default_rng(0)
+    grid = Grid(200, 150, 25.0)
+    lam = np.zeros(grid.shape)
+    s = _grid_samples(rng, 5, 3, 0.01)
+    ratio = eq7_residual_rms(s, grid, lam) / eq7_noise_rms(s, grid, lam, 3, 1)
+    assert ratio == pytest.approx(1.0, abs=0.03)
+
+    def field(amplitude):
+        return lambda j, uv: amplitude * np.sqrt(2) * np.sin(uv[:, 0] / 40 + 1.3 * j)
+
+    for amplitude, low, high in ((0.005, 1.08, 1.2), (0.01, 1.4, 1.6)):
+        s = _grid_samples(rng, 5, 3, 0.01, field(amplitude))
+        res, noise = eq7_residual_rms(s, grid, lam), eq7_noise_rms(s, grid, lam, 3, 1)
+        assert low < res / noise < high
+    assert model_warnings({"m": res}, {"m": noise})
+    assert not model_warnings({"m": 1.0}, {"m": 1.0})
+
+
+def test_eq7_noise_rms_corrects_for_overlapping_boxes():
+    """Box means 5 px wide 4 px apart share a fifth of their pixels: neighbouring
+    samples' noise is correlated, and the estimate corrects for it (residual over
+    noise 1 within 3 %)."""
+    import cv2
+
+    from colourhs.photometric import eq7_noise_rms, eq7_residual_rms
+    from colourhs.photometric_kappa import KappaSamples
+
+    rng = np.random.default_rng(1)
+    grid = Grid(400, 300, 40.0)
+    parts = []
+    u, v = np.meshgrid(np.arange(4, 396, 4), np.arange(4, 296, 4))
+    uv = np.stack([u.ravel(), v.ravel()], axis=1).astype(float)
+    for j in range(4):
+        img = cv2.blur(rng.normal(0, 1, (300, 400)).astype(np.float32), (5, 5))
+        parts.append(
+            KappaSamples(uv, uv, img[v.ravel(), u.ravel()].astype(float), np.full(len(uv), j))
+        )
+    s = KappaSamples.concatenate(parts)
+    lam = np.zeros(grid.shape)
+    ratio = eq7_residual_rms(s, grid, lam) / eq7_noise_rms(s, grid, lam, 4, 5)
+    assert ratio == pytest.approx(1.0, abs=0.03)

@@ -52,6 +52,7 @@ def _calibration(root: Path) -> tuple[Path, Path]:
             t[k] = np.exp(g).astype(np.float32)
         f.attrs["constraints"] = json.dumps({k: 100 + i for i, k in enumerate(MAPS)})
         f.attrs["residual_rms_log"] = json.dumps({k: 0.02 for k in MAPS})
+        f.attrs["noise_rms_log"] = json.dumps({k: 0.016 for k in MAPS})
     return calib, truth
 
 
@@ -69,7 +70,11 @@ def test_calibration_tables(tmp_path):
     assert len(cross) == 9 and cross.iloc[1].tolist() == ["cam1", "G", 0.3, 1.0, 0.4]
     fit = photometric_table(calib / "photometric.h5").set_index("map")
     assert fit.loc["cam3/blue", "constraints"] == 103 and fit["residual_rms_log"].eq(0.02).all()
-    assert fit.loc["cam3/red", "calibrated_share"] == 0.5 and fit.loc["cam1/red"].iloc[2] == 1.0
+    assert np.allclose(fit["residual_over_noise"], 1.25)
+    assert (
+        fit.loc["cam3/red", "calibrated_share"] == 0.5
+        and fit.loc["cam1/red", "calibrated_share"] == 1.0
+    )
     err = mu_error_table(calib / "photometric.h5", truth, rig).set_index("map")
     assert sorted(err.index) == sorted(MAPS)
     # cam1/red 0.1 too high: its pair's free scale takes 0.05, leaving 0.05 on both maps

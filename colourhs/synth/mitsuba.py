@@ -20,6 +20,7 @@ refuses it.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -28,10 +29,11 @@ from colourhs.geometry import normalised_coordinates, pixel_grid
 from colourhs.synth import scenes as sc
 from colourhs.synth.rig import COLOURS, CameraModel, RigModel
 
-# Mitsuba's CPU-vectorised variants compile kernels with the system's LLVM, which
-# aborts on some BSDFs and pixel filters with an older LLVM; the scalar variant
-# needs none.
-MITSUBA_VARIANT = "scalar_rgb"
+# Mitsuba's CPU-vectorised variant (llvm_ad_rgb) compiles kernels with the
+# system's LLVM and aborts on some BSDFs, filters and integrators with LLVM 15 or
+# older; the scalar variant needs none. COLOURHS_MITSUBA_VARIANT=llvm_ad_rgb, with
+# DRJIT_LIBLLVM_PATH at a newer libLLVM, is several times faster.
+MITSUBA_VARIANT = os.environ.get("COLOURHS_MITSUBA_VARIANT", "scalar_rgb")
 # Mitsuba's camera looks along +z with +x to the left and +y up; OpenCV's has
 # +x to the right and +y down.
 _CV_TO_MITSUBA = np.diag([-1.0, -1.0, 1.0])
