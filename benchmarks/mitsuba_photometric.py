@@ -198,7 +198,12 @@ def run(args) -> pd.DataFrame:
             csvs = poses_csvs(data, args.root / "work" / data.name)
             rig, views = ph.load_views(data, csvs["marker"], None)
             t = time.time()
-            result = ph.calibrate(rig, views)
+            try:
+                result = ph.calibrate(rig, views)
+            except ValueError as e:  # the calibration refused the captures: a result too
+                rows.append({"seed": seed, "render": name, "kind": "refused", "error": str(e)})
+                print(f"seed {seed} {name:17s} refused: {e}", flush=True)
+                continue
             maps, pairs = score(result, truth, rig, gt, [v.name for v in views])
             ratio = max(
                 result["residual_rms"][k] / result["noise_rms"][k] for k in result["noise_rms"]
@@ -224,9 +229,13 @@ def run(args) -> pd.DataFrame:
 
 
 def summary(df: pd.DataFrame) -> pd.DataFrame:
-    """Per render: median and worst seed of the worst map and of the plane's pair ratio."""
+    """Per render: median and worst seed of the worst map and of the plane's pair ratio,
+    the range of the residual-over-noise check, and the seeds whose captures the
+    calibration refused."""
     out = []
     for name, g in df.groupby("render", sort=False):
+        refused = int((g.kind == "refused").sum())
+        g = g[g.kind != "refused"]
         m = g[g.kind == "map"].groupby("seed").rms_log_error.max()
         pr = g[(g.kind == "pair") & (g.points == "plane")].groupby("seed").rms_log_error.max()
         q = g.groupby("seed").residual_over_noise.max()
@@ -234,6 +243,7 @@ def summary(df: pd.DataFrame) -> pd.DataFrame:
             {
                 "render": name,
                 "seeds": m.size,
+                "refused": refused,
                 "worst_map_median_%": 100 * m.median(),
                 "worst_map_worst_%": 100 * m.max(),
                 "pair_ratio_plane_median_%": 100 * pr.median(),
