@@ -43,13 +43,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import shutil
 import sys
 import time
 from dataclasses import replace
 from pathlib import Path
 
-import h5py
 import numpy as np
 import pandas as pd
 
@@ -133,41 +131,13 @@ def render_ours(out: Path, preset, seed, nuis, ranges) -> Path:
 
 
 def render_mitsuba(out: Path, ours: Path, d, seed: int, opts) -> Path:
-    """A copy of ``ours`` whose photometric images Mitsuba rendered."""
-    from colourhs.synth.dataset import _image_rng, write_png
-    from colourhs.synth.mitsuba import camera_signal, render_board, true_mu_maps
-    from colourhs.synth.rig import sensor
+    """A copy of ``ours`` whose photometric images Mitsuba rendered (cached)."""
+    from colourhs.synth.mitsuba import photometric_dataset
 
-    if (out / "rig.json").exists():
-        return out
-    t = time.time()
-    tmp = out.with_name(out.name + ".partial")
-    shutil.rmtree(tmp, ignore_errors=True)
-    tmp.mkdir(parents=True)
-    shutil.copy(ours / "rig.json", tmp / "rig.json")
-    shutil.copytree(ours / "gt", tmp / "gt")
-    with h5py.File(tmp / "gt" / "photometric.h5", "w") as f:
-        f.attrs["note"] = "mu = rho / sigma (eq. 2) of Mitsuba's lights, on pixel centres"
-        for key, mu in true_mu_maps(d.rig, opts).items():
-            f.create_dataset(key, data=mu, compression="gzip")
-    image = json.loads((ours / "rig.json").read_text())["image"]
-    for k, (R, t_b) in enumerate(d.poses[:-1]):
-        transport = render_board(d.rig, d.board, R, t_b, opts)
-        for cam in d.rig.cameras:
-            rel = f"photometric/pose{k:02d}/{cam.name}.png"
-            signal = camera_signal(cam, transport[cam.name])
-            dn = sensor(
-                signal,
-                _image_rng(seed, rel),
-                d.rig.nuisances,
-                image["bit_depth"],
-                image["black_level"],
-                image["white_level"],
-            )
-            write_png(tmp / rel, dn)
-    shutil.rmtree(out, ignore_errors=True)
-    tmp.rename(out)
-    print(f"rendered {out.name} with Mitsuba in {time.time() - t:.0f} s", flush=True)
+    if not (out / "rig.json").exists():
+        t = time.time()
+        photometric_dataset(out, ours, d.rig, d.board, d.poses, seed, opts)
+        print(f"rendered {out.name} with Mitsuba in {time.time() - t:.0f} s", flush=True)
     return out
 
 

@@ -20,9 +20,13 @@ refuses it.
 
 from __future__ import annotations
 
+import json
 import os
+import shutil
 from dataclasses import dataclass
+from pathlib import Path
 
+import h5py
 import numpy as np
 
 from colourhs.geometry import normalised_coordinates, pixel_grid
@@ -317,3 +321,51 @@ def camera_signal(
     xy = normalised_coordinates(pixel_grid(W, H).reshape(-1, 2), cam.K, cam.dist)
     sens = cam.sensitivity(xy).reshape(H, W, 3)
     return np.einsum("cb,hwb->hwc", X, transport) * sens
+
+
+def photometric_dataset(
+    out: str | Path, ours: str | Path, rig: RigModel, board: dict, poses, seed: int, opts
+) -> Path:
+    """A copy of dataset ``ours`` whose ``photometric/`` board captures Mitsuba rendered.
+
+    ``ours`` is a dataset that :func:`colourhs.synth.dataset.synthesise` wrote for
+    ``rig`` (its ``rig.json`` and ``gt/`` are copied; ``gt/photometric.h5``
+    becomes :func:`true_mu_maps` of ``opts``' lights); ``poses`` are its board
+    poses (R, t), the held-out plane last, as ``draw_random`` gives them. Each
+    image gets the rig's sensor noise with the draw ``ours`` used for the same
+    file. Written to a sibling folder and moved into place: no partial dataset.
+    """
+    from colourhs.synth.dataset import _image_rng, write_png
+    from colourhs.synth.rig import sensor
+
+    out, ours = Path(out), Path(ours)
+    tmp = out.with_name(out.name + ".partial")
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir(parents=True)
+    try:
+        shutil.copy(ours / "rig.json", tmp / "rig.json")
+        shutil.copytree(ours / "gt", tmp / "gt")
+        with h5py.File(tmp / "gt" / "photometric.h5", "w") as f:
+            f.attrs["note"] = "mu = rho / sigma (eq. 2) of Mitsuba's lights, on pixel centres"
+            for key, mu in true_mu_maps(rig, opts).items():
+                f.create_dataset(key, data=mu, compression="gzip")
+        image = json.loads((ours / "rig.json").read_text())["image"]
+        for k, (R, t) in enumerate(poses[:-1]):
+            transport = render_board(rig, board, R, t, opts)
+            for cam in rig.cameras:
+                rel = f"photometric/pose{k:02d}/{cam.name}.png"
+                dn = sensor(
+                    camera_signal(cam, transport[cam.name]),
+                    _image_rng(seed, rel),
+                    rig.nuisances,
+                    image["bit_depth"],
+                    image["black_level"],
+                    image["white_level"],
+                )
+                write_png(tmp / rel, dn)
+        shutil.rmtree(out, ignore_errors=True)
+        tmp.rename(out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return out
