@@ -476,7 +476,7 @@ def test_every_option_shows_its_default():
             if tuning or a.default not in (None, "", []):
                 checked.append(f"{command} {a.option_strings[0]}")
                 assert "default" in (a.help or ""), (command, a.option_strings, a.help)
-    assert len(checked) == 36, checked  # measured: 36 options with a default (--max-sigma-mm)
+    assert len(checked) == 37, checked  # measured: 37 options with a default (--box-px)
 
 
 def test_readme_minimal_rig_is_valid():
