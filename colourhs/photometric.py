@@ -404,8 +404,8 @@ def model_warnings(residual_rms: dict, noise_rms: dict) -> list[str]:
         "photometric: the board poses disagree with eq. (6) beyond their noise "
         f"(eq. 7 residual over its noise: {listed}; above {MODEL_RATIO_WARN}): light that "
         "eq. (6) does not model reaches the board (interreflections from nearby surfaces, "
-        "room light) or the board is glossy with lights beside the lenses; the mu maps "
-        "may be off by per cents"
+        "room light, channel cross-talk left unmixed) or the board is glossy with lights "
+        "beside the lenses; the mu maps may be off by per cents"
     ]
 
 
@@ -468,15 +468,29 @@ def photometric_maps(
     return result
 
 
-def read_ratio_sigma(path: str | Path) -> dict[str, float]:
+def read_ratio_sigma(path: str | Path, part: str | None = None) -> dict[str, float]:
     """Pair name (``"<cam>/<colour>~<cam>/<colour>"``) -> 1-sigma of its log ratio
     mu_a / mu_b from a photometric.h5; empty where the file has none (ground truth,
-    files written before it), NaN where it is unknown."""
+    files written before it), NaN where it is unknown.
+
+    ``part``: None, the whole sigma; ``"poses"`` or ``"crosstalk"``, one term of
+    ``pair_log_ratio_sigma_parts`` (a file without parts has the jackknife alone,
+    so ``"poses"`` is then the whole sigma and ``"crosstalk"`` empty).
+    """
     with h5py.File(path) as f:
         text = f.attrs.get("pair_log_ratio_sigma")
+        parts = f.attrs.get("pair_log_ratio_sigma_parts")
     if text is None:
         return {}
-    return {k: float("nan") if v is None else float(v) for k, v in json.loads(text).items()}
+    values = json.loads(text)
+    if part is not None:
+        if part not in ("poses", "crosstalk"):
+            raise ValueError(f"read_ratio_sigma: part must be 'poses' or 'crosstalk', not {part!r}")
+        if parts is None:
+            values = values if part == "poses" else {}
+        else:
+            values = {k: v[part] for k, v in json.loads(parts).items()}
+    return {k: float("nan") if v is None else float(v) for k, v in values.items()}
 
 
 def read_mu_maps(path: str | Path) -> dict[str, np.ndarray]:

@@ -42,6 +42,9 @@ def _run_out(argv, capsys) -> tuple[str, str]:
     return capsys.readouterr()
 
 
+# The photometric run here does not unmix the tiny rig's cross-talk, which its model
+# check rightly warns about.
+@pytest.mark.filterwarnings("ignore:photometric. the board poses disagree")
 def test_calibration_stages_show_progress(tiny_dataset, tmp_path, capsys):
     """validate (10 s at paper scale), markers (7 s), noise (16 s), photometric (21 s) and
     chromaticity (7 s): bars over the images, poses, images, pairs and cameras, a line

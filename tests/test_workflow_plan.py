@@ -276,7 +276,7 @@ def test_config_yaml_states_the_package_defaults():
 
     config = yaml.safe_load((PROJECT_ROOT / "config.yaml").read_text())
     photometric = config["calibration"]["photometric"]
-    assert len(photometric) == 4 and photometric == {k: DEFAULTS[k] for k in photometric}
+    assert len(photometric) == 5 and photometric == {k: DEFAULTS[k] for k in photometric}
     assert config["calibration"]["chromaticity"] == {"min_signal": MIN_SIGNAL}
     assert config["surfaces"]["hull"] == {"voxel_m": None, "threshold": DEFAULT_THRESHOLD}
     signature = inspect.signature(frame_mesh).parameters
