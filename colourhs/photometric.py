@@ -141,6 +141,12 @@ noise level; captures that follow eq. (6) give about 1 (from thousands of
 sample pairs, within a few per cent), and 1.3 is a disagreement between poses
 of 0.83 times the noise."""
 
+MODEL_EXCESS_MIN = 5e-4
+"""Smallest disagreement beyond noise, sqrt(residual^2 - noise^2) in natural log
+of mu, that :func:`calibrate` warns about: exact, noise-free captures have both
+spreads near zero and their ratio means nothing; 0.05 % is a small share of the
+maps' own error from sensor noise on any rig (a fraction of a DN per reading)."""
+
 DEFAULTS = {
     "grid_spacing_px": None,
     "grid_angle_deg": 1.0,
@@ -387,16 +393,20 @@ def calibrate(
 def model_warnings(residual_rms: dict, noise_rms: dict) -> list[str]:
     """Warnings for maps whose eq. (7) residuals exceed what their noise explains.
 
-    A ratio above :data:`MODEL_RATIO_WARN` names the maps and the ratio (the
-    board poses disagree with eq. (6) beyond noise; module
-    :func:`eq7_noise_rms`). Empty when every map is within it.
+    A ratio above :data:`MODEL_RATIO_WARN`, with a disagreement beyond noise
+    above :data:`MODEL_EXCESS_MIN`, names the maps and the ratio (the board
+    poses disagree with eq. (6) beyond noise; :func:`eq7_noise_rms`). Empty
+    when every map is within them.
     """
     ratios = {
         k: residual_rms[k] / noise_rms[k]
         for k in residual_rms
         if np.isfinite(noise_rms.get(k, np.nan)) and noise_rms[k] > 0
     }
-    high = {k: r for k, r in ratios.items() if r > MODEL_RATIO_WARN}
+    excess = {k: np.sqrt(max(residual_rms[k] ** 2 - noise_rms[k] ** 2, 0.0)) for k in ratios}
+    high = {
+        k: r for k, r in ratios.items() if r > MODEL_RATIO_WARN and excess[k] > MODEL_EXCESS_MIN
+    }
     if not high:
         return []
     listed = ", ".join(f"{k} {r:.2f}x" for k, r in sorted(high.items()))

@@ -413,6 +413,8 @@ def test_eq7_noise_rms_explains_noise_and_not_pose_disagreement():
         assert low < res / noise < high
     assert model_warnings({"m": res}, {"m": noise})
     assert not model_warnings({"m": 1.0}, {"m": 1.0})
+    # exact data: both spreads near zero, no warning whatever their ratio
+    assert not model_warnings({"m": 2e-6}, {"m": 1e-6})
 
 
 def test_eq7_noise_rms_corrects_for_overlapping_boxes():
