@@ -216,6 +216,10 @@ def crosstalk_ratio_sigma(
     poses cannot see it. With independent errors of standard deviation
     ``mixing_sd[k][c, m]`` (the cross-talk calibration's ``led_mixing_sd``),
     ``sigma^2 = sum_m (sd_a[c_b, m] mean(J_m / J_c_b))^2 + (the same for b)``.
+    This is the error of the mu ratio itself; a scene unmixed with the same M
+    carries the same leaks, which cancel in eq. (5) where its ratios J_m / J_c
+    match the board's, so the depth's error bar does not take it
+    (:func:`colourhs.photometric.read_ratio_sigma`).
 
     Parameters
     ----------
