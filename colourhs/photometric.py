@@ -120,6 +120,7 @@ __all__ = [
     "kappa",
     "kappa_samples",
     "load_views",
+    "model_warnings",
     "mu_map_errors",
     "pair_ratio_errors",
     "pair_ratio_sigma",
@@ -143,9 +144,10 @@ of 0.83 times the noise."""
 
 MODEL_EXCESS_MIN = 5e-4
 """Smallest disagreement beyond noise, sqrt(residual^2 - noise^2) in natural log
-of mu, that :func:`calibrate` warns about: exact, noise-free captures have both
-spreads near zero and their ratio means nothing; 0.05 % is a small share of the
-maps' own error from sensor noise on any rig (a fraction of a DN per reading)."""
+of mu, that :func:`calibrate` warns about (exact, noise-free captures have both
+spreads near zero, and their ratio then means nothing). A relative error of mu,
+so the same on any rig: 0.05 % is far below the per-cent errors the check is
+for and far above the rounding of exact captures."""
 
 DEFAULTS = {
     "grid_spacing_px": None,
