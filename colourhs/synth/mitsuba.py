@@ -5,9 +5,11 @@ Mitsuba 3 (``pip install mitsuba``) is an optional dependency, used by
 workflow; this module imports it when a function is called. It renders the
 photometric captures' board (paper section III-C) for a synthetic rig
 (:class:`~colourhs.synth.rig.RigModel`) with Mitsuba's own pinhole camera,
-point lights, BSDFs, texture lookup and pixel filters, so that the photometric
-calibration can be tried on images that :mod:`colourhs.synth.render` did not
-make. What the rig adds after the optics (channel sensitivity sigma_c,
+point or spot lights, BSDFs, texture lookup, pixel filters and, optionally, a
+white floor whose light reaches the board (path tracing), so that the
+photometric calibration can be tried on images that
+:mod:`colourhs.synth.render` did not make (:class:`BoardRender`,
+:func:`photometric_dataset`). What the rig adds after the optics (channel sensitivity sigma_c,
 cross-talk X, sensor noise) is applied as in eq. (4) of
 :mod:`colourhs.synth.render`.
 
@@ -216,8 +218,7 @@ def true_mu_maps(rig: RigModel, opts: BoardRender) -> dict[str, np.ndarray]:
         prof = spot_profile(cos, opts.spot_cutoff_deg, opts.spot_beam_deg)
         for key in out:
             if key.startswith(f"{cam.name}/"):
-                with np.errstate(divide="ignore"):
-                    out[key] = (out[key] * prof.reshape(out[key].shape)).astype(np.float32)
+                out[key] = (out[key] * prof.reshape(out[key].shape)).astype(np.float32)
     return out
 
 
