@@ -216,10 +216,11 @@ def crosstalk_ratio_sigma(
     poses cannot see it. With independent errors of standard deviation
     ``mixing_sd[k][c, m]`` (the cross-talk calibration's ``led_mixing_sd``),
     ``sigma^2 = sum_m (sd_a[c_b, m] mean(J_m / J_c_b))^2 + (the same for b)``.
-    This is the error of the mu ratio itself; a scene unmixed with the same M
-    carries the same leaks, which cancel in eq. (5) where its ratios J_m / J_c
-    match the board's, so the depth's error bar does not take it
-    (:func:`colourhs.photometric.read_ratio_sigma`).
+    Independent errors can overstate it: the LED-factor fit's errors are correlated
+    between cameras (the fit is weakest along a mixing common to all of them,
+    whose leaks nearly cancel between a pair's two sides), so the depth's error
+    bar does not take this term (:func:`colourhs.photometric.read_ratio_sigma`)
+    until the fit's full covariance is carried through.
 
     Parameters
     ----------
