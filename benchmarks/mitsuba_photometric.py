@@ -45,7 +45,6 @@ import argparse
 import json
 import sys
 import time
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -67,38 +66,6 @@ RENDERS = {
     "spot-box": dict(material="diffuse", pixel_filter="box", spot=True),
     "diffuse-floor": dict(material="diffuse", pixel_filter="box", floor=True),
 }
-
-
-def draw(preset_name: str, seed: int, offset_m: tuple[float, float]):
-    """The seed's preset, ranges, nuisances and draw, restricted to what Mitsuba models."""
-    from colourhs.synth.dataset import PRESETS
-    from colourhs.synth.randomrig import RANGES_BY_NAME, draw_random
-    from colourhs.synth.rig import Nuisances
-
-    p = PRESETS[preset_name]
-    ranges = replace(
-        RANGES_BY_NAME[p.random_ranges],
-        k1=(0.0, 0.0),
-        k2=(0.0, 0.0),
-        tangential_sd=0.0,
-        rational=0.0,
-        thin_prism_sd=0.0,
-        skew_rel=0.0,
-        aspect_rel=0.0,
-        light_offset_m=offset_m,
-    )
-    nuis = Nuisances(light_falloff=False, crosstalk=False)
-    d = draw_random(
-        seed,
-        p.width,
-        p.height,
-        nuis,
-        ranges,
-        n_poses=p.n_poses,
-        sheet_frames=p.sheet_frames,
-        statue_level=p.statue_level,
-    )
-    return p, ranges, nuis, d
 
 
 def half_diagonal_deg(rig) -> float:
@@ -142,12 +109,12 @@ def render_mitsuba(out: Path, ours: Path, d, seed: int, opts) -> Path:
 
 
 def run(args) -> pd.DataFrame:
-    from colourhs.synth.mitsuba import BoardRender
+    from colourhs.synth.mitsuba import BoardRender, mitsuba_draw
 
     rows = []
     offset_m = tuple(x / 1000 for x in args.light_offset_mm)
     for seed in args.seeds:
-        p, ranges, nuis, d = draw(args.preset, seed, offset_m)
+        p, ranges, nuis, d = mitsuba_draw(args.preset, seed, light_offset_m=offset_m)
         tag = f"{args.preset}-{seed}-off{args.light_offset_mm[0]:g}-{args.light_offset_mm[1]:g}"
         ours = render_ours(args.root / f"{tag}-ours", p, seed, nuis, ranges)
         board_poses = json.loads((ours / "gt" / "board_poses.json").read_text())

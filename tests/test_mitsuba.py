@@ -9,7 +9,6 @@ truth.
 from __future__ import annotations
 
 import os
-from dataclasses import replace
 
 import cv2
 import numpy as np
@@ -22,21 +21,9 @@ pytestmark = pytest.mark.skipif(
 
 
 def _draw(seed=0, noise=False):
-    from colourhs.synth.dataset import PRESETS
-    from colourhs.synth.randomrig import RANGES_BY_NAME, draw_random
-    from colourhs.synth.rig import Nuisances
+    from colourhs.synth.mitsuba import mitsuba_draw
 
-    p = PRESETS["random-tiny"]
-    ranges = replace(
-        RANGES_BY_NAME[p.random_ranges],
-        k1=(0.0, 0.0),
-        k2=(0.0, 0.0),
-        tangential_sd=0.0,
-        aspect_rel=0.0,
-    )
-    nuis = Nuisances(light_falloff=False, crosstalk=False, noise=noise)
-    d = draw_random(seed, p.width, p.height, nuis, ranges, n_poses=p.n_poses, exact=not noise)
-    return p, ranges, nuis, d
+    return mitsuba_draw("random-tiny", seed, noise=noise, exact=not noise)
 
 
 def _white_interior(img: np.ndarray) -> np.ndarray:

@@ -103,6 +103,57 @@ def _mitsuba():
     return mi
 
 
+def mitsuba_draw(
+    preset: str,
+    seed: int,
+    *,
+    light_offset_m: tuple[float, float] = (0.0, 0.0),
+    noise: bool = True,
+    exact: bool = False,
+):
+    """A randomised preset's draw restricted to what Mitsuba models (:func:`check_rig`).
+
+    The preset's ranges with no lens distortion, square pixels, no skew and the
+    lights ``light_offset_m`` (a range, metres) from the lens centres;
+    nuisances with isotropic lights and no cross-talk, sensor noise as
+    ``noise``; ``exact`` as :func:`colourhs.synth.randomrig.draw_random`.
+    Returns the preset, the ranges, the nuisances and the draw, which
+    :func:`colourhs.synth.dataset.synthesise` (with those ranges and
+    nuisances) renders as the same rig.
+    """
+    from dataclasses import replace
+
+    from colourhs.synth.dataset import PRESETS
+    from colourhs.synth.randomrig import RANGES_BY_NAME, draw_random
+    from colourhs.synth.rig import Nuisances
+
+    p = PRESETS[preset]
+    ranges = replace(
+        RANGES_BY_NAME[p.random_ranges],
+        k1=(0.0, 0.0),
+        k2=(0.0, 0.0),
+        tangential_sd=0.0,
+        rational=0.0,
+        thin_prism_sd=0.0,
+        skew_rel=0.0,
+        aspect_rel=0.0,
+        light_offset_m=tuple(light_offset_m),
+    )
+    nuis = Nuisances(light_falloff=False, crosstalk=False, noise=noise)
+    d = draw_random(
+        seed,
+        p.width,
+        p.height,
+        nuis,
+        ranges,
+        n_poses=p.n_poses,
+        sheet_frames=p.sheet_frames,
+        statue_level=p.statue_level,
+        exact=exact,
+    )
+    return p, ranges, nuis, d
+
+
 def check_rig(rig: RigModel) -> None:
     """Raise ``ValueError`` naming what of ``rig`` Mitsuba's camera and light cannot model."""
     for cam in rig.cameras:
