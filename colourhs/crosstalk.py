@@ -182,8 +182,9 @@ def calibrate_crosstalk(
     (:meth:`MixingField.to_json`), "field_rms" and "field_quantised"; with the
     board "field" becomes the LED mixing, "filter_field" keeps the filters',
     and "led_factor" (F), "led_factor_sd" and "led_mixing_sd" (its standard
-    errors, and those of M) join, with "led_fit" (the fit's diagnostics) at the
-    top level.
+    errors, and those of M) join, with "led_fit" (the fit's diagnostics) and
+    "led_mixing_cov" (the full covariance of M_LED's off-diagonals, which the
+    fit correlates between cameras) at the top level.
 
     ``progress``: a bar over the filter fields' fits (camera and light
     colour), the board captures read and the board poses, and a line per
@@ -236,6 +237,12 @@ def calibrate_crosstalk(
                 # standard error of M_LED from F's noise, at the field's median
                 "led_mixing_sd": (result["sd"][cam] * np.abs(fields[cam].median)).tolist(),
             }
+        # covariance of M_LED's off-diagonals from F's: M_LED = M_filter * F elementwise
+        scale = np.array([abs(fields[cam].median[c, b]) for cam, c, b in result["order"]])
+        out["led_mixing_cov"] = {
+            "order": [list(o) for o in result["order"]],
+            "matrix": (result["cov"] * np.outer(scale, scale)).tolist(),
+        }
         out["method"] += "; times the LED factor from the board captures (own-light and "
         out["method"] += "same-light pose invariance, eq. 1)"
         out["led_fit"] = result["diagnostics"]
@@ -256,6 +263,16 @@ def load_mixing_sd(path: str | Path) -> dict[str, np.ndarray]:
         for cam, v in data["cameras"].items()
         if "led_mixing_sd" in v
     }
+
+
+def load_mixing_cov(path: str | Path) -> tuple[list[tuple[str, int, int]], np.ndarray] | None:
+    """The LED mixing's off-diagonals' full covariance (``led_mixing_cov``): their order,
+    (camera, channel, light) each, and the matrix; None when the file has none."""
+    data = json.loads(Path(path).read_text())
+    cov = data.get("led_mixing_cov")
+    if cov is None:
+        return None
+    return [tuple(o) for o in cov["order"]], np.asarray(cov["matrix"], float)
 
 
 def load_crosstalk(path: str | Path, light: str = "led") -> dict:

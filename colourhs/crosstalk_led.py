@@ -185,7 +185,8 @@ def led_factor(
     -------
     dict with ``factor`` (camera -> (3, 3) F, unit diagonal), ``sd`` (camera ->
     (3, 3) standard errors: sandwich estimate over 8 x 8 blocks of samples,
-    posterior with ``shrink``), ``diagnostics``
+    posterior with ``shrink``), ``cov`` (their full covariance, in ``order``:
+    (camera, channel, light) per off-diagonal), ``diagnostics``
     (JSON-able: rows per kind, iterations, RMS residual, singular values of
     the normal matrix of F with the nuisances eliminated, parameters).
     """
@@ -221,7 +222,8 @@ def led_factor(
         | diag
         | {"params": {k: v for k, v in opts.items() if k in LED_DEFAULTS}}
     )
-    return {"factor": factor, "sd": sds, "diagnostics": diag}
+    order = [(name, c, b) for name in rig.camera_names for c, b in OFF_DIAGONAL]
+    return {"factor": factor, "sd": sds, "cov": cov, "order": order, "diagnostics": diag}
 
 
 def read_board_shots(ds, poses_csv, progress: bool = False) -> list[BoardShot]:

@@ -83,7 +83,7 @@ import h5py
 import numpy as np
 
 from colourhs.capture import COLOURS, Rig, open_dataset, read_image
-from colourhs.crosstalk import load_crosstalk, load_mixing_sd, unmix
+from colourhs.crosstalk import load_crosstalk, load_mixing_cov, load_mixing_sd, unmix
 from colourhs.io import atomic_output, note_read, sha256_files
 from colourhs.photometric_errors import board_points, mu_map_errors, pair_ratio_errors
 from colourhs.photometric_kappa import (
@@ -274,6 +274,7 @@ def calibrate(
     views: list[PoseView],
     *,
     mixing_sd: dict[str, np.ndarray] | None = None,
+    mixing_cov: tuple[list, np.ndarray] | None = None,
     progress: bool = False,
     **params,
 ) -> dict:
@@ -289,8 +290,9 @@ def calibrate(
     the two maps of a camera equal up to a constant), ``min_support``
     calibrated-region threshold. ``mixing_sd``: camera -> (3, 3) standard
     errors of the cross-talk mixing the views were unmixed with
-    (:func:`colourhs.crosstalk.load_mixing_sd`), for the ratios' cross-talk
-    term. ``progress``: a bar over the reciprocal pairs'
+    (:func:`colourhs.crosstalk.load_mixing_sd`), and ``mixing_cov`` their full
+    covariance (:func:`colourhs.crosstalk.load_mixing_cov`), for the ratios'
+    cross-talk term. ``progress``: a bar over the reciprocal pairs'
     samples and a line per later step, on stderr (:mod:`colourhs.progress`).
 
     Returns a dict with ``maps`` ("<camera>/<colour>" -> (H, W) float32 mu),
@@ -359,7 +361,9 @@ def calibrate(
         name = f"{ka[0]}/{COLOURS[ka[1]]}~{kb[0]}/{COLOURS[kb[1]]}"
         out["offsets"][name] = offs[p]
         jack = float(ratio_sigma[p])
-        xt = crosstalk_ratio_sigma(s, views, rig.camera(ka[0]), rig.camera(kb[0]), mixing_sd or {})
+        xt = crosstalk_ratio_sigma(
+            s, views, rig.camera(ka[0]), rig.camera(kb[0]), mixing_sd or {}, mixing_cov
+        )
         sigma = float(np.hypot(jack, xt))
         out["ratio_sigma"][name] = sigma if np.isfinite(sigma) else None  # JSON null
         out["ratio_sigma_parts"][name] = {
@@ -449,7 +453,10 @@ def photometric_maps(
     t0 = perf_counter()
     rig, views = load_views(dataset_dir, poses_csv, crosstalk_json, progress)
     mixing_sd = load_mixing_sd(crosstalk_json) if crosstalk_json else None
-    result = calibrate(rig, views, mixing_sd=mixing_sd, progress=progress, **params)
+    mixing_cov = load_mixing_cov(crosstalk_json) if crosstalk_json else None
+    result = calibrate(
+        rig, views, mixing_sd=mixing_sd, mixing_cov=mixing_cov, progress=progress, **params
+    )
     ds = open_dataset(dataset_dir, check_images=False, scenes=())
     inputs = [ds.photometric_image(v.name, c) for v in views for c in rig.camera_names]
     inputs += [Path(poses_csv)] + ([Path(crosstalk_json)] if crosstalk_json else [])

@@ -203,24 +203,24 @@ def crosstalk_ratio_sigma(
     a: Camera,
     b: Camera,
     mixing_sd: dict[str, np.ndarray],
+    mixing_cov: tuple[list, np.ndarray] | None = None,
 ) -> float:
     """1-sigma of a pair's log ratio mu_a / mu_b from the unmixing's error (beyond the paper).
 
     The board images are unmixed as J = M^-1 I (:mod:`colourhs.crosstalk`); an
     error dM of camera k's mixing leaves ``d log J_c = -sum_m dM[c, m] J_m / J_c``
     in its channel c (to first order, M near the identity). Every sample of
-    eq. (6) reads camera a's channel of b's light and camera b's channel of
-    a's light, so log kappa moves by the difference of two such terms, and the
-    pair's ratio (fitted to the samples' mean, its constant c_ab included) by
-    their mean over the samples. The same dM on every pose: the jackknife over
-    poses cannot see it. With independent errors of standard deviation
-    ``mixing_sd[k][c, m]`` (the cross-talk calibration's ``led_mixing_sd``),
-    ``sigma^2 = sum_m (sd_a[c_b, m] mean(J_m / J_c_b))^2 + (the same for b)``.
-    Independent errors can overstate it: the LED-factor fit's errors are correlated
-    between cameras (the fit is weakest along a mixing common to all of them,
-    whose leaks nearly cancel between a pair's two sides), so the depth's error
-    bar does not take this term (:func:`colourhs.photometric.read_ratio_sigma`)
-    until the fit's full covariance is carried through.
+    eq. (6) reads camera a's channel c_b of b's light and camera b's channel
+    c_a of a's light, so log kappa moves by ``g . dM`` with ``g = +mean(J_m /
+    J_c_b)`` on a's entries (c_b, m) and ``-mean(J_m / J_c_a)`` on b's (c_a,
+    m), means over the pair's samples, and the pair's ratio (fitted to the
+    samples' mean, its constant c_ab included) with it. The same dM on every
+    pose: the jackknife over poses cannot see it. ``sigma^2 = g^T C g`` with
+    ``C`` the mixing's covariance ``mixing_cov`` (the cross-talk calibration's
+    ``led_mixing_cov``: the LED-factor fit correlates the cameras' errors, and
+    a mixing common to them, where the fit is weakest, largely cancels
+    between a pair's two sides), else the standard errors ``mixing_sd`` taken
+    as independent (an overstatement where the errors correlate).
 
     Parameters
     ----------
@@ -229,15 +229,16 @@ def crosstalk_ratio_sigma(
     a, b : the pair's cameras.
     mixing_sd : camera name -> (3, 3) standard errors of M; a camera absent
         contributes nothing.
+    mixing_cov : (order, matrix): the off-diagonals' (camera, channel, light)
+        order and their covariance (:func:`colourhs.crosstalk.load_mixing_cov`).
 
     Returns
     -------
     float, log units; 0 when neither camera has standard errors.
     """
-    var = 0.0
-    for cam, partner, uv in ((a, b, samples.uv_a), (b, a, samples.uv_b)):
-        sd = mixing_sd.get(cam.name)
-        if sd is None or len(uv) == 0:
+    grad = {}
+    for cam, partner, uv, sign in ((a, b, samples.uv_a, 1.0), (b, a, samples.uv_b, -1.0)):
+        if (mixing_cov is None and cam.name not in mixing_sd) or len(uv) == 0:
             continue
         c = partner.light_channel
         ratios = np.zeros((len(uv), 3))
@@ -249,5 +250,12 @@ def crosstalk_ratio_sigma(
             J = np.stack([sample_bilinear(img[..., k], uv[on]) for k in range(3)], axis=1)
             ratios[on] = J / J[:, c : c + 1]
         mean = ratios.mean(axis=0)
-        var += sum((sd[c, m] * mean[m]) ** 2 for m in range(3) if m != c)
+        for m in range(3):
+            if m != c:
+                grad[(cam.name, c, m)] = sign * mean[m]
+    if mixing_cov is not None:
+        order, C = mixing_cov
+        g = np.array([grad.get(tuple(o), 0.0) for o in order])
+        return float(np.sqrt(max(g @ C @ g, 0.0)))
+    var = sum((mixing_sd[k][c, m] * v) ** 2 for (k, c, m), v in grad.items())
     return float(np.sqrt(var))

@@ -342,14 +342,27 @@ def test_crosstalk_ratio_sigma_known_answer():
     both = np.hypot(expected, np.hypot(2e-3 * 0.1 / 0.4, 2e-3 * 0.5 / 0.4))
     assert crosstalk_ratio_sigma(s, [view], a, b, {"a": sd_a, "b": sd_b}) == pytest.approx(both)
     assert crosstalk_ratio_sigma(s, [view], a, b, {}) == 0.0
+    # the full covariance: diagonal = the independent case; a's and b's leaks of the
+    # same size and fully correlated cancel between the pair's two sides
+    order = [("a", 2, 0), ("a", 2, 1), ("b", 0, 1), ("b", 0, 2)]
+    diag = np.diag([1e-6, 1e-6, 4e-6, 4e-6])
+    got = crosstalk_ratio_sigma(s, [view], a, b, {}, (order, diag))
+    assert got == pytest.approx(both)
+    same = [("a", 2, 0), ("b", 0, 2)]  # leaks of ratio 3 and 1.25: scale them to cancel
+    g = np.array([0.6 / 0.2, -0.5 / 0.4])
+    sd = 1e-3 / np.abs(g)
+    C = np.outer(sd, sd)  # perfectly correlated: the two sides' shifts g * dM cancel
+    assert crosstalk_ratio_sigma(s, [view], a, b, {}, (same, C)) == pytest.approx(0.0, abs=1e-9)
 
 
 def test_ratio_sigma_with_crosstalk_term_is_calibrated(tmp_path):
     """With every nuisance on corner-tiny rigs (seeds 0-2, cross-talk from the pipeline's
     calibration with the board's LED factor), the pairs' ratio errors against the truth
     in units of their sigma: jackknife alone, RMS z measured 25 (up to 61: the
-    unmixing's error is shared by every pose); with the cross-talk term, 0.88."""
-    from colourhs.crosstalk import load_mixing_sd
+    unmixing's error is shared by every pose); with the cross-talk term from the
+    mixing's full covariance, 1.24 (from its standard errors taken as independent,
+    0.88: the fit correlates the cameras' errors)."""
+    from colourhs.crosstalk import load_mixing_cov, load_mixing_sd
 
     z_total, z_jack = [], []
     for seed in range(3):
@@ -365,7 +378,9 @@ def test_ratio_sigma_with_crosstalk_term_is_calibrated(tmp_path):
         xt = tmp_path / f"xt{seed}.json"
         calibrate_crosstalk(root, xt, poses_csv=poses, progress=False)
         rig, views = load_views(root, poses, xt)
-        result = calibrate(rig, views, mixing_sd=load_mixing_sd(xt), **TINY)
+        order, C = load_mixing_cov(xt)
+        assert len(order) == 18 and C.shape == (18, 18) and np.allclose(C, C.T)
+        result = calibrate(rig, views, mixing_sd=load_mixing_sd(xt), mixing_cov=(order, C), **TINY)
         truth = read_mu_maps(root / "gt" / "photometric.h5")
         for pair, err in _pair_ratio_errors(result, truth, rig, views).items():
             z_total.append(err / result["ratio_sigma"][pair])
