@@ -471,7 +471,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 
 def main(argv: list[str] | None = None) -> dict:
     args = parse_args(argv)
-    from colourhs.synth.dataset import PRESETS
+    from colourhs.synth.synthesise import PRESETS
 
     preset = PRESETS[args.preset]
     first = (preset.sheet_frames - args.frames) // 2 if args.first is None else args.first

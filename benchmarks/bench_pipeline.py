@@ -21,7 +21,7 @@ import sys
 import time
 from pathlib import Path
 
-from colourhs.report import find_benchmarks, read_benchmarks, summarise_benchmarks
+from colourhs.report.page import find_benchmarks, read_benchmarks, summarise_benchmarks
 
 ROOT = Path(__file__).resolve().parents[1]
 HERE = Path(__file__).parent

@@ -18,7 +18,7 @@ import threading
 import time
 from pathlib import Path
 
-from colourhs.synth.dataset import synthesise
+from colourhs.synth.synthesise import synthesise
 
 HERE = Path(__file__).parent
 

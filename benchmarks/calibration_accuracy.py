@@ -18,11 +18,12 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from colourhs.calibration.chromaticity import chromaticity_error
+from colourhs.calibration.crosstalk import load_crosstalk
+from colourhs.calibration.markers import read_marker_poses
+from colourhs.calibration.photometric import read_mu_maps
 from colourhs.capture import load_rig
-from colourhs.chromaticity import chromaticity_error
-from colourhs.crosstalk import load_crosstalk
-from colourhs.markers import read_marker_poses
-from colourhs.photometric import mu_map_errors, read_mu_maps
+from colourhs.evaluation.photometric_errors import mu_map_errors
 
 HERE = Path(__file__).parent
 

@@ -28,8 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
-from colourhs.crosstalk import MixingField, calibrate_crosstalk, load_crosstalk
-from colourhs.geometry import normalised_coordinates, pixel_grid
+from colourhs.calibration.crosstalk import MixingField, calibrate_crosstalk, load_crosstalk
+from colourhs.common.geometry import normalised_coordinates, pixel_grid
 
 OFF = ~np.eye(3, dtype=bool)
 
@@ -68,8 +68,8 @@ def errors(est: dict, truth: dict) -> dict[str, tuple[float, float]]:
 
 
 def run_seed(root: Path, preset: str, seed: int, workers: int) -> dict:
-    from colourhs.markers import marker_poses
-    from colourhs.synth.dataset import synthesise
+    from colourhs.calibration.markers import marker_poses
+    from colourhs.synth.synthesise import synthesise
 
     data = root / f"{preset}-seed{seed}"
     if not data.exists():

@@ -17,7 +17,7 @@ sides (``reconstruct(..., blur_px=)``, :func:`colourhs.reconstruct.sides.side_ma
 sampled bilinearly or, with a trailing ``c`` (``1c``), by cubic convolution
 (:data:`colourhs.reconstruct.sides.ORDER` set to 3 for that variant).
 Besides the depth errors it evaluates the consistency energy E
-(:func:`colourhs.reconstruct.surface.hs_residuals`, one robust scale: the
+(:func:`colourhs.reconstruct.bayes.surface.hs_residuals`, one robust scale: the
 truth's) on the same pixels at the truth, at the result, and at the result
 moved along the rays to the truth's median depth. ``E(result) < E(truth)``
 means the energy itself prefers the offset surface (the spline's shape freedom
@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from colourhs.commands import frame_indices as _seeds
+from colourhs.cli.commands import frame_indices as _seeds
 
 HERE = Path(__file__).parent
 SCENES = ("plane", "sheet")
@@ -45,7 +45,7 @@ SCENES = ("plane", "sheet")
 
 def nuisances(mode: str):
     """The synthetic rig's effects of a mode (see the module docstring)."""
-    from colourhs.synth.rig import Nuisances
+    from colourhs.synth.simulated_rig import Nuisances
 
     return {
         "exact": Nuisances().without("noise", "crosstalk"),
@@ -57,10 +57,10 @@ def energies(frame, result, truth_depth, blur_px) -> dict:
     """E at the truth, at the result and at the result moved to the truth's median depth."""
     from scipy.ndimage import binary_erosion
 
+    from colourhs.reconstruct.bayes.surface import SurfaceGraph, hs_residuals
     from colourhs.reconstruct.dataterm import pair_arrays
     from colourhs.reconstruct.frame import reference_rays
     from colourhs.reconstruct.sides import helmholtz_sides
-    from colourhs.reconstruct.surface import SurfaceGraph, hs_residuals
 
     ref = frame.rig.camera(result.info["reference"])
     W, H = frame.rig.image.width, frame.rig.image.height
@@ -85,10 +85,10 @@ def energies(frame, result, truth_depth, blur_px) -> dict:
 def run_seed(seed: int, mode: str, preset, blurs, root: Path) -> list[dict]:
     """One seed x mode: render, then every scene x blur (a trailing ``c``: cubic sampling)."""
     import colourhs.reconstruct.sides as sides
-    from colourhs.ply import load_mesh
-    from colourhs.raycast import render_depth_normals
+    from colourhs.common.ply import load_mesh
+    from colourhs.common.raycast import render_depth_normals
     from colourhs.reconstruct.frame import load_frame, reconstruct
-    from colourhs.synth.dataset import synthesise
+    from colourhs.synth.synthesise import synthesise
 
     data = synthesise(
         root / f"{mode}{seed}",
@@ -130,7 +130,7 @@ def run_seed(seed: int, mode: str, preset, blurs, root: Path) -> list[dict]:
 
 
 def main(argv=None) -> pd.DataFrame:
-    from colourhs.synth.dataset import PRESETS
+    from colourhs.synth.synthesise import PRESETS
 
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--seeds", default="1-4", help="seeds, e.g. 1-4 (default 1-4)")

@@ -59,9 +59,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from colourhs.commands import frame_indices
-from colourhs.contract import DROP_COLUMNS, GAUSSIAN_WITHIN, SIGMA_MULTIPLES
-from colourhs.variants import VARIANTS
+from colourhs.cli.commands import frame_indices
+from colourhs.common.metrics_csv import DROP_COLUMNS, GAUSSIAN_WITHIN, SIGMA_MULTIPLES
+from colourhs.workflow.variants import VARIANTS
 
 HERE = Path(__file__).parent
 #: The accuracy targets, per set: (scene, variant, metric) -> upper bounds on (the median
@@ -128,12 +128,12 @@ def seeds_in_temp(seeds, prefix: str, run, out_csv: Path) -> list[dict]:
 
 def calibrate(data: Path, calib: Path) -> dict:
     """The workflow's calibration stages on one dataset; returns the files by name."""
+    from colourhs.calibration.chromaticity import chromaticity_maps
+    from colourhs.calibration.crosstalk import calibrate_crosstalk
+    from colourhs.calibration.markers import marker_poses
+    from colourhs.calibration.noise import calibrate_noise
+    from colourhs.calibration.photometric import photometric_maps
     from colourhs.capture import open_dataset
-    from colourhs.chromaticity import chromaticity_maps
-    from colourhs.crosstalk import calibrate_crosstalk
-    from colourhs.markers import marker_poses
-    from colourhs.noise import calibrate_noise
-    from colourhs.photometric import photometric_maps
 
     calib.mkdir(parents=True, exist_ok=True)
     files = {
@@ -158,7 +158,8 @@ def calibrate(data: Path, calib: Path) -> dict:
 
 
 def variant_files(variant: str, files: dict, chromatic: str | None) -> dict:
-    """Calibration keyword arguments of ``reconstruct_frame`` for a variant (as workflow_plan)."""
+    """Calibration keyword arguments of ``reconstruct_frame`` for a variant (as the
+    workflow plan passes them)."""
     kw = {"noise_json": files["noise"]}
     if variant in ("ml_full", "bayes_ph", "bayes_full"):
         kw |= {"photometric_h5": files["photometric"], "crosstalk_json": files["crosstalk"]}
@@ -171,9 +172,10 @@ def calibration_errors(data: Path, files: dict) -> dict:
     """mu maps, cross-talk and chromaticity against the dataset's ground truth."""
     import h5py
 
+    from colourhs.calibration.chromaticity import chromaticity_error
+    from colourhs.calibration.photometric import read_mu_maps
     from colourhs.capture import load_rig
-    from colourhs.chromaticity import chromaticity_error
-    from colourhs.photometric import mu_map_errors, read_mu_maps
+    from colourhs.evaluation.photometric_errors import mu_map_errors
 
     rig = load_rig(data)
     with h5py.File(files["photometric"]) as f:
@@ -208,24 +210,24 @@ def evaluate_variant(data, scene, frames, variant, files, chromatic, work) -> di
     Returns
     -------
     dict
-        :func:`colourhs.deptherrors.depth_summary` of the pooled pixels (less
+        :func:`colourhs.evaluation.depth_errors.depth_summary` of the pooled pixels (less
         ``truth_pixels``); ``depth_sigma_median_mm`` and ``sigma_within_1/2/3``
-        (:func:`colourhs.deptherrors.sigma_summary`) over the pooled pixels with both a
+        (:func:`colourhs.evaluation.depth_errors.sigma_summary`) over the pooled pixels with both a
         finite error and a finite ``depth_sigma`` (None where the files carry none:
         ``vh``, files written before it); ``dropped_<reason>`` and ``dropped_other``
-        (:func:`colourhs.deptherrors.drop_summary`), shares of the frames' pooled
+        (:func:`colourhs.evaluation.depth_errors.drop_summary`), shares of the frames' pooled
         ground-truth pixels (None without ``dropped``); ``reciprocity_defect_deg``, the
         frames' median of the depth files' (None where they do not say); ``seconds``. A frame with
         nothing reconstructed (a depth file :func:`read_depth` refuses) counts
         every truth pixel as lost (``dropped_other``), not as an error.
     """
     from colourhs.capture import load_rig
-    from colourhs.deptherrors import depth_errors, depth_summary, sigma_summary
-    from colourhs.depthfile import read_depth
-    from colourhs.hull import visual_hull
-    from colourhs.ply import load_mesh
-    from colourhs.raycast import render_depth_normals
+    from colourhs.common.depthfile import read_depth
+    from colourhs.common.ply import load_mesh
+    from colourhs.common.raycast import render_depth_normals
+    from colourhs.evaluation.depth_errors import depth_errors, depth_summary, sigma_summary
     from colourhs.reconstruct.frame import reconstruct_frame
+    from colourhs.surfaces.hull import visual_hull
 
     rig = load_rig(data)
     size = (rig.image.width, rig.image.height)
@@ -310,8 +312,8 @@ def run_seed(
     from dataclasses import replace
 
     from colourhs.capture import open_dataset
-    from colourhs.synth.dataset import PRESETS, synthesise
     from colourhs.synth.randomranges import RANGES_BY_NAME
+    from colourhs.synth.synthesise import PRESETS, synthesise
 
     ranges, name = None, preset
     if light_offset_m is not None:
@@ -735,7 +737,7 @@ def main(argv=None) -> dict:
     )
     args = p.parse_args(argv)
     if args.summarise is None:
-        from colourhs.synth.dataset import PRESETS
+        from colourhs.synth.synthesise import PRESETS
 
         if args.preset not in PRESETS or not PRESETS[args.preset].randomised:
             randomised = ", ".join(k for k, v in PRESETS.items() if v.randomised)

@@ -6,7 +6,7 @@ Run: ``.venv/bin/python benchmarks/light_offset.py [--preset corner] [--seeds 1,
 Helmholtz reciprocity (eq. 3) equates the BRDF of a reciprocal pair's two
 readings only when each light sits at its camera's centre. With a light
 beside the lens the two readings see the surface at half-vectors
-:func:`colourhs.geometry.half_vector_defect` apart, which leaves matte
+:func:`colourhs.common.geometry.half_vector_defect` apart, which leaves matte
 surfaces exact and moves glossy ones. For every seed of ``--preset`` the
 rig, board, scenes and materials are drawn once; only the lights' offset
 from the lens changes (the same directions, every camera's offset of each
@@ -15,7 +15,7 @@ sensor noise (the seed's sensor) but no cross-talk, and the reconstruction
 has the TRUE calibration: mu maps (``gt/photometric.h5``, which with an
 offset light are exact at the scene's depth only) and, for the coloured
 statue, chromaticity; the noise model is the pipeline's
-(:func:`colourhs.noise.calibrate_noise` on the board poses).
+(:func:`colourhs.calibration.noise.calibrate_noise` on the board poses).
 
 Writes ``benchmarks/results/light_offset.csv``: one row per seed x offset x
 scene with the rig's largest half-vector defect at its fixation point
@@ -35,7 +35,7 @@ import numpy as np
 import pandas as pd
 from generalisation import seeds_in_temp
 
-from colourhs.commands import frame_indices
+from colourhs.cli.commands import frame_indices
 
 HERE = Path(__file__).parent
 #: Scene -> the Bayesian variant a rig owner runs on it (white: bayes_ph; coloured:
@@ -46,15 +46,15 @@ VARIANT = {"plane": "bayes_ph", "sheet": "bayes_ph", "statue": "bayes_full"}
 def run_offset(seed: int, preset, offset_m: float, scenes, root: Path) -> list[dict]:
     """Render the seed's draw with every light ``offset_m`` beside its lens, reconstruct
     each scene with the true calibration, and measure it against the ground truth."""
+    from colourhs.calibration.noise import calibrate_noise
     from colourhs.capture import load_rig
-    from colourhs.deptherrors import depth_errors
-    from colourhs.depthfile import read_depth
-    from colourhs.noise import calibrate_noise
-    from colourhs.ply import load_mesh
+    from colourhs.common.depthfile import read_depth
+    from colourhs.common.ply import load_mesh
+    from colourhs.evaluation.depth_errors import depth_errors
     from colourhs.reconstruct.frame import reconstruct_frame
-    from colourhs.synth.dataset import synthesise
     from colourhs.synth.randomranges import RANGES_BY_NAME
-    from colourhs.synth.rig import Nuisances
+    from colourhs.synth.simulated_rig import Nuisances
+    from colourhs.synth.synthesise import synthesise
 
     ranges = replace(RANGES_BY_NAME[preset.random_ranges], light_offset_m=(offset_m, offset_m))
     data = root / f"offset-{offset_m * 1e3:g}mm"
@@ -119,14 +119,14 @@ def run_offset(seed: int, preset, offset_m: float, scenes, root: Path) -> list[d
 
 def _points_defect(rig, depth) -> float:
     """Median over the reconstructed points of each point's largest pair defect, degrees."""
-    from colourhs.mesh import oriented_points
+    from colourhs.surfaces.poisson import oriented_points
 
     X, _ = oriented_points(depth)
     return float(np.degrees(np.median(rig.reciprocity_defect(X).max(axis=0))))
 
 
 def main(argv=None) -> pd.DataFrame:
-    from colourhs.synth.dataset import PRESETS
+    from colourhs.synth.synthesise import PRESETS
 
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--preset", default="corner", help="a randomised preset (default corner)")

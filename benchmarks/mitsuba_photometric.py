@@ -5,7 +5,7 @@ renderer; this benchmark feeds it board poses that an independent renderer
 made. For every seed it draws a ``random`` (or ``corner``) rig that Mitsuba's
 camera and light can model (no lens distortion, square pixels, isotropic point
 lights; light offsets ``--light-offset-mm``), renders its photometric
-captures with :mod:`colourhs.synth.render` and, for every ``--renders``
+captures with :mod:`colourhs.synth.image_formation` and, for every ``--renders``
 entry, again with Mitsuba (:mod:`colourhs.synth.mitsuba`), adding the same
 channel sensitivity, cross-talk (off here, as in ``photometric_random``'s
 ``noxt``) and sensor noise (the same draw per image). Each dataset is
@@ -50,8 +50,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from colourhs import photometric as ph
-from colourhs.commands import frame_indices
+from colourhs.calibration import photometric as ph
+from colourhs.cli.commands import frame_indices
 
 HERE = Path(__file__).parent
 ROOT = HERE.parent
@@ -79,7 +79,7 @@ def half_diagonal_deg(rig) -> float:
 
 def render_ours(out: Path, preset, seed, nuis, ranges) -> Path:
     """Our renderer's photometric captures (and ground truth) of the seed."""
-    from colourhs.synth.dataset import synthesise
+    from colourhs.synth.synthesise import synthesise
 
     if not (out / "rig.json").exists():
         t = time.time()

@@ -31,7 +31,7 @@ import h5py
 import pandas as pd
 from generalisation import evaluate_variant, seeds_in_temp
 
-from colourhs.commands import frame_indices as _seeds
+from colourhs.cli.commands import frame_indices as _seeds
 
 HERE = Path(__file__).parent
 SCENES = ("plane", "sheet")
@@ -49,8 +49,8 @@ def scaled_mu(gt: Path, out: Path, camera: str, factor: float) -> Path:
 
 def run_seed(seed: int, errors, ml_errors, root: Path) -> list[dict]:
     from colourhs.capture import load_rig
-    from colourhs.synth.dataset import PRESETS, synthesise
-    from colourhs.synth.rig import Nuisances
+    from colourhs.synth.simulated_rig import Nuisances
+    from colourhs.synth.synthesise import PRESETS, synthesise
 
     preset = replace(PRESETS["random-tiny"], name="musens", width=320, height=240, sheet_frames=1)
     data = synthesise(

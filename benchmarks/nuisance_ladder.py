@@ -42,8 +42,8 @@ from pathlib import Path
 import pandas as pd
 from generalisation import calibrate, calibration_errors, evaluate_variant, seeds_in_temp
 
-from colourhs.commands import frame_indices as _seeds
-from colourhs.variants import parse_variants
+from colourhs.cli.commands import frame_indices as _seeds
+from colourhs.workflow.variants import parse_variants
 
 HERE = Path(__file__).parent
 SCENES = ("plane", "sheet")
@@ -53,7 +53,7 @@ EFFECTS = ("light_falloff", "vignetting", "gain_spread", "crosstalk", "noise", "
 
 def rungs() -> list[tuple[str, object]]:
     """The ladder: (name, Nuisances), in order."""
-    from colourhs.synth.rig import Nuisances
+    from colourhs.synth.simulated_rig import Nuisances
 
     none = Nuisances.none()
     full = Nuisances()
@@ -68,7 +68,7 @@ def rungs() -> list[tuple[str, object]]:
 
 def run_rung(seed: int, preset, name: str, nuisances, root: Path, variants=VARIANTS) -> list[dict]:
     """One seed x rung: render, calibrate (or take the truth), reconstruct, evaluate."""
-    from colourhs.synth.dataset import synthesise
+    from colourhs.synth.synthesise import synthesise
 
     exact = name == "exact"
     t0 = time.time()
@@ -113,7 +113,7 @@ def run_rung(seed: int, preset, name: str, nuisances, root: Path, variants=VARIA
 
 
 def main(argv=None) -> pd.DataFrame:
-    from colourhs.synth.dataset import PRESETS
+    from colourhs.synth.synthesise import PRESETS
 
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--seeds", default="1-3", help="seeds, e.g. 1-5 (default 1-3)")

@@ -6,7 +6,7 @@ cross-talk, which isolates this stage; ``all``: every nuisance, images
 unmixed with the cross-talk calibration as the pipeline has it), take the
 board poses from the markers stage (``marker_poses``) and from the truth,
 calibrate with the method at ``--baseline`` (a git revision of
-``colourhs/photometric.py``, loaded from git) and with the working tree's,
+``colourhs/calibration/photometric.py``, loaded from git) and with the working tree's,
 and score each against ``gt/photometric.h5``:
 
 - ``mu_map_errors``: RMS log error of every map, one scale per pair removed
@@ -53,8 +53,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from colourhs import photometric as ph
-from colourhs.commands import frame_indices
+from colourhs.calibration import photometric as ph
+from colourhs.cli.commands import frame_indices
+from colourhs.evaluation import photometric_errors as pe
 
 HERE = Path(__file__).parent
 ROOT = HERE.parent
@@ -62,9 +63,9 @@ BASELINE_REV = "67c48a0"  # the calibration before the colour-shading work
 
 
 def load_baseline(rev: str):
-    """The module ``colourhs/photometric.py`` as it was at git revision ``rev``."""
+    """The module ``colourhs/calibration/photometric.py`` as it was at git revision ``rev``."""
     src = subprocess.run(
-        ["git", "show", f"{rev}:colourhs/photometric.py"],
+        ["git", "show", f"{rev}:colourhs/calibration/photometric.py"],
         cwd=ROOT,
         check=True,
         capture_output=True,
@@ -81,8 +82,8 @@ def load_baseline(rev: str):
 
 def dataset(root: Path, preset: str, seed: int, nuisances: str, n_poses: int | None) -> Path:
     """The seed's dataset under ``root`` (rendered when absent)."""
-    from colourhs.synth.dataset import PRESETS, synthesise
-    from colourhs.synth.rig import Nuisances
+    from colourhs.synth.simulated_rig import Nuisances
+    from colourhs.synth.synthesise import PRESETS, synthesise
 
     tag = f"{preset}-{nuisances}-{seed}"
     preset = PRESETS[preset]
@@ -109,8 +110,8 @@ def dataset(root: Path, preset: str, seed: int, nuisances: str, n_poses: int | N
 
 def poses_csvs(data: Path, work: Path) -> dict[str, Path]:
     """``marker`` (the markers stage, cached) and ``truth`` pose tables of a dataset."""
-    from colourhs.markers import marker_poses
-    from colourhs.synth.dataset import true_poses_csv
+    from colourhs.calibration.markers import marker_poses
+    from colourhs.synth.synthesise import true_poses_csv
 
     work.mkdir(parents=True, exist_ok=True)
     marker = work / "marker_poses.csv"
@@ -121,23 +122,23 @@ def poses_csvs(data: Path, work: Path) -> dict[str, Path]:
 
 def score(result, truth, rig, gt_poses, calib_names) -> tuple[list, list]:
     """Map rows (mu_map_errors) and pair rows (pair_ratio_errors on plane and board points)."""
-    maps = ph.mu_map_errors(result, truth, rig)
+    maps = pe.mu_map_errors(result, truth, rig)
     maps = maps[maps.method == "calibrated"]
     rows = maps[["map", "rms_log_error", "calibrated_fraction"]].to_dict(orient="records")
     pts = {
-        "plane": ph.board_points(rig.board, [gt_poses["plane"]]),
-        "board": ph.board_points(rig.board, [gt_poses[n] for n in calib_names], 0.004),
+        "plane": pe.board_points(rig.board, [gt_poses["plane"]]),
+        "board": pe.board_points(rig.board, [gt_poses[n] for n in calib_names], 0.004),
     }
     pairs = []
     for where, p in pts.items():
-        e = ph.pair_ratio_errors(result, truth, rig, p)
+        e = pe.pair_ratio_errors(result, truth, rig, p)
         for r in e[e.method == "calibrated"].to_dict(orient="records"):
             pairs.append({"pair": r["pair"], "points": where, "rms_log_error": r["rms_log_error"]})
     return rows, pairs
 
 
 def run(args) -> pd.DataFrame:
-    from colourhs.crosstalk import calibrate_crosstalk
+    from colourhs.calibration.crosstalk import calibrate_crosstalk
 
     methods = {}
     if "baseline" in args.methods:

@@ -7,8 +7,8 @@ ground-truth mesh, renders the truth into the reference camera and writes
 (frames pooled), the median, RMS and 95th percentile absolute depth error
 (mm) and the median normal error (degrees), over the pixels the method
 reconstructed, plus the fraction of true surface pixels it covers. The
-errors are :func:`colourhs.evaluate.depth_errors`, pooled by
-:func:`colourhs.evaluate.depth_summary`.
+errors are :func:`colourhs.evaluation.accuracy.depth_errors`, pooled by
+:func:`colourhs.evaluation.accuracy.depth_summary`.
 """
 
 from __future__ import annotations
@@ -21,9 +21,9 @@ import numpy as np
 import pandas as pd
 
 from colourhs.capture import load_rig
-from colourhs.deptherrors import depth_errors, depth_summary
-from colourhs.depthfile import read_depth
-from colourhs.ply import load_mesh
+from colourhs.common.depthfile import read_depth
+from colourhs.common.ply import load_mesh
+from colourhs.evaluation.depth_errors import depth_errors, depth_summary
 
 HERE = Path(__file__).parent
 

@@ -20,7 +20,7 @@ os.environ.setdefault("NUMPY_MADVISE_HUGEPAGE", "0")
 
 # Beyond the paper (speed): open3d's plotly viewer (dash) is imported on its
 # first use, not with open3d: 0.25 s less for each job that imports open3d
-# (colourhs.deferred).
-from colourhs.deferred import defer_open3d_plotly  # noqa: E402
+# (colourhs.common.lazy_open3d).
+from colourhs.common.lazy_open3d import defer_open3d_plotly  # noqa: E402
 
 defer_open3d_plotly()

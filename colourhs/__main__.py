@@ -2,6 +2,6 @@
 
 import sys
 
-from colourhs.cli import main
+from colourhs.cli.parser import main
 
 sys.exit(main())

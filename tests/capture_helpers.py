@@ -169,8 +169,8 @@ def assign(*keys: str | int, value: Any) -> Callable[[Any], None]:
 def render_exact(root, preset, seed: int, scenes, parts=("photometric", "scenes")):
     """A synthetic dataset of ``scenes`` without sensor noise and cross-talk (16 bit,
     exact masks; every other nuisance on, which the true calibration undoes)."""
-    from colourhs.synth.dataset import synthesise
-    from colourhs.synth.rig import Nuisances
+    from colourhs.synth.simulated_rig import Nuisances
+    from colourhs.synth.synthesise import synthesise
 
     return synthesise(
         root,

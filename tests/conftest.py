@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from colourhs.synth.dataset import Preset, synthesise
-from colourhs.synth.rig import Nuisances
+from colourhs.synth.simulated_rig import Nuisances
+from colourhs.synth.synthesise import Preset, synthesise
 
 # 640x480 like the demo preset, with fewer board poses and sheet frames.
 CHECK_PRESET = Preset("check", 640, 480, 1250.0, 2, n_poses=3, sheet_frames=1)
@@ -52,9 +52,9 @@ def plane_calibrated(tmp_path_factory):
     Returns the dataset path and the calibration files (cross-talk JSON,
     photometric HDF5) made by the marker, cross-talk and photometric stages.
     """
-    from colourhs.crosstalk import calibrate_crosstalk
-    from colourhs.markers import marker_poses
-    from colourhs.photometric import photometric_maps
+    from colourhs.calibration.crosstalk import calibrate_crosstalk
+    from colourhs.calibration.markers import marker_poses
+    from colourhs.calibration.photometric import photometric_maps
 
     root = tmp_path_factory.mktemp("plane")
     data = synthesise(root / "data", PLANE_PRESET, scenes=("plane",), progress=False)

@@ -8,9 +8,9 @@ import numpy as np
 import open3d as o3d
 
 from colourhs.capture import Camera
-from colourhs.raycast import cast_pixels
-from colourhs.sampling import sample_bilinear
-from colourhs.synth.render import SHADOW_EPS_M
+from colourhs.common.raycast import cast_pixels
+from colourhs.common.sampling import sample_bilinear
+from colourhs.synth.image_formation import SHADOW_EPS_M
 
 
 def constraint_vector(
@@ -94,7 +94,7 @@ def pair_rows(
     (N, P, 3) rows w, NaN where a point projects outside an image.
     """
     from colourhs.capture import COLOURS
-    from colourhs.geometry import project
+    from colourhs.common.geometry import project
 
     rows = []
     for pr in pairs:

@@ -1,9 +1,9 @@
 """Issue 12: every job reads only its declared inputs (helpers of the workflow tests).
 
 A run with ``COLOURHS_AUDIT_READS=FOLDER`` set has every job's ``colourhs`` process
-record the files it opened to read (:func:`colourhs.io.record_reads`: Python's
+record the files it opened to read (:func:`colourhs.common.files.record_reads`: Python's
 ``open`` audit events, and the HDF5 and PLY files read in C through
-:func:`colourhs.io.note_read`). :func:`undeclared_reads` compares them with what
+:func:`colourhs.common.files.note_read`). :func:`undeclared_reads` compares them with what
 Snakemake recorded for each job: a file a job reads but its rule does not declare
 would not rerun the job when it changes (a silent stale result). Folders the jobs
 list are not checked: the rules' input functions glob the same folders, so an
@@ -24,7 +24,7 @@ from snakemake.api import SnakemakeApi
 from snakemake.settings.enums import Quietness
 from snakemake.settings.types import ConfigSettings, DAGSettings, OutputSettings, ResourceSettings
 
-from colourhs.cli import SNAKEFILE
+from colourhs.cli.parser import SNAKEFILE
 
 ENV = "COLOURHS_AUDIT_READS"
 

@@ -1,4 +1,5 @@
-"""Surface chromaticity calibration (colourhs.chromaticity, section III-D, eqs. 9-12)."""
+"""Surface chromaticity calibration (colourhs.calibration.chromaticity, section III-D,
+eqs. 9-12)."""
 
 from __future__ import annotations
 
@@ -10,8 +11,7 @@ import h5py
 import numpy as np
 import pytest
 
-from colourhs.capture import COLOURS, CaptureFormatError, open_dataset, read_mask
-from colourhs.chromaticity import (
+from colourhs.calibration.chromaticity import (
     NORMALISATION,
     chromaticity_error,
     chromaticity_map,
@@ -22,7 +22,8 @@ from colourhs.chromaticity import (
     signal_mask,
     solve_chromaticity,
 )
-from colourhs.figures import chromaticity_figure, chromaticity_rgb
+from colourhs.capture import COLOURS, CaptureFormatError, open_dataset, read_mask
+from colourhs.report.figures import chromaticity_figure, chromaticity_rgb
 
 # Median relative error bound on the tiny preset (all nuisances on). The demo preset's target
 # is 2 % (measured there: toy 0.85-0.86 %, statue 1.28-1.36 %). The statue's error is shot
@@ -267,7 +268,7 @@ def test_all_samples_masked_leaves_no_output(tiny_dataset, tmp_path):
 def test_command_draws_the_figure_and_leaves_neither_file_when_it_fails(tiny_dataset, tmp_path):
     """The figure is the command's (calibration modules do not import figures): written
     beside the maps; a figure that cannot be written removes the maps too."""
-    from colourhs.cli import main
+    from colourhs.cli.parser import main
 
     out, png = tmp_path / "toy.h5", tmp_path / "toy.png"
     assert main(["chromaticity", str(tiny_dataset), "toy", str(out), "--figure", str(png)]) == 0

@@ -15,8 +15,8 @@ import pytest
 import yaml
 from whole_job import VARIANTS, snapshot
 
-from colourhs.cli import PROJECT_ROOT, _input_problem, main
-from colourhs.depthfile import DepthResult, write_depth
+from colourhs.cli.parser import PROJECT_ROOT, _input_problem, main
+from colourhs.common.depthfile import DepthResult, write_depth
 
 
 def test_synth_refuses_to_overwrite(tmp_path, capsys):
@@ -307,7 +307,7 @@ USER_ERRORS = {  # argv -> what the one line must say
         ["--config", "bad.yaml: not YAML"],
     ),
     "folder json": (["metrics", "{b}", "{o}/m.csv"], ["json", ": a folder, not a file"]),
-    # issue 12: depth files are read in full (colourhs.depthfile.read_depth) and maps to
+    # issue 12: depth files are read in full (colourhs.common.depthfile.read_depth) and maps to
     # their end before a stage starts, not just their signature; the error names the option
     "mesh half depth": (
         ["mesh", "{b}/half.h5", "{o}/m.ply"],
@@ -425,10 +425,10 @@ def test_user_errors_are_one_line_and_write_nothing(
 
 def test_each_depth_file_is_read_once(bad_inputs, tmp_path, monkeypatch, capsys):
     """Issue 12: mesh, evaluate and figures read their depth file once: the input
-    check's read (colourhs.cli._check_inputs) is the one the stage uses (it was
+    check's read (colourhs.cli.parser._check_inputs) is the one the stage uses (it was
     read twice: 0.2 s of a job at 1280 x 960). Measured: 1.0 s (a Poisson mesh
     at octree depth 5, a figure)."""
-    import colourhs.depthfile as depthfile
+    import colourhs.common.depthfile as depthfile
 
     read = []
     real = depthfile.read_depth
@@ -463,7 +463,7 @@ def test_every_option_shows_its_default():
     """Issue 14: every option with a default, and every tuning option, says it in --help."""
     import argparse
 
-    from colourhs.cli import build_parser
+    from colourhs.cli.parser import build_parser
 
     parser = build_parser(show_defaults=True)
     (sub,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
@@ -506,7 +506,7 @@ def test_synth_help_names_exactly_the_presets(capsys):
     """The help once named a preset (random-tiny-lens) that ``PRESETS`` refused."""
     import re
 
-    from colourhs.synth.dataset import PRESETS
+    from colourhs.synth.synthesise import PRESETS
 
     with pytest.raises(SystemExit):
         main(["synth", "--help"])

@@ -14,8 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from colourhs.capture import COLOURS
-from colourhs.crosstalk import (
+from colourhs.calibration.crosstalk import (
     MixingField,
     calibrate_crosstalk,
     crosstalk_matrix,
@@ -25,6 +24,7 @@ from colourhs.crosstalk import (
     shrink_towards_filter,
     unmix,
 )
+from colourhs.capture import COLOURS
 
 OFF = ~np.eye(3, dtype=bool)
 
@@ -35,7 +35,7 @@ def true_mixing(dataset: Path) -> dict[str, np.ndarray]:
     sigma as CameraModel.sensitivity at the undistorted normalised coordinates of
     the pixel centre (what render.channel_signal multiplies); X from gt/rig_model.json.
     """
-    from colourhs.geometry import normalised_coordinates, pixel_grid
+    from colourhs.common.geometry import normalised_coordinates, pixel_grid
 
     model = json.loads((dataset / "gt" / "rig_model.json").read_text())
     image = json.loads((dataset / "rig.json").read_text())["image"]
@@ -84,8 +84,8 @@ def max_rms(mixing: dict, truth: dict) -> dict[str, tuple[float, float]]:
 
 
 def _render(root: Path, preset: str, seed: int, poses: bool = True, **kw) -> Path:
-    from colourhs.markers import marker_poses
-    from colourhs.synth.dataset import synthesise
+    from colourhs.calibration.markers import marker_poses
+    from colourhs.synth.synthesise import synthesise
 
     data = synthesise(
         root / "data",
@@ -229,7 +229,7 @@ def test_random_rig_led_mixing_within_half_a_percent(random_tiny):
 
 def test_calibration_files_and_loaders(random_tiny):
     """Without poses: today's file (constant "M"); with them: the field, its median as "M"."""
-    from colourhs.photometric import load_views
+    from colourhs.calibration.photometric import load_views
 
     data, root, today, new = random_tiny
     for cam, v in today["cameras"].items():
@@ -254,8 +254,8 @@ def test_calibration_files_and_loaders(random_tiny):
 
 def _true_pose_problem(data: Path):
     """The rig, the board shots at their true poses (isolates this stage) and the filter fields."""
+    from colourhs.calibration.crosstalk import BoardShot
     from colourhs.capture import open_dataset, read_image
-    from colourhs.crosstalk import BoardShot
 
     ds = open_dataset(data, check_images=False)
     q = 1.0 / (ds.rig.image.white_level - ds.rig.image.black_level)
@@ -288,7 +288,7 @@ def _true_pose_problem(data: Path):
 @pytest.fixture(scope="module")
 def clean_random_tiny(tmp_path_factory):
     """random-tiny seed 0 without sensor noise, at the true board poses."""
-    from colourhs.synth.rig import Nuisances
+    from colourhs.synth.simulated_rig import Nuisances
 
     root = tmp_path_factory.mktemp("xt-clean")
     data = _render(root, "random-tiny", 0, poses=False, nuisances=Nuisances().without("noise"))
@@ -303,7 +303,7 @@ def test_led_factor_exact_on_a_noise_free_rig(clean_random_tiny):
     error); all 18 numbers determined (smallest singular value of the
     reduced normal matrix 0.0027 of the largest; bound 0.0015).
     """
-    from colourhs.crosstalk import led_factor
+    from colourhs.calibration.crosstalk import led_factor
 
     data, rig, shots, fields = clean_random_tiny
     result = led_factor(rig, shots, fields, shrink=False)
@@ -322,7 +322,7 @@ def test_light_field_ratios_alone_leave_six_numbers_free(clean_random_tiny):
     to all cameras: 6 of the 18 singular values vanish (measured <= 4e-5 of the
     largest, against 0.015 for the 12th), and F is off by up to 1.8 (M by 5 %).
     """
-    from colourhs.crosstalk import led_factor
+    from colourhs.calibration.crosstalk import led_factor
 
     _, rig, shots, fields = clean_random_tiny
     same = led_factor(rig, shots, fields, constraints=("same_light",), shrink=False)
@@ -336,7 +336,7 @@ def offset_random_tiny(tmp_path_factory):
     from dataclasses import replace
 
     import colourhs.synth.randomrig as randomrig
-    from colourhs.synth.rig import Nuisances
+    from colourhs.synth.simulated_rig import Nuisances
 
     offsets = ([0.02, 0.0, 0.0], [0.0, -0.02, 0.0], [-0.014, 0.014, 0.0])
     draw = randomrig.draw_random
@@ -367,7 +367,7 @@ def test_led_factor_with_lights_off_the_camera_centres(offset_random_tiny):
     0.0013 (bound 0.0025); keyed on the camera's pixel instead, the light's
     profile moves with the board's depth and F was off by 0.15 (M by 0.37 %).
     """
-    from colourhs.crosstalk import led_factor
+    from colourhs.calibration.crosstalk import led_factor
 
     data, rig, shots, fields = offset_random_tiny
     result = led_factor(rig, shots, fields, shrink=False)
@@ -446,7 +446,7 @@ def test_calibration_reports_progress_on_stderr(random_tiny, capsys):
 @pytest.mark.parametrize("size", [(1, 1), (7, 5), (640, 480)])
 def test_legendre_grid_is_the_basis_on_every_pixel(size):
     """The separable grid (MixingField.dense's) gives legendre_basis's numbers to the bit."""
-    from colourhs.crosstalk_field import legendre_grid
+    from colourhs.calibration.crosstalk_filter import legendre_grid
 
     W, H = size
     v, u = np.mgrid[0:H, 0:W].astype(float)

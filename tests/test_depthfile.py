@@ -1,4 +1,4 @@
-"""The results contract's depth file (colourhs.depthfile): writing and reading it,
+"""The results contract's depth file (colourhs.common.depthfile): writing and reading it,
 with and without the depth's uncertainty (``depth_sigma``, ``uncertain``) and why a
 pixel has no depth (``dropped``)."""
 
@@ -11,7 +11,7 @@ import h5py
 import numpy as np
 import pytest
 
-from colourhs.depthfile import DATASETS, DROP_REASONS, DepthResult, read_depth, write_depth
+from colourhs.common.depthfile import DATASETS, DROP_REASONS, DepthResult, read_depth, write_depth
 
 H, W = 24, 32
 CAMERA = SimpleNamespace(

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from colourhs.depthfile import DROP_REASONS
+from colourhs.common.depthfile import DROP_REASONS
 from colourhs.reconstruct.drops import drop_codes
 
 

@@ -1,7 +1,7 @@
 """Where the missing depth goes: the depth file's ``dropped`` codes
-summarised against the ground truth (colourhs.deptherrors.drop_summary), the metrics
-columns ``dropped_<reason>`` (colourhs.evaluate, colourhs.contract) and the report's
-table (colourhs.reporttables.drop_table)."""
+summarised against the ground truth (colourhs.evaluation.depth_errors.drop_summary), the metrics
+columns ``dropped_<reason>`` (colourhs.evaluation.accuracy, colourhs.common.metrics_csv) and
+the report's table (colourhs.report.tables.drop_table)."""
 
 from __future__ import annotations
 
@@ -11,14 +11,14 @@ import pytest
 from test_report import _as_dicts, _tables
 
 from colourhs.capture import Camera
-from colourhs.contract import DROP_COLUMNS, DROP_REASONS, EXTRA_COLUMNS, REQUIRED_COLUMNS
-from colourhs.deptherrors import depth_errors, depth_summary, drop_summary
-from colourhs.depthfile import DepthMap, DepthResult, write_depth
-from colourhs.evaluate import evaluate_frame, metrics_table
-from colourhs.ply import load_mesh, write_ply
-from colourhs.raycast import render_depth_normals
-from colourhs.report import build_report
-from colourhs.reporttables import drop_table
+from colourhs.common.depthfile import DepthMap, DepthResult, write_depth
+from colourhs.common.metrics_csv import DROP_COLUMNS, DROP_REASONS, EXTRA_COLUMNS, REQUIRED_COLUMNS
+from colourhs.common.ply import load_mesh, write_ply
+from colourhs.common.raycast import render_depth_normals
+from colourhs.evaluation.accuracy import evaluate_frame, metrics_table
+from colourhs.evaluation.depth_errors import depth_errors, depth_summary, drop_summary
+from colourhs.report.page import build_report
+from colourhs.report.tables import drop_table
 
 H, W = 4, 5
 #: Why each pixel has no depth (code k + 1: DROP_REASONS[k]); (1, 2) has a depth and

@@ -1,4 +1,5 @@
-"""Hausdorff distances, seen regions, depth errors and the metrics table (colourhs.evaluate)."""
+"""Hausdorff distances, seen regions, depth errors and the metrics table
+(colourhs.evaluation.accuracy)."""
 
 from __future__ import annotations
 
@@ -11,10 +12,19 @@ import pytest
 from scipy.spatial import cKDTree
 
 from colourhs.capture import Camera
-from colourhs.contract import DROP_COLUMNS, EXTRA_COLUMNS, GAUSSIAN_WITHIN
-from colourhs.deptherrors import sigma_summary, uncertainty_summary
-from colourhs.depthfile import DepthResult, read_depth, write_depth
-from colourhs.evaluate import (
+from colourhs.common.depthfile import DepthResult, read_depth, write_depth
+from colourhs.common.geometry import look_at, project
+from colourhs.common.metrics_csv import DROP_COLUMNS, EXTRA_COLUMNS, GAUSSIAN_WITHIN
+from colourhs.common.ply import load_mesh, write_ply
+from colourhs.common.raycast import (
+    cast_pixels,
+    closest_on_triangles,
+    closest_points,
+    depth_normal_maps,
+    pixel_rays,
+    render_depth_normals,
+)
+from colourhs.evaluation.accuracy import (
     CONTRACT_COLUMNS,
     depth_errors,
     evaluate_frame,
@@ -23,16 +33,7 @@ from colourhs.evaluate import (
     seen_surface,
     visible_vertices,
 )
-from colourhs.geometry import look_at, project
-from colourhs.ply import load_mesh, write_ply
-from colourhs.raycast import (
-    cast_pixels,
-    closest_on_triangles,
-    closest_points,
-    depth_normal_maps,
-    pixel_rays,
-    render_depth_normals,
-)
+from colourhs.evaluation.depth_errors import sigma_summary, uncertainty_summary
 
 W, H = 128, 96
 

@@ -16,11 +16,11 @@ import numpy as np
 import pytest
 from capture_helpers import render_exact
 
-from colourhs.ply import load_mesh
-from colourhs.raycast import render_depth_normals
+from colourhs.common.ply import load_mesh
+from colourhs.common.raycast import render_depth_normals
 from colourhs.reconstruct.frame import load_frame, reconstruct
-from colourhs.synth.dataset import PRESETS, synthesise
-from colourhs.synth.rig import Nuisances
+from colourhs.synth.simulated_rig import Nuisances
+from colourhs.synth.synthesise import PRESETS, synthesise
 
 EXACT = replace(
     PRESETS["random-tiny"],
@@ -226,11 +226,11 @@ def test_compiled_data_term_equals_the_numpy_reference(exact_rigs, tiny_dataset)
 
 def test_subsampled_depth_search_on_a_curved_object(exact_statue, monkeypatch):
     """The depth search on every 2nd pixel in rows and columns (what
-    :func:`colourhs.reconstruct.valley.search_stride` gives from 1200 pixels
+    :func:`colourhs.reconstruct.bayes.valley.search_stride` gives from 1200 pixels
     wide) finds the statue's depth as the full search does, here at 320 x 240
     where that keeps only 4 of a control cell's 16 pixels (a harder case
     than the paper preset's 28 of 114)."""
-    from colourhs.reconstruct import refine
+    from colourhs.reconstruct.bayes import refine
 
     monkeypatch.setattr(refine, "search_stride", lambda spacing: 2)
     err, ang, _ = _statue_errors(exact_statue)
@@ -245,7 +245,7 @@ def test_subsampled_depth_search_on_a_curved_object(exact_statue, monkeypatch):
 def test_the_ratio_term_of_the_error_bar_predicts_the_depths_move(exact_rigs):
     """A pair's ratio mu_a / mu_b off by 0.2 % moves the sheet of an exact rig
     (seed 1) as a whole: the error bar's ratio term (the depth search's gain on
-    that ratio, :func:`colourhs.reconstruct.uncertainty.ratio_sensitivity`, times a
+    that ratio, :func:`colourhs.reconstruct.bayes.uncertainty.ratio_sensitivity`, times a
     given 0.2 % uncertainty) predicts how far. Measured: the depth moves by
     0.103 mm, the term says 0.108 mm (with a finite 0.1 % step instead of the
     derivative the term said 2.19 mm: on exact data the rows sit on the robust

@@ -1,4 +1,4 @@
-"""Tests of the surface/evaluation figures in colourhs.figures."""
+"""Tests of the surface/evaluation figures in colourhs.report.figures."""
 
 from __future__ import annotations
 
@@ -9,9 +9,9 @@ import open3d as o3d
 import pytest
 from PIL import Image
 
-from colourhs.animation import label_frame
-from colourhs.colours import colour_values, value_colours
-from colourhs.figures import (
+from colourhs.common.colours import colour_values, value_colours
+from colourhs.report.animation import label_frame
+from colourhs.report.figures import (
     depth_map_figure,
     error_maps_figure,
     mu_maps_figure,
@@ -236,11 +236,11 @@ def test_scene_figures_share_one_scale(tmp_path):
     import json
 
     from colourhs.capture import Camera
-    from colourhs.depthfile import DepthResult, write_depth
-    from colourhs.figures import scene_figures
-    from colourhs.geometry import look_at, vertex_normals
-    from colourhs.ply import write_ply
-    from colourhs.raycast import render_depth_normals
+    from colourhs.common.depthfile import DepthResult, write_depth
+    from colourhs.common.geometry import look_at, vertex_normals
+    from colourhs.common.ply import write_ply
+    from colourhs.common.raycast import render_depth_normals
+    from colourhs.report.figures import scene_figures
 
     v, f = _sphere(30)
     n = vertex_normals(v, f)
@@ -352,11 +352,11 @@ def test_scene_figures_sigma_map_without_ground_truth(tmp_path):
     scale (the one variant's 95th percentile: 2 mm, so the 1 mm left half has the
     scale's middle colour)."""
     from colourhs.capture import Camera
-    from colourhs.depthfile import DepthResult, write_depth
-    from colourhs.figures import scene_figures
-    from colourhs.geometry import look_at, vertex_normals
-    from colourhs.ply import write_ply
-    from colourhs.raycast import render_depth_normals
+    from colourhs.common.depthfile import DepthResult, write_depth
+    from colourhs.common.geometry import look_at, vertex_normals
+    from colourhs.common.ply import write_ply
+    from colourhs.common.raycast import render_depth_normals
+    from colourhs.report.figures import scene_figures
 
     v, f = _sphere(30)
     n = vertex_normals(v, f)

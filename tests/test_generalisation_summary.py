@@ -12,7 +12,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from colourhs.contract import DROP_COLUMNS
+from colourhs.common.metrics_csv import DROP_COLUMNS
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
@@ -303,11 +303,11 @@ def test_evaluate_variant_pools_sigma_over_the_compared_pixels(monkeypatch, tmp_
     from types import SimpleNamespace
 
     import colourhs.capture
-    import colourhs.deptherrors
-    import colourhs.depthfile
-    import colourhs.hull
-    import colourhs.ply
+    import colourhs.common.depthfile
+    import colourhs.common.ply
+    import colourhs.evaluation.depth_errors
     import colourhs.reconstruct.frame
+    import colourhs.surfaces.hull
 
     nan = np.nan
     errors = {  # metres, per frame
@@ -320,9 +320,9 @@ def test_evaluate_variant_pools_sigma_over_the_compared_pixels(monkeypatch, tmp_
     }
     rig = SimpleNamespace(image=SimpleNamespace(width=2, height=2), cameras=[None])
     monkeypatch.setattr(colourhs.capture, "load_rig", lambda data: rig)
-    monkeypatch.setattr(colourhs.ply, "load_mesh", lambda path: (None, None, None))
+    monkeypatch.setattr(colourhs.common.ply, "load_mesh", lambda path: (None, None, None))
     monkeypatch.setattr(colourhs.reconstruct.frame, "reconstruct_frame", lambda *a, **k: None)
-    monkeypatch.setattr(colourhs.hull, "visual_hull", lambda *a, **k: None)
+    monkeypatch.setattr(colourhs.surfaces.hull, "visual_hull", lambda *a, **k: None)
 
     def read_depth(h5):
         vh = h5.parent.name == "vh"
@@ -338,8 +338,8 @@ def test_evaluate_variant_pools_sigma_over_the_compared_pixels(monkeypatch, tmp_
             )
         return err, np.zeros_like(err), {"truth_pixels": 4} | lost
 
-    monkeypatch.setattr(colourhs.depthfile, "read_depth", read_depth)
-    monkeypatch.setattr(colourhs.deptherrors, "depth_errors", depth_errors)
+    monkeypatch.setattr(colourhs.common.depthfile, "read_depth", read_depth)
+    monkeypatch.setattr(colourhs.evaluation.depth_errors, "depth_errors", depth_errors)
     frames = list(errors)
     files = {"noise": None, "photometric": None, "crosstalk": None}
     m = gen.evaluate_variant(tmp_path, "plane", frames, "bayes_ph", files, None, tmp_path)
@@ -354,21 +354,21 @@ def test_evaluate_variant_pools_sigma_over_the_compared_pixels(monkeypatch, tmp_
     # Where the 3 lost pixels of 8 went, pooled over the frames' truth pixels.
     assert (m["dropped_outside"], m["dropped_data_term"], m["dropped_rims"]) == (0.125, 0.25, 0)
     # A frame with nothing reconstructed: its 4 truth pixels lost, not an error.
-    import colourhs.raycast
+    import colourhs.common.raycast
 
     def refused(h5):
         if h5.stem == "000001":
             raise ValueError(f"{h5}: no reconstructed pixels (depth is empty or all NaN)")
         return read_depth(h5)
 
-    monkeypatch.setattr(colourhs.depthfile, "read_depth", refused)
+    monkeypatch.setattr(colourhs.common.depthfile, "read_depth", refused)
     truth = np.array([[1.0, 1.0], [1.0, 1.0]])
-    monkeypatch.setattr(colourhs.raycast, "render_depth_normals", lambda *a: (truth, None))
+    monkeypatch.setattr(colourhs.common.raycast, "render_depth_normals", lambda *a: (truth, None))
     empty = gen.evaluate_variant(tmp_path, "plane", frames, "bayes_ph", files, None, tmp_path)
     assert empty["coverage"] == pytest.approx(3 / 8)  # frame 0's 3 of its 4, then 0 of 4
     assert empty["dropped_outside"] == pytest.approx(1 / 8)
     assert empty["dropped_other"] == pytest.approx(4 / 8)
-    monkeypatch.setattr(colourhs.depthfile, "read_depth", read_depth)
+    monkeypatch.setattr(colourhs.common.depthfile, "read_depth", read_depth)
     vh = gen.evaluate_variant(tmp_path, "plane", frames, "vh", {}, None, tmp_path)
     assert vh["depth_median_mm"] == pytest.approx(2.0)
     assert vh["depth_sigma_median_mm"] is None and vh["sigma_within_2"] is None

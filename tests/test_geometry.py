@@ -11,7 +11,7 @@ import cv2
 import numpy as np
 import pytest
 
-from colourhs import geometry as g
+from colourhs.common import geometry as g
 
 K = np.array([[1250.0, 0.0, 321.3], [0.0, 1248.0, 238.7], [0.0, 0.0, 1.0]])
 DIST = np.array([-0.09, 0.07, 3e-4, -2e-4, 0.01])

@@ -12,8 +12,10 @@ import pytest
 from scipy.ndimage import binary_erosion
 
 from colourhs.capture import Camera, CaptureFormatError, open_dataset, read_mask
-from colourhs.geometry import backproject, look_at, pixel_grid
-from colourhs.hull import (
+from colourhs.common.geometry import backproject, look_at, pixel_grid
+from colourhs.common.ply import load_mesh
+from colourhs.common.raycast import render_depth_normals
+from colourhs.surfaces.hull import (
     axes_centre,
     carve,
     carve_field,
@@ -24,9 +26,7 @@ from colourhs.hull import (
     visual_hull,
     working_volume,
 )
-from colourhs.ply import load_mesh
-from colourhs.raycast import render_depth_normals
-from colourhs.silhouettes import silhouettes, threshold_silhouette
+from colourhs.surfaces.silhouettes import silhouettes, threshold_silhouette
 
 # ---------------------------------------------------------------------------------------------
 # A sphere of radius R at the origin, 12 cameras at distance D on two rings (+-25 deg
@@ -339,8 +339,8 @@ def test_padded_field_is_meshed_in_place_to_the_same_mesh(ring, monkeypatch):
     and meshed in place: same numbers, and far less memory than the old copies."""
     import tracemalloc
 
-    import colourhs.carving as carving
-    from colourhs.hullmesh import march_surface
+    import colourhs.surfaces.carving as carving
+    from colourhs.surfaces.hull_mesh import march_surface
 
     cams, sils = ring
     monkeypatch.setattr(carving, "SLAB_VOXELS", 1 << 14)  # small batches: the field dominates

@@ -1,11 +1,12 @@
-"""Sparse SPD solves (colourhs.linalg): equal to a dense solve, and the nearby solver's CG."""
+"""Sparse SPD solves (colourhs.common.linalg): equal to a dense solve, and the nearby
+solver's CG."""
 
 from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
 
-from colourhs.linalg import NearbySolver, solve_spd
+from colourhs.common.linalg import NearbySolver, solve_spd
 
 
 def _laplacian(n: int, anchor: np.ndarray) -> sp.csr_matrix:

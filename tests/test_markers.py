@@ -23,9 +23,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from colourhs.capture import load_rig, read_image
-from colourhs.geometry import look_at, project
-from colourhs.markers import (
+from colourhs.calibration.markers import (
     BoardPose,
     board_pose_from_corners,
     csv_columns,
@@ -34,6 +32,8 @@ from colourhs.markers import (
     read_marker_poses,
     to_grey8,
 )
+from colourhs.capture import load_rig, read_image
+from colourhs.common.geometry import look_at, project
 
 TINY_NORMAL_DEG = 0.1
 TINY_OFFSET_MM = 0.2

@@ -1,4 +1,5 @@
-"""Oriented points, hull completion and Poisson meshes (colourhs.mesh) against known geometry."""
+"""Oriented points, hull completion and Poisson meshes (colourhs.surfaces.poisson) against
+known geometry."""
 
 from __future__ import annotations
 
@@ -9,9 +10,10 @@ import pytest
 from scipy.spatial import cKDTree
 
 from colourhs.capture import Camera
-from colourhs.depthfile import DepthResult, read_depth, write_depth
-from colourhs.geometry import backproject, look_at, pixel_grid, ray_plane_intersection
-from colourhs.mesh import (
+from colourhs.common.depthfile import DepthResult, read_depth, write_depth
+from colourhs.common.geometry import backproject, look_at, pixel_grid, ray_plane_intersection
+from colourhs.common.ply import load_mesh, write_ply
+from colourhs.surfaces.poisson import (
     add_hull_points,
     crop_to_data,
     frame_mesh,
@@ -19,7 +21,6 @@ from colourhs.mesh import (
     poisson_mesh,
     poisson_voxel,
 )
-from colourhs.ply import load_mesh, write_ply
 
 W, H = 128, 96
 

@@ -34,11 +34,11 @@ def _white_interior(img: np.ndarray) -> np.ndarray:
 
 
 def test_mitsuba_renders_the_board_as_our_renderer(tmp_path):
-    """Eq. (4) on the Lambertian board: Mitsuba and colourhs.synth.render agree to 1e-4."""
+    """Eq. (4) on the Lambertian board: Mitsuba and colourhs.synth.image_formation agree to 1e-4."""
     pytest.importorskip("mitsuba")
     from colourhs.capture import load_rig, read_image
-    from colourhs.synth.dataset import synthesise
     from colourhs.synth.mitsuba import BoardRender, camera_signal, render_board
+    from colourhs.synth.synthesise import synthesise
 
     p, ranges, nuis, d = _draw()
     data = synthesise(
@@ -70,10 +70,10 @@ def test_mitsuba_renders_the_board_as_our_renderer(tmp_path):
 def test_spot_profile_is_mitsubas():
     """The spot profile behind Mitsuba's true mu maps matches Mitsuba's spot light."""
     pytest.importorskip("mitsuba")
-    from colourhs.geometry import normalised_coordinates, pixel_grid, ray_directions
+    from colourhs.common.geometry import normalised_coordinates, pixel_grid, ray_directions
     from colourhs.synth.mitsuba import BoardRender, camera_signal, render_board, spot_profile
-    from colourhs.synth.rig import COLOURS
     from colourhs.synth.scenes import WHITE_ALBEDO
+    from colourhs.synth.simulated_rig import COLOURS
 
     _, _, _, d = _draw()
     opts = BoardRender(samples_per_pixel=64, spot_cutoff_deg=12.0, spot_beam_deg=6.0)
@@ -115,9 +115,10 @@ def test_calibration_on_mitsuba_renders_and_its_model_check(tmp_path):
     pytest.importorskip("mitsuba")
     import warnings
 
-    from colourhs.photometric import calibrate, load_views, mu_map_errors, read_mu_maps
-    from colourhs.synth.dataset import synthesise, true_poses_csv
+    from colourhs.calibration.photometric import calibrate, load_views, read_mu_maps
+    from colourhs.evaluation.photometric_errors import mu_map_errors
     from colourhs.synth.mitsuba import BoardRender, photometric_dataset
+    from colourhs.synth.synthesise import synthesise, true_poses_csv
 
     p, ranges, nuis, d = _draw(noise=True)
     ours = synthesise(

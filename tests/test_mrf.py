@@ -1,4 +1,4 @@
-"""SGM with the depth-normal consistency prior (colourhs.reconstruct.mrf)."""
+"""SGM with the depth-normal consistency prior (colourhs.reconstruct.bayes.mrf)."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from numba import njit
 
-from colourhs.reconstruct import mrf
-from colourhs.reconstruct.mrf import labelling_energy, sgm_depth_normal
+from colourhs.reconstruct.bayes import mrf
+from colourhs.reconstruct.bayes.mrf import labelling_energy, sgm_depth_normal
 
 ALPHA, TAU = 0.5, 3.0
 
@@ -332,7 +332,7 @@ def test_input_validation():
 _SGM_RUN = """
 import sys
 import numpy as np
-from colourhs.reconstruct.mrf import sgm_depth_normal
+from colourhs.reconstruct.bayes.mrf import sgm_depth_normal
 rng = np.random.default_rng(0)
 H, W, K = 24, 32, 48
 cost = rng.random((H, W, K), dtype=np.float32)

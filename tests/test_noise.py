@@ -1,11 +1,16 @@
-"""The sensor noise model (colourhs.noise) against known answers."""
+"""The sensor noise model (colourhs.calibration.noise) against known answers."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from colourhs.noise import NoiseModel, estimate_noise, fit_affine_noise, neighbour_residuals
+from colourhs.calibration.noise import (
+    NoiseModel,
+    estimate_noise,
+    fit_affine_noise,
+    neighbour_residuals,
+)
 
 
 def _shaded(rng, h=240, w=320):
@@ -57,7 +62,7 @@ def test_noise_free_captures_give_the_quantisation_floor():
     rung): every bin's spread is 0, and the fit failed with a NaN in its least
     squares. With the quantisation's variance as a floor the model is that
     floor; without one it is a clear error."""
-    from colourhs.noise import quantisation_variance
+    from colourhs.calibration.noise import quantisation_variance
 
     white = 255.0
     y, x = np.mgrid[0:240, 0:320]

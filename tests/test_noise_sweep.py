@@ -8,7 +8,7 @@ the true calibration (gt/photometric.h5); the lights collocated (a light
 beside its lens breaks Helmholtz reciprocity on glossy surfaces and makes
 mu depend on depth, which is not what this measures). The
 sensor noise is then added as the renderer makes it (Poisson electrons
-and Gaussian read noise, :func:`colourhs.synth.rig.sensor`) with the noise
+and Gaussian read noise, :func:`colourhs.synth.simulated_rig.sensor`) with the noise
 scaled by k = 0.5, 1, 2 and 4 (full well / k^2, read noise / k), three
 realisations per level, and the noise model given exactly.
 """
@@ -23,11 +23,11 @@ import numpy as np
 import pytest
 from capture_helpers import render_exact
 
-from colourhs.ply import load_mesh
-from colourhs.raycast import render_depth_normals
+from colourhs.common.ply import load_mesh
+from colourhs.common.raycast import render_depth_normals
 from colourhs.reconstruct.frame import load_frame, reconstruct
-from colourhs.synth.dataset import PRESETS
 from colourhs.synth.randomranges import RANGES_BY_NAME
+from colourhs.synth.synthesise import PRESETS
 
 LEVELS = (0.5, 1.0, 2.0, 4.0)
 REALISATIONS = 3

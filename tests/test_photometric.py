@@ -9,20 +9,20 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from colourhs.capture import load_rig, open_dataset, read_image
-from colourhs.crosstalk import calibrate_crosstalk, crosstalk_matrix, unmix
-from colourhs.figures import mu_maps_figure
-from colourhs.photometric import (
+from colourhs.calibration.crosstalk import calibrate_crosstalk, crosstalk_matrix, unmix
+from colourhs.calibration.photometric import (
     Grid,
     calibrate,
     kappa,
     load_views,
-    mu_map_errors,
     photometric_maps,
     read_mu_maps,
     read_ratio_sigma,
 )
-from colourhs.synth.dataset import synthesise, true_poses_csv
+from colourhs.capture import load_rig, open_dataset, read_image
+from colourhs.evaluation.photometric_errors import mu_map_errors
+from colourhs.report.figures import mu_maps_figure
+from colourhs.synth.synthesise import synthesise, true_poses_csv
 
 TINY = {"grid_spacing_px": 8}
 
@@ -206,9 +206,9 @@ def _pair_ratio_errors(result, truth, rig, views) -> dict:
     """Per pair: the mean over the board poses' white points of the calibrated log
     ratio log(mu_a / mu_b) minus the true one (what moves a smooth surface's depth)."""
     from colourhs.capture import COLOURS
-    from colourhs.geometry import project
-    from colourhs.photometric import board_points
-    from colourhs.sampling import sample_bilinear
+    from colourhs.common.geometry import project
+    from colourhs.common.sampling import sample_bilinear
+    from colourhs.evaluation.photometric_errors import board_points
 
     pts = board_points(rig.board, [(v.R, v.t) for v in views])
     out = {}
@@ -230,7 +230,7 @@ def _pair_ratio_errors(result, truth, rig, views) -> dict:
 @pytest.fixture(scope="module")
 def tiny_noxt(tmp_path_factory):
     """The tiny rig with its sensor noise and no cross-talk; its views at the true poses."""
-    from colourhs.synth.rig import Nuisances
+    from colourhs.synth.simulated_rig import Nuisances
 
     tmp = tmp_path_factory.mktemp("noxt")
     root = synthesise(tmp / "d", "tiny", nuisances=Nuisances().without("crosstalk"), progress=False)
@@ -287,8 +287,8 @@ def test_pair_ratio_sigma_needs_four_poses(tiny_calibration):
 
 def test_box_means_are_centre_values_of_smooth_images():
     """A box mean of a linear ramp is its centre value; a saturated pixel flags its boxes."""
-    from colourhs.photometric import PoseView
-    from colourhs.photometric_kappa import box_means
+    from colourhs.calibration.photometric import PoseView
+    from colourhs.calibration.photometric_samples import box_means
 
     v, u = np.mgrid[0:40, 0:50].astype(float)
     img = np.stack([0.2 + 0.004 * u + 0.003 * v] * 3, axis=-1)
@@ -324,7 +324,7 @@ def test_crosstalk_ratio_sigma_known_answer():
     """sigma^2 = sum over the leaking channels of (sd of M x mean leak ratio)^2, both cameras."""
     from types import SimpleNamespace
 
-    from colourhs.photometric import KappaSamples, PoseView, crosstalk_ratio_sigma
+    from colourhs.calibration.photometric import KappaSamples, PoseView, crosstalk_ratio_sigma
 
     a = SimpleNamespace(name="a", light_channel=0)
     b = SimpleNamespace(name="b", light_channel=2)
@@ -362,7 +362,7 @@ def test_ratio_sigma_with_crosstalk_term_is_calibrated(tmp_path):
     unmixing's error is shared by every pose); with the cross-talk term from the
     mixing's full covariance, 1.24 (from its standard errors taken as independent,
     0.88: the fit correlates the cameras' errors)."""
-    from colourhs.crosstalk import load_mixing_cov, load_mixing_sd
+    from colourhs.calibration.crosstalk import load_mixing_cov, load_mixing_sd
 
     z_total, z_jack = [], []
     for seed in range(3):
@@ -393,7 +393,7 @@ def test_ratio_sigma_with_crosstalk_term_is_calibrated(tmp_path):
 def _grid_samples(rng, n_poses, step, noise, pose_field=None):
     """Eq. (6) samples on a step-pixel grid of b, a = b's pixels, log kappa = noise
     (+ a smooth per-pose field), for a zero map."""
-    from colourhs.photometric import KappaSamples
+    from colourhs.calibration.photometric import KappaSamples
 
     u, v = np.meshgrid(np.arange(0, 200, step, dtype=float), np.arange(0, 150, step, dtype=float))
     uv = np.stack([u.ravel(), v.ravel()], axis=1)
@@ -410,7 +410,7 @@ def test_eq7_noise_rms_explains_noise_and_not_pose_disagreement():
     """Noise alone: residual / noise = 1 (measured 1.00); a smooth field that differs
     between poses (RMS 0.5 noise sigma per pose): measured 1.13; 1 noise sigma: 1.48,
     and a warning."""
-    from colourhs.photometric import eq7_noise_rms, eq7_residual_rms, model_warnings
+    from colourhs.calibration.photometric import eq7_noise_rms, eq7_residual_rms, model_warnings
 
     rng = np.random.default_rng(0)
     grid = Grid(200, 150, 25.0)
@@ -438,8 +438,8 @@ def test_eq7_noise_rms_corrects_for_overlapping_boxes():
     noise 1 within 3 %)."""
     import cv2
 
-    from colourhs.photometric import eq7_noise_rms, eq7_residual_rms
-    from colourhs.photometric_kappa import KappaSamples
+    from colourhs.calibration.photometric import eq7_noise_rms, eq7_residual_rms
+    from colourhs.calibration.photometric_samples import KappaSamples
 
     rng = np.random.default_rng(1)
     grid = Grid(400, 300, 40.0)

@@ -1,4 +1,4 @@
-"""The one PLY writer and reader (colourhs.ply)."""
+"""The one PLY writer and reader (colourhs.common.ply)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import open3d as o3d
 import pytest
 
 from colourhs.capture import CaptureFormatError
-from colourhs.ply import load_mesh, write_ply
+from colourhs.common.ply import load_mesh, write_ply
 
 
 def _sphere():

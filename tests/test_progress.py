@@ -14,16 +14,16 @@ from dataclasses import replace
 
 import pytest
 
-from colourhs.cli import main
-from colourhs.evaluate import evaluate_frame
-from colourhs.figures import scene_figures
-from colourhs.hull import visual_hull
-from colourhs.markers import marker_poses
-from colourhs.mesh import frame_mesh
-from colourhs.noise import calibrate_noise
-from colourhs.photometric import photometric_maps
-from colourhs.report import build_report
-from colourhs.synth.dataset import PRESETS, synthesise
+from colourhs.calibration.markers import marker_poses
+from colourhs.calibration.noise import calibrate_noise
+from colourhs.calibration.photometric import photometric_maps
+from colourhs.cli.parser import main
+from colourhs.evaluation.accuracy import evaluate_frame
+from colourhs.report.figures import scene_figures
+from colourhs.report.page import build_report
+from colourhs.surfaces.hull import visual_hull
+from colourhs.surfaces.poisson import frame_mesh
+from colourhs.synth.synthesise import PRESETS, synthesise
 
 
 def _lines(err: str) -> list[str]:
@@ -155,8 +155,8 @@ def test_synth_shows_its_steps_before_the_views(tmp_path, capsys):
 def test_calibration_bars_close_when_a_fit_fails(tiny_dataset, tmp_path, monkeypatch, capsys):
     """The noise and cross-talk bars are closed before the error is reported: the
     message starts its own line, not the end of a half-drawn bar."""
-    import colourhs.crosstalk as crosstalk
-    import colourhs.noise as noise
+    import colourhs.calibration.crosstalk as crosstalk
+    import colourhs.calibration.noise as noise
 
     def fail(*args, **kwargs):
         raise ValueError("no usable pixels")
@@ -184,7 +184,7 @@ def test_bar_redraws_when_its_items_slow_down(monkeypatch, capsys):
     part (tqdm's default: 2, the last one the closing redraw)."""
     import time
 
-    from colourhs import progress
+    from colourhs.common import progress
 
     monkeypatch.setattr(progress, "MIN_INTERVAL_S", 0.05)
     for i in progress.bar(range(18), "slow down"):
@@ -201,7 +201,7 @@ def test_stdout_reaches_a_file_line_by_line():
     job's lines until it ended, 7 s)."""
     import io
 
-    from colourhs.progress import line_buffered
+    from colourhs.common.progress import line_buffered
 
     raw = io.BytesIO()
     stream = io.TextIOWrapper(raw, encoding="utf-8")

@@ -11,8 +11,8 @@ from capture_helpers import edit_json, make_dataset
 
 from colourhs.capture import load_rig
 from colourhs.capture.rig import light_offset_warning, reciprocity_defect_deg
-from colourhs.cli import main
-from colourhs.geometry import half_vector_defect
+from colourhs.cli.parser import main
+from colourhs.common.geometry import half_vector_defect
 from colourhs.synth.brdf import Material
 
 # A symmetric pair 0.8 m from the point X = 0, 0.4 m apart (28 degrees).
@@ -102,7 +102,7 @@ def test_rig_reports_its_lights_defect(tmp_path):
 
 def test_report_states_where_the_lights_are(tmp_path):
     from colourhs.capture import open_dataset
-    from colourhs.reportinfo import rig_summary
+    from colourhs.report.provenance import rig_summary
 
     root = make_dataset(tmp_path / "d")
     line = rig_summary(open_dataset(root))["lights"]

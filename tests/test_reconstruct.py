@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 from hs_constraint import pair_rows
 
-from colourhs.crosstalk import calibrate_crosstalk
-from colourhs.io import sha256_files
-from colourhs.photometric import read_mu_maps
-from colourhs.ply import load_mesh
-from colourhs.raycast import render_depth_normals
+from colourhs.calibration.crosstalk import calibrate_crosstalk
+from colourhs.calibration.photometric import read_mu_maps
+from colourhs.common.files import sha256_files
+from colourhs.common.ply import load_mesh
+from colourhs.common.raycast import render_depth_normals
 from colourhs.reconstruct.dataterm import INVALID_COST, data_term, pair_arrays, prepare_images
 from colourhs.reconstruct.frame import (
     ReconstructOptions,
@@ -124,7 +124,7 @@ def test_depth_range_from_the_visual_hull(tiny_dataset, calib, tmp_path):
     on tiny against the working range's 0.3 m, so the labels are coarser; the
     continuous refinement and its depth search recover from the worse start:
     measured 1.67 mm and 2.74 deg median before, 0.57 mm and 1.26 deg now)."""
-    from colourhs.hull import hull_depth_range, visual_hull
+    from colourhs.surfaces.hull import hull_depth_range, visual_hull
 
     hull = tmp_path / "hull.ply"
     visual_hull(tiny_dataset, "statue", "000000", hull)
@@ -268,7 +268,7 @@ def test_plane_accuracy_at_demo_resolution(plane_calibrated):
     RMS, 0.24 deg, 110103 pixels (markers filled), with the spline at 1/120 of
     the width (at 1/80: 0.029 mm, 0.052 mm, 0.19 deg; a finer spline fits a
     little more noise on a plane and holds curved objects far better, see
-    :func:`colourhs.reconstruct.spline.default_spacing`). (Before the continuous
+    :func:`colourhs.reconstruct.bayes.spline.default_spacing`). (Before the continuous
     consistency refinement: 0.12 / 0.68 mm, 1.5 deg.) ML HS (20.6 / 39.5 mm
     here) and Bayesian HS without calibration (5.8 / 10.5 mm) are compared on
     tiny, to keep the suite short (:func:`test_ml_is_clearly_worse_than_bayes`,

@@ -1,4 +1,4 @@
-"""Tests of the evaluation report colourhs.report (small inputs, no pipeline run)."""
+"""Tests of the evaluation report colourhs.report.page (small inputs, no pipeline run)."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ import pandas as pd
 import pytest
 from PIL import Image
 
-from colourhs.report import (
+from colourhs.report.page import (
     PAPER_REFERENCE,
     REQUIRED_COLUMNS,
     build_report,
@@ -26,8 +26,8 @@ from colourhs.report import (
     summarise_benchmarks,
     summarise_metrics,
 )
-from colourhs.reportinfo import arrange_figures, git_provenance, resolve_config
-from colourhs.reporttables import (
+from colourhs.report.provenance import arrange_figures, git_provenance, resolve_config
+from colourhs.report.tables import (
     EXPECTED_ERROR_COLUMNS,
     EXTRA_COLUMNS,
     sigma_calibration_table,
@@ -346,7 +346,7 @@ def test_report_timing_and_environment(report):
 
 
 def test_software_versions_missing_package(monkeypatch):
-    from colourhs import report as rep
+    from colourhs.report import page as rep
 
     monkeypatch.setitem(rep.SOFTWARE, "nosuchpkg", ("nosuchpkg_xyz", ("nosuchpkg-xyz",)))
     v = software_versions()
@@ -583,8 +583,8 @@ def test_arrange_figures_and_template_is_package_data():
     assert [p.name for p in a["errors"]] == ["vh_depth_error.png", "vh_normal_error.png"]
     thumbs = ["animation.gif", "vh_depth.png", "bayes_ph_depth.png", "bayes_ph_normal.png"]
     assert [p.name for p in a["thumbs"]] == thumbs  # by kind, then the paper's variant order
-    assert (files("colourhs") / "templates" / "report.html").is_file()
-    assert 'colourhs = ["templates/*.html"]' in Path("pyproject.toml").read_text()
+    assert (files("colourhs.report") / "templates" / "report.html").is_file()
+    assert '"colourhs.report" = ["templates/*.html"]' in Path("pyproject.toml").read_text()
 
 
 def test_report_expected_error_and_sigma_calibration(tmp_path, images):

@@ -1,7 +1,7 @@
 """The evaluation report as a browser shows it (headless Chromium at 1400 x 900).
 
 Reports are built from synthetic inputs shaped like a real run's (five variants,
-every metric column of colourhs.evaluate, the figures colourhs.figures writes
+every metric column of colourhs.evaluation.accuracy, the figures colourhs.report.figures writes
 at their real pixel sizes), loaded by ``chromium --headless --dump-dom`` with a
 small script that writes the page's measurements into the DOM on ``load``, and
 by ``--screenshot``. Skipped when no Chromium is installed (scripts/setup.sh
@@ -24,10 +24,10 @@ import pandas as pd
 import pytest
 from PIL import Image
 
-from colourhs.ply import write_ply
-from colourhs.report import REQUIRED_COLUMNS, build_report
-from colourhs.reporttables import EXTRA_COLUMNS
-from colourhs.variants import VARIANT_ORDER
+from colourhs.common.ply import write_ply
+from colourhs.report.page import REQUIRED_COLUMNS, build_report
+from colourhs.report.tables import EXTRA_COLUMNS
+from colourhs.workflow.variants import VARIANT_ORDER
 
 CHROMIUM = next(
     (p for p in map(shutil.which, ("chromium", "chromium-browser", "google-chrome")) if p), None

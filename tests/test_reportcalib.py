@@ -1,4 +1,4 @@
-"""The report's calibration diagnostics (colourhs.reportcalib) on small hand-made files."""
+"""The report's calibration diagnostics (colourhs.report.calibration) on small hand-made files."""
 
 from __future__ import annotations
 
@@ -13,15 +13,15 @@ import pytest
 from test_rig_schema import contract_example
 
 from colourhs.capture import rig_from_dict
-from colourhs.cli import main
-from colourhs.report import REQUIRED_COLUMNS
-from colourhs.reportcalib import (
+from colourhs.cli.parser import main
+from colourhs.report.calibration import (
     calibration_diagnostics,
     crosstalk_table,
     marker_table,
     mu_error_table,
     photometric_table,
 )
+from colourhs.report.page import REQUIRED_COLUMNS
 
 #: The Helmholtz cameras of docs/capture-format.md's example rig (cam1 blue, cam2 red,
 #: cam3 green): pairs (cam1 red, cam2 blue), (cam1 green, cam3 blue), (cam2 green, cam3 red).

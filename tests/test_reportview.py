@@ -1,4 +1,4 @@
-"""The report's offline 3D view (colourhs.reportview): packing and simplifying meshes."""
+"""The report's offline 3D view (colourhs.report.view3d): packing and simplifying meshes."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import numpy as np
 import open3d as o3d
 import pytest
 
-from colourhs.ply import write_ply
-from colourhs.reportview import mesh_payload, pack_mesh, scene_views
+from colourhs.common.ply import write_ply
+from colourhs.report.view3d import mesh_payload, pack_mesh, scene_views
 
 
 def _unpack(p: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -62,7 +62,7 @@ def test_mesh_payload_simplifies_and_keeps_colours(tmp_path):
 def test_simplify_large_noisy_mesh_fits_the_budget_and_keeps_the_shape():
     """Over PRE_FACTOR x the budget: clustering first, then quadric decimation;
     the result fits the budget, keeps the colours and stays on the surface."""
-    from colourhs.reportview import PRE_FACTOR, simplify
+    from colourhs.report.view3d import PRE_FACTOR, simplify
 
     sphere = o3d.geometry.TriangleMesh.create_sphere(0.05, resolution=80)  # 25280 triangles
     rng = np.random.default_rng(1)

@@ -17,8 +17,8 @@ import pytest
 from jsonschema import Draft202012Validator
 
 from colourhs.capture import DIST_LENGTHS, CaptureFormatError, rig_from_dict, rig_schema
-from colourhs.synth.dataset import PRESETS, rig_json
-from colourhs.synth.rig import make_rig
+from colourhs.synth.simulated_rig import make_rig
+from colourhs.synth.synthesise import PRESETS, rig_json
 
 DOCS = Path(__file__).resolve().parents[1] / "docs" / "capture-format.md"
 

@@ -27,8 +27,8 @@ import pandas as pd
 import pytest
 import yaml
 
-from colourhs.cli import PROJECT_ROOT
-from colourhs.synth.dataset import synthesise
+from colourhs.cli.parser import PROJECT_ROOT
+from colourhs.synth.synthesise import synthesise
 
 SCRIPT = PROJECT_ROOT / "scripts" / "slurm-local.sh"
 

@@ -1,19 +1,24 @@
-"""The Bayesian refinement's pieces (colourhs.reconstruct.surface, .sides, .spline, .ml)."""
+"""The Bayesian refinement's pieces (colourhs.reconstruct.bayes.surface, .sides, .spline, .ml)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from colourhs.crosstalk import calibrate_crosstalk
-from colourhs.ply import load_mesh
-from colourhs.raycast import render_depth_normals
+from colourhs.calibration.crosstalk import calibrate_crosstalk
+from colourhs.common.ply import load_mesh
+from colourhs.common.raycast import render_depth_normals
+from colourhs.reconstruct.bayes.spline import SplineSurface
+from colourhs.reconstruct.bayes.surface import (
+    SurfaceGraph,
+    fill_holes,
+    hs_residuals,
+    surface_normals,
+)
 from colourhs.reconstruct.dataterm import pair_arrays
 from colourhs.reconstruct.frame import foreground, load_frame, reference_rays
 from colourhs.reconstruct.ml import candidate_labels
 from colourhs.reconstruct.sides import helmholtz_sides, sample_sides, whitened_cost
-from colourhs.reconstruct.spline import SplineSurface
-from colourhs.reconstruct.surface import SurfaceGraph, fill_holes, hs_residuals, surface_normals
 
 
 def _plane_depth(rays, c, n, d):
@@ -285,8 +290,8 @@ def test_active_pixels_rows_are_the_full_rows_to_the_bit(plane_sides):
     pixels: their rows, Jacobian entries and chi2 must be those of the full
     evaluation, to the bit, the others unusable, and the Gram matrix over them
     that of their rows (to rounding: its threads' cells differ)."""
-    from colourhs.reconstruct.gram import SplineGram
-    from colourhs.reconstruct.spline import SplineSurface
+    from colourhs.reconstruct.bayes.gram import SplineGram
+    from colourhs.reconstruct.bayes.spline import SplineSurface
 
     fr, ref, rays, gd, _, mask, sides = plane_sides
     W = fr.rig.image.width
@@ -314,7 +319,7 @@ def test_active_pixels_rows_are_the_full_rows_to_the_bit(plane_sides):
 def test_explained_surfaces_by_median_chi2():
     """A surface is kept when the median chi2 of its usable pixels is under the
     robust scale; one with no usable pixel is not."""
-    from colourhs.reconstruct.refine import explained_surfaces
+    from colourhs.reconstruct.bayes.refine import explained_surfaces
 
     chi2 = np.array([1.0, 2.0, 3.0, 100.0, 200.0, 5.0])
     usable = np.array([1, 1, 1, 1, 1, 0], bool)
@@ -328,7 +333,7 @@ def test_lm_stops_on_a_converged_surface(plane_sides, monkeypatch):
     Levenberg-Marquardt must not raise their damping LM_TRIES times per step, one
     sparse solve each (measured before refine.CONVERGED: 8 solves per step, 42 of a
     640x480 board's 104). Here at most one solve per step beyond the first two."""
-    import colourhs.reconstruct.refine as rf
+    import colourhs.reconstruct.bayes.refine as rf
 
     fr, ref, rays, gd, _, mask, sides = plane_sides
     H, W = fr.rig.image.height, fr.rig.image.width
@@ -353,7 +358,7 @@ def test_lm_returns_the_state_at_its_result(plane_sides):
     """The depth search takes each trial's energies from lm's last state instead of
     evaluating E again: they must be the very numbers :meth:`state` gives at the
     returned control points, on several surfaces whose steps are kept separately."""
-    import colourhs.reconstruct.refine as rf
+    import colourhs.reconstruct.bayes.refine as rf
 
     fr, ref, rays, gd, _, mask, sides = plane_sides
     H, W = fr.rig.image.height, fr.rig.image.width
@@ -461,7 +466,7 @@ def test_spline_gram_equals_the_sparse_products():
     spacing, with 3 rows per pixel and with 2."""
     import scipy.sparse as sp
 
-    from colourhs.reconstruct.gram import SplineGram
+    from colourhs.reconstruct.bayes.gram import SplineGram
 
     rng = np.random.default_rng(5)
     H, W = 37, 53
@@ -494,7 +499,7 @@ def test_spline_gram_equals_the_sparse_products():
 def test_spline_gram_refuses_a_spacing_under_one_pixel():
     """Its kernel writes a pixel's rows into a 6 x 6 block without checking
     indices: a spacing under one pixel would write outside it."""
-    from colourhs.reconstruct.gram import SplineGram
+    from colourhs.reconstruct.bayes.gram import SplineGram
 
     mask = np.ones((6, 8), bool)
     graph = SurfaceGraph(mask.ravel(), (6, 8), np.ones(48), np.full(48, 1e-3), 3.0)
@@ -509,7 +514,7 @@ def test_spline_gram_refuses_a_link_between_two_surfaces():
     """Two surfaces' control grids both start at (0, 0): a link from one into
     the other passes the spacing test, and the kernel would write its rows
     into the wrong columns (the one-way link fixed in 28da2f3 did so)."""
-    from colourhs.reconstruct.gram import SplineGram
+    from colourhs.reconstruct.bayes.gram import SplineGram
 
     mask = np.ones((6, 13), bool)
     mask[:, 6] = False  # two surfaces, columns 0-5 and 7-12

@@ -13,13 +13,13 @@ import pytest
 from hs_constraint import constraint_residual, pair_rows, surface_points
 
 from colourhs.capture import CaptureFormatError, load_rig, open_dataset, read_image, validate
-from colourhs.commands import frame_indices
-from colourhs.geometry import project
-from colourhs.ply import load_mesh
-from colourhs.sampling import sample_bilinear
-from colourhs.synth import dataset as synth_dataset
-from colourhs.synth.dataset import PRESETS, synthesise
-from colourhs.synth.rig import Nuisances, sensor
+from colourhs.cli.commands import frame_indices
+from colourhs.common.geometry import project
+from colourhs.common.ply import load_mesh
+from colourhs.common.sampling import sample_bilinear
+from colourhs.synth import synthesise as synth_dataset
+from colourhs.synth.simulated_rig import Nuisances, sensor
+from colourhs.synth.synthesise import PRESETS, synthesise
 
 
 def _frame(root, scene, frame="000000"):

@@ -15,15 +15,15 @@ import numpy as np
 import pytest
 from hs_constraint import constraint_residual, pair_rows, surface_points
 
+from colourhs.calibration.markers import to_grey8
 from colourhs.capture import load_rig, open_dataset, read_image, validate
-from colourhs.geometry import project
-from colourhs.markers import to_grey8
-from colourhs.ply import load_mesh
-from colourhs.sampling import sample_bilinear
+from colourhs.common.geometry import project
+from colourhs.common.ply import load_mesh
+from colourhs.common.sampling import sample_bilinear
 from colourhs.synth import randomrig as rr
 from colourhs.synth.brdf import Material
-from colourhs.synth.dataset import PRESETS, SCENE_META, _mask, rig_json, synthesise
-from colourhs.synth.rig import COLOURS, Nuisances
+from colourhs.synth.simulated_rig import COLOURS, Nuisances
+from colourhs.synth.synthesise import PRESETS, SCENE_META, _mask, rig_json, synthesise
 
 TINY = PRESETS["random-tiny"]
 CLEAN = Nuisances().without("noise", "crosstalk")
@@ -438,7 +438,7 @@ def test_lens_preset_draws_skewed_cameras_with_rational_and_thin_prism_terms():
     """``--preset random-tiny-lens``: the random-tiny rig with the camera model's
     less common coefficients (rational and thin-prism terms, skew)."""
     from colourhs.synth.randomrig import RANGES_BY_NAME, draw_random
-    from colourhs.synth.rig import Nuisances
+    from colourhs.synth.simulated_rig import Nuisances
 
     p = PRESETS["random-tiny-lens"]
     d = draw_random(3, p.width, p.height, Nuisances(), RANGES_BY_NAME[p.random_ranges])

@@ -7,18 +7,18 @@ from types import SimpleNamespace
 import numpy as np
 from scipy.ndimage import gaussian_filter
 
+from colourhs.reconstruct.bayes.uncertainty import (
+    correlated_gain,
+    filled_sigma,
+    rim_valley_pull,
+    valley_sigma,
+)
 from colourhs.reconstruct.sides import (
     RIM_SUPPORT,
     HelmholtzSides,
     noise_correlation,
     sample_sides,
     side_maps,
-)
-from colourhs.reconstruct.uncertainty import (
-    correlated_gain,
-    filled_sigma,
-    rim_valley_pull,
-    valley_sigma,
 )
 
 

@@ -36,7 +36,7 @@ from snakemake.settings.types import (
 )
 from whole_job import NAME, VARIANTS, WholeJob, copy_run, snapshot
 
-from colourhs.cli import SNAKEFILE
+from colourhs.cli.parser import SNAKEFILE
 
 # The tiny preset's scenes and frames (sheet: 3 frames, the others one).
 FRAMES = {

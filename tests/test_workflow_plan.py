@@ -1,4 +1,4 @@
-"""colourhs.workflow_plan: what the Snakemake rules read, make and pass on (issue 12).
+"""colourhs.workflow.plan: what the Snakemake rules read, make and pass on (issue 12).
 
 On the capture tests' small dataset (tests/capture_helpers.py; scene toy: one frame,
 masks, ground truth, the chromatic object slinky; scene wave: two frames, nothing
@@ -16,8 +16,8 @@ import pytest
 from capture_helpers import make_dataset
 from snakemake.utils import validate
 
-from colourhs.cli import PROJECT_ROOT
-from colourhs.workflow_plan import MalformedDatasetError, WorkflowPlan
+from colourhs.cli.parser import PROJECT_ROOT
+from colourhs.workflow.plan import MalformedDatasetError, WorkflowPlan
 
 SCHEMA = str(PROJECT_ROOT / "workflow" / "schemas" / "config.schema.yaml")
 
@@ -263,16 +263,16 @@ def test_config_yaml_states_the_package_defaults():
     """Issue 12 (one value for each default): what config.yaml writes out for the
     calibration and surfaces is the package's own default, and the command line's
     option defaults are the same (the mesh options repeat frame_mesh's: the command
-    line must not import open3d). Measured: 1.5 s (importing colourhs.mesh)."""
+    line must not import open3d). Measured: 1.5 s (importing colourhs.surfaces.poisson)."""
     import inspect
 
     import yaml
 
-    from colourhs.chromaticity import MIN_SIGNAL
-    from colourhs.cli import build_parser
-    from colourhs.mesh import frame_mesh
-    from colourhs.photometric import DEFAULTS
-    from colourhs.silhouettes import DEFAULT_THRESHOLD
+    from colourhs.calibration.chromaticity import MIN_SIGNAL
+    from colourhs.calibration.photometric import DEFAULTS
+    from colourhs.cli.parser import build_parser
+    from colourhs.surfaces.poisson import frame_mesh
+    from colourhs.surfaces.silhouettes import DEFAULT_THRESHOLD
 
     config = yaml.safe_load((PROJECT_ROOT / "config.yaml").read_text())
     photometric = config["calibration"]["photometric"]
@@ -291,7 +291,7 @@ def test_config_yaml_states_the_package_defaults():
 
 def test_schema_refuses_a_spline_spacing_under_one_pixel(data):
     """The refinement's Gram kernel needs a control spacing of at least one pixel
-    (colourhs.reconstruct.gram): the config is refused before any stage runs."""
+    (colourhs.reconstruct.bayes.gram): the config is refused before any stage runs."""
     ok = {"datasets": {"d": {"path": str(data)}}, "reconstruction": {"params": {"spline_px": 1}}}
     plan_of(ok)
     bad = {"datasets": {"d": {"path": str(data)}}, "reconstruction": {"params": {"spline_px": 0.5}}}

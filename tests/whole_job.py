@@ -28,7 +28,7 @@ from pathlib import Path
 
 from read_audit import ENV, audit
 
-from colourhs.cli import PROJECT_ROOT
+from colourhs.cli.parser import PROJECT_ROOT
 
 NAME = "t"
 #: Without ml_full and bayes_nocalib, for the suite's 15-minute budget: each variant's
@@ -56,7 +56,7 @@ class WholeJob:
     workdir: Path  # the run's folder, "my run"
     cmd: list[str]  # the `colourhs run` command line
     done: subprocess.CompletedProcess  # its exit status and output
-    reads: Path  # what each job read (colourhs.io.record_reads)
+    reads: Path  # what each job read (colourhs.common.files.record_reads)
     first: dict[str, int] = field(default_factory=dict)  # snapshot() after the run
 
     @property

@@ -27,7 +27,7 @@ from colourhs.capture.png import (
 )
 from colourhs.capture.rig import light_offset_warning, reciprocity_defect_deg
 from colourhs.capture.rigjson import load_rig
-from colourhs.progress import bar
+from colourhs.common.progress import bar
 
 _FRAME = re.compile(r"[0-9]{6}")
 _STATIC_FRAME = "000000"
@@ -269,7 +269,7 @@ def validate(
     dataset : the dataset folder (capture format, version 1).
     summary_json : optional path of a JSON summary to write (written only
         when the dataset is valid, atomically).
-    progress : a bar over the images decoded, on stderr (:mod:`colourhs.progress`).
+    progress : a bar over the images decoded, on stderr (:mod:`colourhs.common.progress`).
 
     Returns
     -------
@@ -332,7 +332,7 @@ def validate(
         "warnings": [w for w in (light_offset_warning(ds.rig),) if w],
     }
     if summary_json is not None:
-        from colourhs.io import write_json
+        from colourhs.common.files import write_json
 
         write_json(summary_json, summary)
     return summary

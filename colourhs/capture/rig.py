@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from colourhs.capture.base import COLOURS, UnknownNameError
-from colourhs.geometry import camera_centre, fixation_point, half_vector_defect, light_centre
+from colourhs.common.geometry import camera_centre, fixation_point, half_vector_defect, light_centre
 
 RECIPROCITY_DEFECT_TOLERANCE_DEG = 0.01
 """Largest half-vector defect of a reciprocal pair (:meth:`Rig.reciprocity_defect`,
@@ -249,7 +249,7 @@ class Rig:
     def reciprocity_defect(self, X: np.ndarray) -> np.ndarray:
         """Per reciprocal pair (rig order), the half-vector angle between the pair's two
         readings at world points ``X`` (..., 3): shape (P, ...), radians, 0 with
-        collocated lights (:func:`colourhs.geometry.half_vector_defect`)."""
+        collocated lights (:func:`colourhs.common.geometry.half_vector_defect`)."""
         out = []
         for p in self.reciprocal_pairs():
             a, b = self.camera(p.cam_a), self.camera(p.cam_b)
@@ -260,7 +260,7 @@ class Rig:
 def cameras_fixation_point(cameras) -> np.ndarray:
     """The point nearest (least squares) to the optical axes of ``cameras`` (the third
     row of each R), metres (3,). ValueError with fewer than two cameras or (nearly)
-    parallel axes (:func:`colourhs.geometry.fixation_point`)."""
+    parallel axes (:func:`colourhs.common.geometry.fixation_point`)."""
     axes = [np.asarray(c.R, float)[2] for c in cameras]
     return fixation_point(axes, [c.centre for c in cameras])
 

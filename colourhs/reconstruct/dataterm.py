@@ -30,7 +30,7 @@ import numba as nb
 import numpy as np
 
 from colourhs.capture import MIN_SIGNAL
-from colourhs.geometry import model_coefficients
+from colourhs.common.geometry import model_coefficients
 from colourhs.reconstruct.simd import LANES, bilinear4, cache_tagged
 
 INVALID_COST = 1.0
@@ -99,8 +99,8 @@ def _smallest_eig(a, b, c, d, e, f):
 @nb.njit(cache=True, inline="always")
 def to_pixel(x, y, K, dist):
     """Pixel (u, v) of normalised camera coordinates (x, y): the package's
-    camera model (:func:`colourhs.geometry.pixels_of`) compiled; ``dist``
-    the 12 coefficients of :func:`colourhs.geometry.model_coefficients`."""
+    camera model (:func:`colourhs.common.geometry.pixels_of`) compiled; ``dist``
+    the 12 coefficients of :func:`colourhs.common.geometry.model_coefficients`."""
     return _to_pixel(x, y, K[0, 0], K[0, 1], K[0, 2], K[1, 1], K[1, 2], dist)
 
 
@@ -109,7 +109,7 @@ def _to_pixel(x, y, fx, sk, cx, fy, cy, d):
     """Pixel (u, v) of normalised camera coordinates (x, y): OpenCV's
     distortion with the 12 coefficients ``d`` (k1, k2, p1, p2, k3, k4, k5,
     k6, s1, s2, s3, s4), then K with its skew ``sk`` (as
-    :func:`colourhs.geometry.pixels_of`)."""
+    :func:`colourhs.common.geometry.pixels_of`)."""
     rr = x * x + y * y
     radial = 1.0 + rr * (d[0] + rr * (d[1] + rr * d[4]))
     radial /= 1.0 + rr * (d[5] + rr * (d[6] + rr * d[7]))

@@ -1,7 +1,7 @@
 """Why a pixel of the reference camera has no depth (beyond the paper).
 
 The accounting a rig owner needs to see where coverage goes: the depth file's
-``dropped`` codes (:data:`colourhs.depthfile.DROP_REASONS`), from the reference
+``dropped`` codes (:data:`colourhs.common.depthfile.DROP_REASONS`), from the reference
 camera's own causes and the stages of the reconstruction
 (:func:`colourhs.reconstruct.frame.reconstruct`).
 """
@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from colourhs.depthfile import DROP_REASONS
+from colourhs.common.depthfile import DROP_REASONS
 from colourhs.reconstruct.inputs import Frame
 
 
@@ -25,7 +25,7 @@ def reference_unusable(frame: Frame, ref: int) -> list[tuple[str, np.ndarray]]:
 
 
 def drop_codes(obj, fg, unusable, stages, ok) -> np.ndarray:
-    """Why each pixel (H*W,) has no depth: codes of :data:`colourhs.depthfile.DROP_REASONS`.
+    """Why each pixel (H*W,) has no depth: codes of :data:`colourhs.common.depthfile.DROP_REASONS`.
 
     Beyond the paper (the accounting a rig owner needs to see where coverage
     goes). ``obj`` is the object's silhouette or lit region, ``fg`` the

@@ -7,10 +7,10 @@
 - Bayesian HS (Roubtsova and Guillemaut; paper section III-E): the MAP
   labelling of alpha * E_data + (1 - alpha) * E_prior with the depth-normal
   consistency prior, optimised by semi-global aggregation along 8 directions
-  (:mod:`colourhs.reconstruct.mrf`); then, beyond the paper, a smooth initial
-  surface that integrates the HS normals (:mod:`colourhs.reconstruct.integrate`), and the
+  (:mod:`colourhs.reconstruct.bayes.mrf`); then, beyond the paper, a smooth initial
+  surface that integrates the HS normals (:mod:`colourhs.reconstruct.bayes.integrate`), and the
   continuous surface that minimises the depth-normal consistency energy in
-  noise units (:mod:`colourhs.reconstruct.surface`): its shape from the
+  noise units (:mod:`colourhs.reconstruct.bayes.surface`): its shape from the
   agreement of its normals with eq. (5), its depth from a search along that
   energy's valley, never from the discrete labels.
 """
@@ -27,18 +27,18 @@ from colourhs.capture import (
     Camera,
     Rig,
 )
-from colourhs.depthfile import DepthResult, write_depth
-from colourhs.geometry import (
+from colourhs.common.depthfile import DepthResult, write_depth
+from colourhs.common.files import sha256_files
+from colourhs.common.geometry import (
     normalised_coordinates,
     pixel_grid,
     ray_directions,
 )
-from colourhs.io import sha256_files
-from colourhs.progress import bar, stage
+from colourhs.common.progress import bar, stage
+from colourhs.reconstruct.bayes.integrate import initial_surface
 from colourhs.reconstruct.dataterm import INVALID_COST, data_term, pair_arrays, prepare_images
 from colourhs.reconstruct.drops import drop_codes, reference_unusable
 from colourhs.reconstruct.inputs import Frame, load_frame
-from colourhs.reconstruct.integrate import initial_surface
 from colourhs.reconstruct.options import (
     MAX_SIGMA,
     WORKING_RADIUS,
@@ -144,7 +144,7 @@ def reconstruct(
         depth zc (where the optical axes meet) +- ``working_radius`` zc.
     progress : one line per step on stderr, with the seconds since the start,
         and a bar over the data term's chunks of pixels
-        (:mod:`colourhs.progress`).
+        (:mod:`colourhs.common.progress`).
     **options : the tuning options, :class:`ReconstructOptions` (a TypeError
         names any other keyword).
 
@@ -153,9 +153,9 @@ def reconstruct(
     ML: the best hypothesis per pixel, then :func:`refine_ml` (continuous),
     :func:`_ml_reconstruction`. Bayesian: the MAP labelling of the MRF, a smooth
     initial surface from the HS normals
-    (:func:`colourhs.reconstruct.integrate.refine_depth`; its depth is still the
+    (:func:`colourhs.reconstruct.bayes.integrate.refine_depth`; its depth is still the
     labelling's), then the depth from the agreement of the geometry with eq. (5)
-    (:func:`colourhs.reconstruct.refine.refine_surface`), :func:`_bayes_reconstruction`.
+    (:func:`colourhs.reconstruct.bayes.refine.refine_surface`), :func:`_bayes_reconstruction`.
     """
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
@@ -243,10 +243,10 @@ def _bayes_reconstruction(
     """Bayesian HS of the foreground ``pix`` (paper section III-E, then beyond it):
     the data term written into the MRF box's volumes, the MAP labelling
     (:func:`_bayes_labelling`), the initial surface
-    (:func:`colourhs.reconstruct.integrate.initial_surface`) and the consistent
+    (:func:`colourhs.reconstruct.bayes.integrate.initial_surface`) and the consistent
     surface (:func:`_consistent_surface`), the rims eroded. Returns (H*W,) depth,
     (H*W, 3) normal, validity, confidence, each depth's 1-sigma uncertainty
-    (metres, :mod:`colourhs.reconstruct.uncertainty`; NaN without the
+    (metres, :mod:`colourhs.reconstruct.bayes.uncertainty`; NaN without the
     refinement) and the stages that removed pixels (:func:`.drops.drop_codes`); adds
     the MRF's and the surface's figures to ``info``."""
     H, W = shape
@@ -380,7 +380,7 @@ def _ml_solution(
     conf[pix] = np.clip(1.0 - cost.min(axis=1), 0, 1) * good
     sigma = np.full(H * W, np.nan)
     if good.any():
-        from colourhs.reconstruct.uncertainty import ml_sigma
+        from colourhs.reconstruct.bayes.uncertainty import ml_sigma
 
         if say is not None:
             say("ml: each depth's uncertainty")
@@ -440,7 +440,7 @@ def _bayes_labelling(cost, normals, local, box, rays, depths, shape, opts, info,
     foreground's labels (N,) and their sub-label positions (a parabola through
     the aggregated cost). ``say(text)``, if given, reports the SGM sweeps.
     """
-    from colourhs.reconstruct.mrf import labelling_energy, sgm_depth_normal
+    from colourhs.reconstruct.bayes.mrf import labelling_energy, sgm_depth_normal
 
     H, W = shape
     n_labels = len(depths)
@@ -471,7 +471,7 @@ def _consistent_surface(
 ):
     """The depth from the agreement of geometry and eq. (5) (see :mod:`.surface`);
     ``say(text)`` reports its steps."""
-    from colourhs.reconstruct.refine import refine_surface
+    from colourhs.reconstruct.bayes.refine import refine_surface
     from colourhs.reconstruct.sides import RIM_SUPPORT, helmholtz_sides
 
     H, W = frame.rig.image.height, frame.rig.image.width
@@ -530,7 +530,7 @@ def reconstruct_frame(
 
     With ``hull_ply`` (the frame's visual hull, ``colourhs hull``) the depth
     hypotheses span the hull's depth range in the reference camera
-    (:func:`colourhs.hull.hull_depth_range`) instead of the working range.
+    (:func:`colourhs.surfaces.hull.hull_depth_range`) instead of the working range.
     """
     fr = load_frame(
         dataset_dir,
@@ -542,8 +542,8 @@ def reconstruct_frame(
         noise_json=noise_json,
     )
     if hull_ply is not None:
-        from colourhs.hull import hull_depth_range
-        from colourhs.ply import load_mesh
+        from colourhs.common.ply import load_mesh
+        from colourhs.surfaces.hull import hull_depth_range
 
         vertices, triangles, _ = load_mesh(hull_ply)
         ref = fr.rig.camera(params.get("reference") or fr.rig.camera_names[0])

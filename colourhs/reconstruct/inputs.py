@@ -15,10 +15,10 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from colourhs.calibration.crosstalk import load_crosstalk, unmix
+from colourhs.calibration.noise import NoiseModel, estimate_noise, load_noise
 from colourhs.capture import COLOURS, Rig, open_dataset, read_image, read_mask
-from colourhs.crosstalk import load_crosstalk, unmix
-from colourhs.io import note_read
-from colourhs.noise import NoiseModel, estimate_noise, load_noise
+from colourhs.common.files import note_read
 from colourhs.reconstruct.dataterm import pair_arrays
 
 
@@ -51,9 +51,9 @@ def load_frame(
 ) -> Frame:
     """Read a frame's images and the calibrations that apply to it.
 
-    ``noise_json`` (:func:`colourhs.noise.calibrate_noise`) gives the images'
+    ``noise_json`` (:func:`colourhs.calibration.noise.calibrate_noise`) gives the images'
     noise variance; without it the noise model is estimated from the frame's
-    own images (:func:`colourhs.noise.estimate_noise`).
+    own images (:func:`colourhs.calibration.noise.estimate_noise`).
     """
     ds = open_dataset(dataset_dir, check_images=False, scenes=[scene])
     rig = ds.rig
@@ -71,7 +71,7 @@ def load_frame(
     mu = ratio_sigma = None
     pair_cams, pair_ch = pair_arrays(rig)
     if photometric_h5:
-        from colourhs.photometric import read_mu_maps, read_ratio_sigma
+        from colourhs.calibration.photometric import read_mu_maps, read_ratio_sigma
 
         maps = read_mu_maps(photometric_h5)
         names = rig.camera_names

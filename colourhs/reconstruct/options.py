@@ -56,10 +56,10 @@ class ReconstructOptions:
     link_m : neighbours within this distance of each other's tangent plane
         belong to one surface (small unlinked pieces are left out).
     surface_iterations, spline_px : the final refinement
-        (:func:`colourhs.reconstruct.refine.refine_surface`):
+        (:func:`colourhs.reconstruct.bayes.refine.refine_surface`):
         Levenberg-Marquardt steps before and after its depth search, and the
         spline control spacing (default 1/120 of the width,
-        :func:`colourhs.reconstruct.spline.default_spacing`).
+        :func:`colourhs.reconstruct.bayes.spline.default_spacing`).
     blur_px : Gaussian blur of the Helmholtz sides before sampling, pixels
         (ML HS's continuous step and the refinement; default
         :data:`colourhs.reconstruct.sides.BLUR_PX`, see

@@ -5,7 +5,7 @@ sigma_3 / sigma_2 of the 3 x 3 matrix W of the three reciprocal pairs' rows
 at every pixel and depth hypothesis, and W's null vector as the normal), on
 the same inputs (:class:`~colourhs.reconstruct.dataterm.Prepared` images),
 written the obvious way: vectorised over pixels and hypotheses, the
-projection of :func:`colourhs.geometry.project`, bilinear sampling by
+projection of :func:`colourhs.common.geometry.project`, bilinear sampling by
 indexing, ``numpy.linalg.eigh`` of W^T W in float64. No numba, no float32
 arithmetic, no fused loops, no attempt at speed: it exists so that
 ``benchmarks/bench_reconstruct.py`` reports the compiled kernel's speed as a
@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from colourhs.geometry import project
+from colourhs.common.geometry import project
 from colourhs.reconstruct.dataterm import INVALID_COST, MIN_FACING_COS, Prepared
 
 

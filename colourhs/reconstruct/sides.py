@@ -4,11 +4,11 @@ A reciprocal pair k of cameras (a, b) gives the eq. (5) row
 ``w_k = s_a v_a - s_b v_b`` at a point X, with ``s = J / |L - X|^2``, ``J =
 mu i / p`` (the Helmholtz camera's calibrated intensity, eqs. 2 and 4) and
 ``v`` the unit vector from X to the side's light L. :func:`helmholtz_sides`
-prepares, per side, J and its noise variance (:mod:`colourhs.noise`) as
+prepares, per side, J and its noise variance (:mod:`colourhs.calibration.noise`) as
 images; :func:`sample_sides` samples them (compiled, the OpenCV camera
 model) with their derivatives along a ray; :func:`whitened_cost` is the
 per-point ML cost of eq. (5) in noise units (used by ML HS and by the
-Bayesian refinement, :mod:`colourhs.reconstruct.surface`).
+Bayesian refinement, :mod:`colourhs.reconstruct.bayes.surface`).
 
 Beyond the paper: the noise variance of every sample (the squared
 interpolation weights of the pixels' variances: a sample between pixels
@@ -25,7 +25,7 @@ import numpy as np
 from scipy.ndimage import gaussian_filter
 
 from colourhs.capture import MIN_SIGNAL
-from colourhs.geometry import model_coefficients
+from colourhs.common.geometry import model_coefficients
 from colourhs.reconstruct.dataterm import to_pixel
 
 BLUR_PX = 1.0  # Gaussian blur of the images before sampling, pixels (see side_maps)
@@ -35,7 +35,7 @@ unusable regions (``side_maps``) removes the bias that a board's dark markers
 give its depth at low signal, but the same edges are the silhouettes of
 curved objects and sheets, whose depth they fix: on random and corner rigs
 with every nuisance those lost more than the boards gained. The depth's
-error bar (:mod:`colourhs.reconstruct.uncertainty`) covers the markers'
+error bar (:mod:`colourhs.reconstruct.bayes.uncertainty`) covers the markers'
 offset instead. A rig whose captures are all boards may set it (0.15 pixel:
 two views 12-30 degrees apart see a slanted surface foreshortened 10-20 %
 differently, so their 1-pixel blur kernels differ by about that much)."""
@@ -143,7 +143,8 @@ def side_maps(
         against them, so a surface's depth moved with the noise level.
     min_support : least share of the blur's kernel on usable pixels; below it the
         sample is unusable (:data:`BLUR_SUPPORT`; :data:`RIM_SUPPORT` keeps only
-        samples clear of every edge, :func:`colourhs.reconstruct.uncertainty.rim_valley_pull`).
+        samples clear of every edge,
+        :func:`colourhs.reconstruct.bayes.uncertainty.rim_valley_pull`).
     """
     unusable = ~np.isfinite(J)
     if blur_px > 0:
@@ -397,7 +398,7 @@ def sample_sides(sides: HelmholtzSides, X: np.ndarray, R: np.ndarray, derivative
     """Eq. (5) terms at points ``X`` (N, 3) and their derivative along rays ``R`` (dX/dz).
 
     Compiled (numba); the projection is the OpenCV model of
-    :func:`colourhs.geometry.project` (the data term's
+    :func:`colourhs.common.geometry.project` (the data term's
     :func:`colourhs.reconstruct.dataterm.to_pixel`).
 
     Returns

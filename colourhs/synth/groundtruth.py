@@ -2,7 +2,7 @@
 
 :func:`true_mu_maps` gives ``gt/photometric.h5``'s maps of a rig model;
 :func:`true_poses_csv` turns a dataset's ``gt/board_poses.json`` into a
-marker-poses table. Re-exported by :mod:`colourhs.synth.dataset`.
+marker-poses table. Re-exported by :mod:`colourhs.synth.synthesise`.
 """
 
 from __future__ import annotations
@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from colourhs.synth.render import camera_rays
-from colourhs.synth.rig import COLOURS, RigModel
+from colourhs.synth.image_formation import camera_rays
+from colourhs.synth.simulated_rig import COLOURS, RigModel
 
 
 def true_mu_maps(rig: RigModel) -> dict[str, np.ndarray]:
@@ -50,7 +50,7 @@ def true_poses_csv(dataset_dir: str | Path, out_csv: str | Path) -> Path:
 
     Reads ``gt/board_poses.json``; the rows are the ``photometric/`` poses in
     name order, so a stage fed this table instead of
-    :func:`colourhs.markers.marker_poses`'s is isolated from pose errors.
+    :func:`colourhs.calibration.markers.marker_poses`'s is isolated from pose errors.
     """
     root = Path(dataset_dir)
     poses = json.loads((root / "gt" / "board_poses.json").read_text())

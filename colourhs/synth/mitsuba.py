@@ -4,14 +4,14 @@ Mitsuba 3 (``pip install mitsuba``) is an optional dependency, used by
 ``benchmarks/mitsuba_photometric.py`` and the opt-in tests only, never by the
 workflow; this module imports it when a function is called. It renders the
 photometric captures' board (paper section III-C) for a synthetic rig
-(:class:`~colourhs.synth.rig.RigModel`) with Mitsuba's own pinhole camera,
+(:class:`~colourhs.synth.simulated_rig.RigModel`) with Mitsuba's own pinhole camera,
 point or spot lights, BSDFs, texture lookup, pixel filters and, optionally, a
 white floor whose light reaches the board (path tracing), so that the
 photometric calibration can be tried on images that
-:mod:`colourhs.synth.render` did not make (:class:`BoardRender`,
+:mod:`colourhs.synth.image_formation` did not make (:class:`BoardRender`,
 :func:`photometric_dataset`). What the rig adds after the optics (channel sensitivity sigma_c,
 cross-talk X, sensor noise) is applied as in eq. (4) of
-:mod:`colourhs.synth.render`.
+:mod:`colourhs.synth.image_formation`.
 
 Mitsuba's perspective camera has no lens distortion, square pixels only and
 no skew, and its point light is isotropic: a rig given here must have
@@ -31,9 +31,9 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from colourhs.geometry import normalised_coordinates, pixel_grid
+from colourhs.common.geometry import normalised_coordinates, pixel_grid
 from colourhs.synth import scenes as sc
-from colourhs.synth.rig import COLOURS, CameraModel, RigModel
+from colourhs.synth.simulated_rig import COLOURS, CameraModel, RigModel
 
 # Mitsuba's CPU-vectorised variant (llvm_ad_rgb) compiles kernels with the
 # system's LLVM and aborts on some BSDFs, filters and integrators with LLVM 15 or
@@ -56,7 +56,7 @@ class BoardRender:
         coating: glossy paper or a laminated board).
     roughness : GGX alpha of the coating (``"roughplastic"`` only).
     pixel_filter : Mitsuba's reconstruction filter: ``"box"`` (a sensor's pixel
-        area, as :mod:`colourhs.synth.render`) or ``"gaussian"`` (Mitsuba's
+        area, as :mod:`colourhs.synth.image_formation`) or ``"gaussian"`` (Mitsuba's
         default, 0.5 px standard deviation: light from a marker spreads about
         2 px into the white).
     samples_per_pixel : stratified samples per pixel.
@@ -118,14 +118,14 @@ def mitsuba_draw(
     nuisances with isotropic lights and no cross-talk, sensor noise as
     ``noise``; ``exact`` as :func:`colourhs.synth.randomrig.draw_random`.
     Returns the preset, the ranges, the nuisances and the draw, which
-    :func:`colourhs.synth.dataset.synthesise` (with those ranges and
+    :func:`colourhs.synth.synthesise.synthesise` (with those ranges and
     nuisances) renders as the same rig.
     """
     from dataclasses import replace
 
-    from colourhs.synth.dataset import PRESETS
     from colourhs.synth.randomrig import RANGES_BY_NAME, draw_random
-    from colourhs.synth.rig import Nuisances
+    from colourhs.synth.simulated_rig import Nuisances
+    from colourhs.synth.synthesise import PRESETS
 
     p = PRESETS[preset]
     ranges = replace(
@@ -256,7 +256,7 @@ def true_mu_maps(rig: RigModel, opts: BoardRender) -> dict[str, np.ndarray]:
     ``opts`` asks for spot lights.
     """
     from colourhs.synth.groundtruth import true_mu_maps as rig_maps
-    from colourhs.synth.render import camera_rays
+    from colourhs.synth.image_formation import camera_rays
 
     out = rig_maps(rig)
     if opts.spot_cutoff_deg is None:
@@ -366,7 +366,7 @@ def camera_signal(
 
     ``transport`` is one camera's :func:`render_board` image; sigma_c is taken
     at the pixel centres. Returns the (height, width, 3) signal in fractions of
-    full scale, as :func:`colourhs.synth.render.channel_signal`.
+    full scale, as :func:`colourhs.synth.image_formation.channel_signal`.
     """
     H, W = transport.shape[:2]
     X = cam.crosstalk if crosstalk is None else np.asarray(crosstalk, float)
@@ -380,15 +380,15 @@ def photometric_dataset(
 ) -> Path:
     """A copy of dataset ``ours`` whose ``photometric/`` board captures Mitsuba rendered.
 
-    ``ours`` is a dataset that :func:`colourhs.synth.dataset.synthesise` wrote for
+    ``ours`` is a dataset that :func:`colourhs.synth.synthesise.synthesise` wrote for
     ``rig`` (its ``rig.json`` and ``gt/`` are copied; ``gt/photometric.h5``
     becomes :func:`true_mu_maps` of ``opts``' lights); ``poses`` are its board
     poses (R, t), the held-out plane last, as ``draw_random`` gives them. Each
     image gets the rig's sensor noise with the draw ``ours`` used for the same
     file. Written to a sibling folder and moved into place: no partial dataset.
     """
-    from colourhs.synth.dataset import _image_rng, write_png
-    from colourhs.synth.rig import sensor
+    from colourhs.synth.simulated_rig import sensor
+    from colourhs.synth.synthesise import _image_rng, write_png
 
     out, ours = Path(out), Path(ours)
     tmp = out.with_name(out.name + ".partial")

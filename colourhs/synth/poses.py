@@ -1,6 +1,6 @@
 """Random calibration-board poses that every camera of a rig sees (synthetic data).
 
-Shared by the fixed presets (:mod:`colourhs.synth.dataset`) and the
+Shared by the fixed presets (:mod:`colourhs.synth.synthesise`) and the
 randomised ones (:mod:`colourhs.synth.randomrig`).
 """
 
@@ -9,9 +9,9 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from colourhs.geometry import project
+from colourhs.common.geometry import project
 from colourhs.synth import scenes as sc
-from colourhs.synth.rig import RigModel
+from colourhs.synth.simulated_rig import RigModel
 
 
 def rotation_xyz(ax: float, ay: float, az: float) -> np.ndarray:

@@ -17,7 +17,7 @@ import cv2
 import numpy as np
 
 from colourhs.capture import Camera
-from colourhs.geometry import look_at
+from colourhs.common.geometry import look_at
 from colourhs.synth import scenes as sc
 from colourhs.synth.poses import (
     _board_visible,
@@ -33,7 +33,7 @@ from colourhs.synth.randomranges import (
     _stream,
 )
 from colourhs.synth.randomscenes import _draw_scenes, _object_shapes
-from colourhs.synth.rig import COLOURS
+from colourhs.synth.simulated_rig import COLOURS
 
 
 @dataclass(frozen=True)

@@ -189,7 +189,7 @@ from colourhs.synth.randomranges import (
     _stream,
 )
 from colourhs.synth.randomscenes import _builders, _tilt_matrix
-from colourhs.synth.rig import (
+from colourhs.synth.simulated_rig import (
     CameraModel,
     LightModel,
     Nuisances,

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from colourhs.geometry import axis_angle, outward_triangles, vertex_normals
+from colourhs.common.geometry import axis_angle, outward_triangles, vertex_normals
 from colourhs.synth.brdf import Material
 
 WHITE_ALBEDO = 0.8  # reflectance of the board's white and of the white reference

@@ -1,4 +1,4 @@
-# The rules' helpers: colourhs.workflow_plan.WorkflowPlan (dataset discovery with
+# The rules' helpers: colourhs.workflow.plan.WorkflowPlan (dataset discovery with
 # colourhs.capture.open_dataset, targets, inputs, command-line options) bound to
 # this run's config, which the Snakefile validated with the schema's defaults set.
 import json
@@ -6,7 +6,7 @@ import shlex
 import sys
 from pathlib import Path
 
-from colourhs.workflow_plan import (
+from colourhs.workflow.plan import (
     MalformedDatasetError,
     WorkflowPlan,
     cli_options,
@@ -29,7 +29,7 @@ PLAN = WorkflowPlan(
 PLAN.check_layouts()
 DATASETS = PLAN.datasets
 
-# What the rules call (documented in colourhs/workflow_plan.py).
+# What the rules call (documented in colourhs/workflow/plan.py).
 dataset_path = PLAN.dataset_path
 synth_settings = PLAN.synth_settings
 capture_files = PLAN.capture_files

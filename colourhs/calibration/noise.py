@@ -1,0 +1,197 @@
+"""Sensor noise model of each camera channel, estimated from the captures.
+
+Beyond the paper: the Bayesian refinement (:mod:`colourhs.reconstruct.bayes.surface`)
+weighs every constraint row of eq. (5) by its predicted noise, so that the
+energy is in units of the sensor's own noise on any rig. A camera pixel
+collects photo-electrons (Poisson) and read noise; in fractions of full
+scale its variance is affine in the signal,
+
+    var(i) = gain * i + offset,
+
+``gain`` = 1 / (full well in electrons) and ``offset`` = (read noise /
+full well)^2 plus the quantisation step^2 / 12. Both are estimated per
+camera and channel from images the dataset already has (the white board
+poses and the chromatic white captures), with no noise parameter in the
+capture format:
+
+1. Each pixel's residual against the mean of its 4 neighbours,
+   ``r = i - (i_N + i_S + i_E + i_W) / 4``, is pure noise wherever the image
+   is locally linear (smooth shading), with ``var(r) = 1.25 var(i)``.
+2. Pixels are binned by signal level; in every bin the robust variance
+   ``(1.4826 MAD(r))^2 / 1.25`` ignores the minority of pixels on edges
+   (markers, the board's outline, silhouettes).
+3. ``gain`` and ``offset`` are the non-negative weighted least-squares fit
+   of the bins' variances against their median signal.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from colourhs.capture import COLOURS, open_dataset, read_image
+from colourhs.common.files import write_json
+from colourhs.common.progress import bar
+
+MAD_TO_SIGMA = 1.4826  # MAD of a normal distribution is 0.6745 sigma
+RESIDUAL_VARIANCE = 1.25  # var(i - mean of 4 independent neighbours) / var(i)
+MIN_SIGNAL = 0.02  # bins below this are biased by clipping at the black level
+N_BINS = 24  # signal bins at most
+MIN_BIN = 100  # pixels a bin needs for a stable MAD (its relative error ~ 1 / sqrt(N))
+
+
+@dataclass(frozen=True)
+class NoiseModel:
+    """Affine noise model per camera: var(i) = gain[c] * i + offset[c] (full scale^2).
+
+    Attributes
+    ----------
+    gain : dict camera name -> (3,) per channel R, G, B (1 / electrons at full scale).
+    offset : dict camera name -> (3,) per channel (signal-independent variance).
+    """
+
+    gain: dict
+    offset: dict
+
+    def variance(self, camera: str, image: np.ndarray) -> np.ndarray:
+        """Predicted variance (H, W, 3) of a linear image (H, W, 3) of ``camera``."""
+        g = np.asarray(self.gain[camera], float)
+        o = np.asarray(self.offset[camera], float)
+        return np.clip(np.asarray(image, float), 0.0, None) * g + o
+
+
+def neighbour_residuals(channel: np.ndarray) -> np.ndarray:
+    """``i - mean(4 neighbours)`` (H-2, W-2) of one channel (H, W): noise where locally linear."""
+    c = np.asarray(channel, float)
+    mean4 = (c[:-2, 1:-1] + c[2:, 1:-1] + c[1:-1, :-2] + c[1:-1, 2:]) / 4.0
+    return c[1:-1, 1:-1] - mean4
+
+
+def fit_affine_noise(
+    signal: np.ndarray, residual: np.ndarray, floor: float = 0.0
+) -> tuple[float, float]:
+    """Fit ``var = gain * signal + offset`` to neighbour residuals, robustly.
+
+    Parameters
+    ----------
+    signal : (N,) signal level of each pixel (fraction of full scale).
+    residual : (N,) its :func:`neighbour_residuals`.
+    floor : least variance a bin can have (full scale^2): the quantisation's
+        (:func:`quantisation_variance`). Without it an evenly lit capture
+        without noise (a synthetic one with noise, vignetting and light
+        fall-off off) has bins of variance 0 and no fit.
+
+    Returns
+    -------
+    gain, offset : non-negative floats (full scale, full scale^2).
+
+    With pixels for a single bin only, the offset is taken as 0 (shot noise).
+
+    Raises
+    ------
+    ValueError
+        Fewer than ``MIN_BIN`` usable pixels.
+    """
+    s = np.asarray(signal, float)
+    r = np.asarray(residual, float)
+    ok = np.isfinite(s) & np.isfinite(r) & (s > MIN_SIGNAL) & (s < 0.98)
+    s, r = s[ok], r[ok]
+    if len(s) < MIN_BIN:
+        raise ValueError(f"noise estimate: only {len(s)} usable pixels (need {MIN_BIN})")
+    bins = int(np.clip(len(s) // (2 * MIN_BIN), 1, N_BINS))
+    edges = np.unique(np.quantile(s, np.linspace(0, 1, bins + 1)))
+    level, var, count = [], [], []
+    which = np.clip(np.searchsorted(edges, s, side="right") - 1, 0, len(edges) - 2)
+    for k in range(len(edges) - 1):
+        sel = which == k
+        if sel.sum() < MIN_BIN:
+            continue
+        rk = r[sel]
+        mad = np.median(np.abs(rk - np.median(rk)))
+        v = max((MAD_TO_SIGMA * mad) ** 2 / RESIDUAL_VARIANCE, floor)
+        if v <= 0:
+            continue
+        level.append(np.median(s[sel]))
+        var.append(v)
+        count.append(sel.sum())
+    if not level:
+        raise ValueError("noise estimate: no measurable noise (every bin's spread is 0)")
+    if len(level) == 1:
+        return float(var[0] / level[0]), 0.0
+    level, var, w = np.array(level), np.array(var), np.array(count, float)
+    from scipy.optimize import nnls
+
+    A = np.stack([level, np.ones_like(level)], axis=1) * np.sqrt(w)[:, None] / var[:, None]
+    gain, offset = nnls(A, np.sqrt(w))[0]
+    return float(gain), float(offset)
+
+
+def quantisation_variance(black_level: float, white_level: float) -> float:
+    """Variance (full scale^2) of rounding to the raw values: one raw step
+    ``1 / (white - black)`` of full scale, uniform error, so step^2 / 12."""
+    return 1.0 / (12.0 * (float(white_level) - float(black_level)) ** 2)
+
+
+def estimate_noise(images: list[np.ndarray], floor: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Per-channel ``gain`` and ``offset`` (3,) from images (H, W, 3) of one camera;
+    ``floor``: see :func:`fit_affine_noise`."""
+    gain, offset = np.zeros(3), np.zeros(3)
+    for ch in range(3):
+        sig = np.concatenate([im[1:-1, 1:-1, ch].ravel() for im in images])
+        res = np.concatenate([neighbour_residuals(im[..., ch]).ravel() for im in images])
+        gain[ch], offset[ch] = fit_affine_noise(sig, res, floor)
+    return gain, offset
+
+
+def calibrate_noise(dataset_dir, out_json=None, progress: bool = True) -> NoiseModel:
+    """Noise model of every camera from the board poses and chromatic white captures.
+
+    Writes ``{"cameras": {name: {"gain": [3], "offset": [3]}}, ...}``
+    atomically when ``out_json`` is given. The raw images are used (before
+    cross-talk unmixing, which changes the variance by well under 1 %).
+    ``progress``: a bar over the images read on stderr (:mod:`colourhs.common.progress`).
+    """
+    ds = open_dataset(dataset_dir, check_images=False, scenes=())
+    gains, offsets, out = {}, {}, {"cameras": {}, "units": "full scale; var = gain * i + offset"}
+    paths = {
+        cam: [ds.photometric_image(p, cam) for p in ds.poses]
+        + (
+            [ds.chromatic_image("white", colour, cam) for colour in COLOURS]
+            if "white" in ds.chromatic_objects
+            else []
+        )
+        for cam in ds.rig.camera_names
+    }
+    total = sum(map(len, paths.values()))
+    with bar(desc="noise model", total=total, enabled=progress, unit="image") as shown:
+        for cam in ds.rig.camera_names:
+            images = []
+            for path in paths[cam]:
+                images.append(read_image(path, ds.rig.image)[0])
+                shown.update()
+            try:
+                floor = quantisation_variance(ds.rig.image.black_level, ds.rig.image.white_level)
+                gains[cam], offsets[cam] = estimate_noise(images, floor)
+            except ValueError as err:
+                raise ValueError(f"{ds.root / 'photometric'}: camera {cam}: {err}") from None
+            full_well = [1.0 / g if g > 0 else None for g in gains[cam]]
+            out["cameras"][cam] = {
+                "gain": gains[cam].tolist(),
+                "offset": offsets[cam].tolist(),
+                "full_well_e": full_well,
+            }
+    if out_json is not None:
+        write_json(out_json, out)
+    return NoiseModel(gains, offsets)
+
+
+def load_noise(path: str | Path) -> NoiseModel:
+    """The :class:`NoiseModel` of a file written by :func:`calibrate_noise`."""
+    data = json.loads(Path(path).read_text())["cameras"]
+    return NoiseModel(
+        {c: np.asarray(v["gain"], float) for c, v in data.items()},
+        {c: np.asarray(v["offset"], float) for c, v in data.items()},
+    )

@@ -1,0 +1,437 @@
+"""Minimising the depth-normal consistency energy E (:mod:`colourhs.reconstruct.bayes.surface`).
+
+Beyond the paper. Each connected surface's depth map is a cubic B-spline
+(:mod:`colourhs.reconstruct.bayes.spline`). Levenberg-Marquardt fits its shape;
+its depth, the one mode E determines weakly, comes from a search along E's
+valley (:func:`colourhs.reconstruct.bayes.valley.depth_search`); holes are filled
+(:func:`~colourhs.reconstruct.bayes.surface.fill_holes`).
+"""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import scipy.sparse as sp
+
+from colourhs.common.linalg import solve_spd
+from colourhs.reconstruct.bayes.gram import SplineGram
+from colourhs.reconstruct.bayes.spline import SplineSurface, default_spacing
+from colourhs.reconstruct.bayes.surface import (
+    EDGE_FOOTPRINTS,
+    ROBUST,
+    SurfaceGraph,
+    fill_holes,
+    hs_residuals,
+    robust_energy,
+    surface_normals,
+)
+from colourhs.reconstruct.bayes.uncertainty import SIGMA_SAMPLES, depth_sigma, filled_sigma
+from colourhs.reconstruct.bayes.valley import depth_search, search_stride
+from colourhs.reconstruct.sides import HelmholtzSides
+
+CURVATURE_TOL_PER_M = 100.0  # weak prior on the spline: curvature radii under 1 cm cost
+LM_START, LM_MIN = 1e-3, 1e-9  # Levenberg-Marquardt damping, relative to diag(A)
+LM_UP, LM_DOWN, LM_TRIES = 10.0, 0.3, 8
+COARSE = 8.0  # the first fit's control spacing, in units of the final spacing
+CONVERGED = 1e-6  # predicted decrease of E (chi2 units) below which a surface has converged
+"""Why these values hold on any rig:
+
+- ``CURVATURE_TOL_PER_M``: the prior's unit is a curvature (1/m) times the
+  data's own noise level (:meth:`_Problem.prior`), so it neither depends on
+  the resolution nor on how close the data are to the noise model; 100 /m
+  (a 1 cm radius) is far sharper than the objects' curvature, so the prior
+  only decides where there are no data (measured: 10x weaker changed no
+  statue by more than 0.08 mm).
+- ``LM_*``: dimensionless (relative to the Gauss-Newton diagonal).
+- ``CONVERGED``: E is in units of the noise (chi2), so 1e-6 is a millionth
+  of one pixel's noise-level residual on any rig: nothing any estimate
+  could notice. Without it a converged surface (measured: a one-pixel
+  surface, E ~ 1e-27) raised its damping ``LM_TRIES`` times per step, one
+  solve each: 42 of 104 solves of a 640x480 board.
+- ``COARSE``: a ratio of spacings, so free of units. The fine spline's
+  first LM steps cannot pull in a part of a surface whose start is several
+  millimetres off (its residuals are far beyond the robust scale, so it has
+  no weight, and the fine spline lets it keep its own shape); on the coarse
+  spline its control points are shared with the rest of the surface, which
+  carries it. Measured on an exact random rig's board (a 30-pixel strip of
+  it 5-18 mm off at the start): fine only 0.24 mm median, p95 6.5 mm;
+  coarse 8x first 0.035 mm, p95 0.05 mm; 16x then 4x 0.10 mm.
+"""
+
+
+def _problem(graph, R, sides, c_ref, spacing, footprint, robust) -> _Problem:
+    """E over a spline of control spacing ``spacing`` (pixels) on ``graph``'s surfaces;
+    ``footprint`` is the pixels' median lateral size (metres), the prior's unit."""
+    spline = SplineSurface(graph.rows, graph.cols, graph.surface, spacing)
+    D, prior_surface = spline.second_differences()
+    Dw = D * (1.0 / (CURVATURE_TOL_PER_M * (spacing * footprint) ** 2))
+    return _Problem(graph, R, sides, c_ref, spline, Dw, prior_surface, robust)
+
+
+class _Problem:
+    """E of the spline's control points, per surface (the surfaces are independent:
+    no triangle or prior row joins two), and its Levenberg-Marquardt steps."""
+
+    def __init__(self, graph, R, sides, c_ref, spline, Dw, prior_surface, robust):
+        self.graph, self.R, self.sides, self.c_ref = graph, R, sides, c_ref
+        self.spline, self.B, self.Dw, self.robust = spline, spline.basis, Dw, robust
+        self.Bt = spline.basis.T.tocsr()  # B^T, once: every step multiplies by it
+        self.gram = SplineGram(spline.basis, spline.grid_coords, graph.neighbours, sides.pairs)
+        self.DtD = (Dw.T @ Dw).tocsr()  # the prior's normal matrix at level 1
+        self.ctrl_surface = spline.surface_of
+        self.prior_surface = prior_surface
+        self.n = graph.n_surfaces
+        self.active = None  # every pixel's rows count
+        self.pixel_weight = None
+
+    def subsampled(self, stride: int) -> _Problem:
+        """The same E over every ``stride``-th pixel in rows and columns.
+
+        Beyond the paper (speed). Each kept pixel's robust energy, rows and
+        Jacobian count ``n_k / kept_k`` times (its surface's pixels over those
+        kept), so the data keep their weight against the prior and E its
+        scale; the kept pixels' normals still come from their four
+        neighbours. A surface that would keep fewer pixels than one control
+        cell holds at full resolution keeps all of its pixels.
+        """
+        if stride <= 1:
+            return self
+        g = self.graph
+        active = (g.rows % stride == 0) & (g.cols % stride == 0)
+        kept = np.bincount(g.surface[active], minlength=self.n)
+        small = kept < self.spline.spacing**2
+        active |= small[g.surface]
+        kept = np.bincount(g.surface[active], minlength=self.n)
+        total = np.bincount(g.surface, minlength=self.n)
+        out = copy.copy(self)
+        out.active = active
+        out.pixel_weight = np.where(active, total[g.surface] / np.maximum(kept[g.surface], 1), 0)
+        out.gram = SplineGram(
+            self.B, self.spline.grid_coords, g.neighbours, self.sides.pairs, pixels=active
+        )
+        return out
+
+    def _residuals(self, c, **kw):
+        """:func:`hs_residuals` at control points ``c`` over the counted pixels."""
+        return hs_residuals(
+            self.B @ c, self.graph, self.R, self.sides, self.c_ref, active=self.active, **kw
+        )
+
+    def _weighted(self, rho):
+        return rho if self.pixel_weight is None else rho * self.pixel_weight
+
+    def state(self, c, scale, info=None) -> tuple[np.ndarray, np.ndarray]:
+        """Each pixel's robust energy rho (NaN where unusable) and each surface's
+        prior energy (n_surfaces,), at Geman-McClure ``scale``; ``info`` from
+        :func:`hs_residuals` at ``c`` saves sampling the images again."""
+        if info is None:
+            _, rho, _ = self._residuals(c, jacobian=False, scale=scale)
+        else:
+            rho = robust_energy(info["chi2"], info["valid"], scale)
+        prior = self.prior(scale) @ c
+        return self._weighted(rho), np.bincount(self.prior_surface, prior * prior, self.n)
+
+    def prior(self, scale) -> sp.csr_matrix:
+        """The prior's rows in the data's units at Geman-McClure ``scale``.
+
+        The data's chi2 is in units of the predicted noise, or of the residuals'
+        own level where that is larger (``scale / (robust^2 P)``, see
+        :func:`hs_residuals`): the prior is scaled by the same level, so that
+        its weight against the data does not depend on how far the data are
+        from the noise model (on exact data the predicted noise is only the
+        quantisation, and an unscaled prior left the holes' control points to
+        rounding errors).
+        """
+        level = scale / (self.robust**2 * self.sides.pairs)
+        return self.Dw * np.sqrt(level)
+
+    def compare(self, states) -> np.ndarray:
+        """(len(states), n_surfaces) energies of several states over the pixels
+        usable in all of them.
+
+        A pixel whose samples are unusable at a depth (off an image, outside a
+        silhouette, in a shadow) carries no information on that depth, so it
+        must neither cost (at rho's ceiling, measured: it pulled a statue
+        0.5 mm towards the depth where more of its rim stayed inside the other
+        views' silhouettes) nor pay (nothing, or the mean of the others:
+        it pulled a sheet 1.6 mm the other way): energies compare over the
+        pixels usable in every state compared.
+        """
+        common = np.all([np.isfinite(rho) for rho, _ in states], axis=0)
+        surf = self.graph.surface[common]
+        return np.stack([np.bincount(surf, rho[common], self.n) + prior for rho, prior in states])
+
+    def scale(self, c) -> float:
+        """The Geman-McClure scale of the residuals at ``c`` (see :func:`hs_residuals`)."""
+        return self._residuals(c, robust=self.robust, jacobian=False)[2]["scale"]
+
+    def lm(self, c, iterations: int, scale=None, lam=LM_START, say=None):
+        """``iterations`` Levenberg-Marquardt steps, each kept per surface where it
+        lowers that surface's energy (else its damping rises and it tries again,
+        up to ``LM_TRIES`` times; a kept step lowers it). The damping is
+        relative to the diagonal of the Gauss-Newton matrix, so it has no unit.
+
+        Beyond plain Gauss-Newton: the sampled intensities make E non-linear in
+        the depth, and the damping keeps each step where the linear model holds.
+        ``scale`` fixes the robust scale (default: from the residuals at each
+        step). ``say(text)``, if given, is called before each step (progress:
+        1-2 s a step at 1280 x 960). Returns the control points, the total energy after each step
+        and :meth:`state` at the returned control points at the last step's
+        scale (the same numbers a new :meth:`state` call gives: a pixel's
+        energy depends on its own surface's control points alone; None
+        without steps).
+        """
+        lam = np.full(self.n, float(lam))
+        history, s0, rows = [], None, None
+        for step in range(iterations):
+            if say is not None:
+                say(f"refinement: LM step {step + 1} of {iterations}")
+            if rows is None:
+                rows = self._residuals(c, robust=self.robust, scale=scale)
+            Jz, r, info = rows
+            # With the scale fixed, a pixel's rows depend on its own surface's
+            # control points alone: the next step's rows are, pixel by pixel,
+            # those of the try kept for its surface (or of this step), so the
+            # tries compute them and the next step does not sample E again.
+            reuse = scale is not None and step + 1 < iterations
+            sc = info["scale"]
+            s0 = self.state(c, sc, info)
+            Dw = self.prior(sc)
+            level = sc / (self.robust**2 * self.sides.pairs)  # Dw = self.Dw sqrt(level)
+            vals = info["jacobian_values"]
+            if self.pixel_weight is not None:  # rows and residuals times sqrt(weight)
+                w = np.repeat(self.pixel_weight[self.active], self.sides.pairs)
+                vals, r = vals * np.sqrt(w)[:, None], r * w
+            A = self.gram.matrix(vals) + self.DtD * level
+            g = self.Bt @ (Jz.T @ r) + Dw.T @ (Dw @ c)
+            diag = A.diagonal() + 1e-12 * max(A.diagonal().mean(), 1e-300)
+            pending = np.ones(self.n, bool)
+            for _ in range(LM_TRIES):
+                damp = sp.diags(lam[self.ctrl_surface] * diag)
+                h = solve_spd(A + damp, -g)
+                cc = c + h
+                if reuse:
+                    tried = self._residuals(cc, robust=self.robust, scale=sc)
+                    s1 = self.state(cc, sc, tried[2])
+                else:
+                    s1 = self.state(cc, sc)
+                e0, e = self.compare([s0, s1])
+                better = pending & (e < e0)
+                if reuse and better.any():
+                    rows = _kept_rows(
+                        rows, tried, better[self.graph.surface], self.sides.pairs, self.active
+                    )
+                # A surface whose quadratic model predicts no decrease worth
+                # noticing has converged: more damping cannot make it improve.
+                predicted = np.bincount(self.ctrl_surface, -h * (g + 0.5 * (A @ h)), self.n)
+                pending &= predicted > CONVERGED
+                c = np.where(better[self.ctrl_surface], cc, c)
+                s0 = (
+                    np.where(better[self.graph.surface], s1[0], s0[0]),
+                    np.where(better, s1[1], s0[1]),
+                )
+                lam = np.where(better, np.maximum(lam * LM_DOWN, LM_MIN), lam)
+                pending &= ~better
+                lam = np.where(pending, lam * LM_UP, lam)
+                if not pending.any():
+                    break
+            history.append(float(np.nansum(s0[0]) + s0[1].sum()))
+            if not reuse:
+                rows = None
+        return c, history, s0
+
+    def fit(self, z) -> np.ndarray:
+        """Control points whose spline is the least-squares fit to depths ``z`` (n,)."""
+        BtB = (self.B.T @ self.B).tocsc()
+        eps = 1e-9 * BtB.diagonal().mean() * sp.identity(self.B.shape[1], format="csc")
+        return solve_spd(BtB + eps, self.B.T @ z)
+
+    def scaled(self, c, factor) -> np.ndarray:
+        """Control points with each surface k's depths multiplied by ``factor[k]``."""
+        return c * factor[self.ctrl_surface]
+
+
+def _kept_rows(rows, tried, take, pairs: int, active=None):
+    """:func:`hs_residuals`' output ``(J, r, info)`` at the control points kept:
+    ``tried``'s rows for the pixels ``take`` (n,), ``rows``' for the others
+    (both evaluated over the pixels ``active``, default all).
+
+    Exact: each pixel's rows, weight and chi2 depend only on its own
+    surface's control points (and, with the scale fixed, not on the others'
+    residuals), so they equal a new evaluation at the kept points.
+    """
+    J, r, info = rows
+    _, r1, info1 = tried
+    row = np.repeat(take if active is None else take[active], pairs)
+    vals = np.where(row[:, None], info1["jacobian_values"], info["jacobian_values"])
+    kept = {k: np.where(take, info1[k], info[k]) for k in ("valid", "weights", "chi2")}
+    kept.update(scale=info["scale"], jacobian_values=vals)
+    J = sp.csr_matrix((vals.ravel(), J.indices, J.indptr), shape=J.shape)
+    return J, np.where(row, r1, r), kept
+
+
+def explained_surfaces(chi2, usable, surface, scale) -> np.ndarray:
+    """Which surfaces (n_surfaces,) the model explains: the median chi2 of a
+    surface's usable pixels is under the Geman-McClure ``scale``.
+
+    Beyond the paper. Where it is not, most of the surface's pixels have
+    less than a quarter of their weight (rho'(chi2) = 1 / (1 + chi2 /
+    scale)^2): the rows of eq. (5) do not agree with any shape near its
+    depth (measured on exact data: the white cells inside a marker, their
+    footprints mixed with its black, median chi2 10^3-10^7 times the board's
+    at their best depth, and 25-200 mm off). Such a surface is left out
+    (its pixels may still be filled as a hole of a surface around it)
+    rather than reported at a depth the data do not support.
+    """
+    from scipy.ndimage import median
+
+    n = int(surface.max()) + 1 if len(surface) else 0
+    if n == 0 or not usable.any():
+        return np.zeros(n, bool)
+    med = np.asarray(median(chi2[usable], surface[usable], np.arange(n)), float)
+    has = np.bincount(surface[usable], minlength=n) > 0  # no usable pixel: not explained
+    return has & (med < scale)
+
+
+def refine_surface(
+    z0: np.ndarray,
+    mask: np.ndarray,
+    rays: np.ndarray,
+    c_ref: np.ndarray,
+    shape: tuple[int, int],
+    sides: HelmholtzSides,
+    footprint: np.ndarray,
+    spacing_px: float | None = None,
+    iterations: int = 3,
+    robust: float = ROBUST,
+    edge_footprints: float = EDGE_FOOTPRINTS,
+    fill: np.ndarray | None = None,
+    search: bool = True,
+    sigma_samples: int = SIGMA_SAMPLES,
+    clear_sides: HelmholtzSides | None = None,
+    ratio_sigma: np.ndarray | None = None,
+    say=None,
+) -> tuple[np.ndarray, np.ndarray, dict]:
+    """Minimise E (module docstring) over a B-spline surface, from depths ``z0``.
+
+    ``iterations`` Levenberg-Marquardt steps on a spline ``COARSE`` times
+    coarser, then as many on the final one, bring each surface's shape into
+    agreement with the HS normals at its starting depth; :func:`.valley.depth_search`
+    then finds each surface's depth (with ``search``); ``iterations`` more
+    steps polish shape and depth together.
+
+    Parameters
+    ----------
+    z0 : (H*W,) initial depths (metres; the discrete solution, refined).
+    mask : (H*W,) pixels of the surface.
+    rays : (H*W, 3) rays with unit z-depth; c_ref : (3,) their origin.
+    shape : (H, W).
+    sides : from :func:`colourhs.reconstruct.sides.helmholtz_sides`.
+    footprint : (H*W,) lateral size of a pixel at its depth, metres
+        (z / focal length): the unit of depth edges and of the prior.
+    spacing_px : spline control spacing (default
+        :func:`colourhs.reconstruct.bayes.spline.default_spacing`).
+    fill : (H*W,) pixels that may be filled (the object's silhouette or the
+        lit foreground): the holes of each surface inside it (black markers,
+        dark spots, pixels whose rows were unusable) are filled by
+        :func:`fill_holes` (their weight, and so their confidence, is 0).
+    sigma_samples : draws of :func:`depth_sigma` (0: no uncertainty, all NaN).
+    clear_sides : the sides with only the samples clear of every edge usable
+        (:data:`colourhs.reconstruct.sides.RIM_SUPPORT`): the rim rows' pull on
+        each surface's depth (:func:`.uncertainty.rim_valley_pull`) joins the depths' sigma.
+    ratio_sigma : (P,) 1-sigma of each pair's log ratio mu_a / mu_b (the
+        photometric calibration's); its move of each surface's depth
+        (:func:`.uncertainty.ratio_sensitivity`) joins the depths' sigma.
+    say : called with a line of text at each step (progress), if given.
+
+    Returns
+    -------
+    z : (H*W,) refined depths (NaN outside the mask).
+    normals : (H*W, 3) unit normals of the refined surface (NaN outside).
+    info : ``valid`` (H*W,) pixels of the result (without the surfaces
+        that :func:`explained_surfaces` leaves out), ``weights`` (H*W,) final
+        robust weights (0 where the rows were unusable), ``sigma`` (H*W,) each
+        depth's 1-sigma uncertainty (:func:`depth_sigma`, the depth search's
+        :func:`.uncertainty.valley_sigma` with its pulls, metres; :func:`filled_sigma`
+        where the rows were unusable and in filled holes), ``filled`` (H*W,)
+        filled holes, ``energy`` after each step, ``depth_factors`` (the
+        search's scale per surface), ``surfaces`` and ``control_points``.
+    """
+    H, W = shape
+    say = say or (lambda text: None)
+    spacing = float(spacing_px or default_spacing(W))
+    graph = SurfaceGraph(mask, shape, z0, footprint, edge_footprints)
+    R = rays[graph.pix]
+    fp = float(np.median(footprint[graph.pix]))
+    coarse = _problem(graph, R, sides, c_ref, spacing * COARSE, fp, robust)
+    say(f"refinement: {graph.n_surfaces} surfaces, {iterations} LM steps on a coarse spline")
+    c, energies, _ = coarse.lm(coarse.fit(z0[graph.pix]), iterations, say=say)
+    problem = _problem(graph, R, sides, c_ref, spacing, fp, robust)
+    B = problem.B
+    say(f"refinement: {iterations} LM steps on {B.shape[1]} control points")
+    c, more, _ = problem.lm(problem.fit(coarse.B @ c), iterations, say=say)
+    energies += more
+    factors = np.ones(graph.n_surfaces)
+    valley = np.zeros(graph.n_surfaces)
+    if search:
+        stride = search_stride(spacing)
+        say(f"refinement: depth search along E's valley (pixel stride {stride})")
+        c, factors, valley = depth_search(
+            problem.subsampled(stride),
+            c,
+            clear_sides=clear_sides,
+            ratio_sigma=ratio_sigma,
+            say=say,
+        )
+    say(f"refinement: {iterations} final LM steps")
+    c, more, _ = problem.lm(c, iterations, say=say)
+    z = B @ c
+    _, _, info = hs_residuals(z, graph, R, sides, c_ref, robust, jacobian=False)
+    out_z = np.full(H * W, np.nan)
+    out_z[graph.pix] = z
+    # Every pixel of the surface keeps the spline's depth; those whose rows
+    # were unusable at it (a saturated or dark sample, a silhouette edge in
+    # another view) have weight, and so confidence, 0.
+    valid = np.zeros(H * W, bool)
+    explained = explained_surfaces(info["chi2"], info["valid"], graph.surface, info["scale"])
+    valid[graph.pix] = explained[graph.surface]
+    out_z[graph.pix[~explained[graph.surface]]] = np.nan
+    weights = np.zeros(H * W)
+    weights[graph.pix] = info["weights"] * info["valid"]
+    sigma = np.full(H * W, np.nan)
+    if sigma_samples > 0:
+        say("refinement: each depth's uncertainty")
+        local = depth_sigma(problem, c, sigma_samples)
+        sigma[graph.pix] = np.hypot(local, np.abs(z) * valley[graph.surface])
+    filled = np.zeros(H * W, bool)
+    if fill is not None:
+        zh = fill_holes(z, graph, fill, rays, surfaces=explained)
+        filled = np.isfinite(zh) & (zh > 0)
+        out_z[filled] = zh[filled]
+        valid |= filled
+    # Filled holes and pixels whose rows were unusable: extrapolated depths.
+    guessed = valid & ~np.isfinite(sigma)
+    sigma[guessed] = filled_sigma(sigma, guessed, shape)
+    out_n = np.full((H * W, 3), np.nan)
+    if valid.any():  # the output's normals: E's, over the output's own links
+        # Filled holes had no footprint: it is z / focal length, so scale it from out_z.
+        per_m = float(np.median(footprint[graph.pix] / np.abs(z0[graph.pix])))
+        final = SurfaceGraph(valid, shape, out_z, np.abs(out_z) * per_m, edge_footprints)
+        out_n[final.pix] = surface_normals(final, out_z[final.pix], rays, c_ref)
+        valid[final.pix] = np.all(np.isfinite(out_n[final.pix]), axis=1)
+    return (
+        out_z,
+        out_n,
+        {
+            "valid": valid,
+            "weights": weights,
+            "sigma": sigma,
+            "energy": energies + more,
+            "filled": filled,
+            "depth_factors": factors.tolist(),
+            "depth_factor_sigma": valley.tolist(),
+            "surfaces": int(graph.n_surfaces),
+            "control_points": int(B.shape[1]),
+        },
+    )

@@ -1,0 +1,297 @@
+"""The depth's error bar: a 1-sigma uncertainty for every reconstructed depth.
+
+Beyond the paper, which gives no error bar. Bayesian HS
+(:func:`colourhs.reconstruct.bayes.refine.refine_surface`): the local part from
+the Gauss-Newton covariance of the spline's control points
+(:func:`depth_sigma`, with the sides' correlated noise,
+:func:`correlated_gain`), the depth mode that E fixes weakly from the depth
+search's own trial energies (:func:`valley_sigma`) and the pull of the rows
+at the edges of unusable regions on it, a model error
+(:func:`rim_valley_pull`), and the move of that mode that the calibrated
+pair ratios' uncertainty allows (:func:`ratio_sensitivity`, the ratios'
+sigma from :func:`colourhs.calibration.photometric_solve.pair_ratio_sigma`), filled
+holes from their nearest measured depth
+(:func:`filled_sigma`); the parts add in variance. ML HS: the curvature of its
+chi-square cost along the ray (:func:`ml_sigma`).
+"""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import scipy.sparse as sp
+
+from colourhs.common.linalg import _factor
+from colourhs.reconstruct.sides import HelmholtzSides, noise_correlation, with_side_scaled
+
+VALLEY_BLOCK = 4  # blocks of the valley's uncertainty, in spline control spacings
+"""Why ``VALLEY_BLOCK`` holds on any rig: in units of the spline's spacing
+(a fixed fraction of the image width), so blocks hold the same share of a
+surface at any resolution, wide enough that neighbouring blocks share few
+control points and no noise (the sides' blur is a pixel)."""
+
+
+def _near_trials(tried: dict, best: float, span: float):
+    """The depth search's trial depths within ``span`` of ``best``: per-pixel rho
+    (trials, n), prior energies (trials,), offsets ``x = d - best`` and the
+    quadratic's design matrix [1, x, x^2]; None with fewer than three."""
+    deltas = sorted(d for d in tried if abs(d - best) <= span * (1 + 1e-6))
+    if len(deltas) < 3:
+        return None
+    rho = np.array([tried[d][0] for d in deltas])
+    prior = np.array([tried[d][1] for d in deltas])
+    x = np.asarray(deltas) - best
+    return rho, prior, x, np.stack([np.ones_like(x), x, x * x], axis=1)
+
+
+def valley_sigma(tried: dict, best: float, groups: np.ndarray, span: float) -> float:
+    """Relative 1-sigma uncertainty of a surface's depth factor from the depth search.
+
+    Beyond the paper. Along E's valley the depth of a smooth surface is
+    decided by weak shading differences against the sensor noise sampled at
+    positions that move with the depth, so the minimum's scatter can far
+    exceed what E's curvature alone says (the noise also shapes E along the
+    valley). This is the sandwich (cluster-robust) variance of the
+    minimum: each block of pixels (``groups``, about independent) gets its
+    own quadratic ``E_g(d) = a_g + b_g x + c_g x^2`` in ``x = d - best``
+    through the trial depths within ``span`` of ``best`` (a search step: E's
+    trial energies nearer each other differ by less than their fits' own
+    noise; ``tried``: delta -> (per-pixel rho, prior energy, control
+    points)), and the minimum's
+    variance is ``G / (G - 1) sum_g (b_g - mean b)^2 / (2 sum_g c_g + 2
+    c_prior)^2``. Returns inf where E does not curve upwards there (the
+    depth is not determined) and NaN with fewer than three trial depths.
+    """
+    near = _near_trials(tried, best, span)
+    if near is None:
+        return float("nan")
+    rho, prior, _, X = near
+    common = np.all(np.isfinite(rho), axis=0)
+    _, grp = np.unique(groups[common], return_inverse=True)
+    G = int(grp.max()) + 1 if len(grp) else 0
+    if G < 2:
+        return float("nan")
+    Eg = np.stack([np.bincount(grp, r[common], G) for r in rho])  # (trials, G)
+    coef, *_ = np.linalg.lstsq(X, np.concatenate([Eg, prior[:, None]], axis=1), rcond=None)
+    b, c = coef[1, :G], coef[2]
+    curvature = 2.0 * c.sum()
+    if not curvature > 0:
+        return float("inf")
+    return float(np.sqrt(G / (G - 1) * np.sum((b - b.mean()) ** 2)) / curvature)
+
+
+def rim_valley_pull(
+    tried: dict, best: float, span: float, clear: np.ndarray, groups: np.ndarray
+) -> float:
+    """Relative bias of a surface's depth factor from its rim rows (E's valley).
+
+    Beyond the paper. A sample whose blur kernel reaches an unusable region
+    (a silhouette, a dark marker, a saturated patch) mixes the edge into the
+    surface, differently in the two views of a pair: a model error that
+    does not fall with the sensor noise, so the robust weights drop such
+    rows only on nearly exact data, and under noise they move the depth
+    mode (a bias, not scatter: on exact images with the noise model's
+    weights, the rows clear of every edge alone bring a statue's and a
+    sheet's depth back to the truth). E's Gauss-Newton model does not see
+    that move (it does not follow the valley), so it is measured on the
+    depth search's own energies: ``tried`` (delta -> per-pixel rho, prior
+    energy, ...) at the trial depths, ``clear`` (the surface's pixels) those
+    whose rows are clear of every edge. Quadratics through E over every
+    usable pixel and over the clear ones alone, at the trial depths within
+    ``span`` of ``best``, give two minima (each kept within those trial
+    depths, where the quadratics hold) a distance d apart. Without a rim
+    bias d is noise alone, with variance ``s_clear^2 - s_all^2`` (the clear
+    pixels' minimum is the less precise of two nested estimates of one
+    depth; each s from :func:`valley_sigma` with ``groups``), so the bias is
+    ``sqrt(max(0, d^2 - (s_clear^2 - s_all^2)))`` (a Hausman-type
+    difference): 0 where the clear pixels cannot tell it from their own
+    noise, or where no pixel is a rim's. NaN with fewer than three trial
+    depths or an energy over every pixel that does not curve upwards.
+    """
+    near = _near_trials(tried, best, span)
+    if near is None:
+        return float("nan")
+    rho, prior, x, X = near
+    usable = np.all(np.isfinite(rho), axis=0)
+    inner = usable & clear
+    if inner.sum() == usable.sum():
+        return 0.0
+    E = np.stack([rho[:, usable].sum(axis=1) + prior, rho[:, inner].sum(axis=1) + prior], axis=1)
+    coef, *_ = np.linalg.lstsq(X, E, rcond=None)
+    if not coef[2, 0] > 0:
+        return float("nan")
+    if not coef[2, 1] > 0:
+        return 0.0  # the clear pixels alone do not fix the depth: no bias can be told
+    vertex = np.clip(-coef[1] / (2.0 * coef[2]), x.min(), x.max())  # the fits hold there only
+    s_all = valley_sigma(tried, best, groups, span)
+    inner_only = {d: (np.where(inner, r[0], np.nan), *r[1:]) for d, r in tried.items()}
+    s_clear = valley_sigma(inner_only, best, groups, span)
+    noise = s_clear**2 - s_all**2 if np.isfinite(s_clear) and np.isfinite(s_all) else np.inf
+    return float(np.sqrt(max(0.0, (vertex[1] - vertex[0]) ** 2 - max(noise, 0.0))))
+
+
+RATIO_STEP = 1e-6
+"""Log step of a pair's ratio in :func:`ratio_sensitivity`. Why it holds on any
+rig: a share of the intensities, so the same on any sensor and scale, far below
+any sensor's relative noise (a 16-bit sample's is above 1e-5), so that E's
+change is its derivative even where the rows sit on the robust function's
+knee, and far above the rounding of E's float64 terms."""
+
+
+def ratio_sensitivity(problem, tried, best, span, pixels, at, scale, step=RATIO_STEP):
+    """How far each surface's depth factor moves per unit log ratio of each pair.
+
+    Beyond the paper. On a smooth surface the depth is the mode E fixes
+    weakly (:func:`valley_sigma`), and a pair's ratio mu_a / mu_b (eq. 5's
+    weights, from the photometric calibration) enters it as the distances'
+    fall-off does: a small error of the ratio moves the valley's minimum far.
+    Linearised on the depth search's own trials: with pair p's side a scaled by
+    ``exp(step)``, E at each trial depth within ``span`` of ``best`` changes by
+    ``step g(x)`` (the shape's re-fit is of second order there); with E's
+    quadratic ``a + b x + c x^2`` the minimum moves by ``-step g'(x) / (2 c)``.
+
+    ``problem`` (``refine._Problem``), ``tried`` (per surface: delta -> (per-pixel
+    rho, prior, control points)), ``best`` (n,), ``pixels`` (per surface: its
+    pixels' mask), ``at(deltas)`` (the control points at one delta per surface),
+    ``scale`` (the robust scale the trials used). Returns (n, P) relative shifts
+    per unit log ratio; NaN where a surface has fewer than three trials there or
+    E does not curve upwards.
+    """
+    n, P = len(tried), problem.sides.pairs
+    near = [_near_trials(tried[k], best[k], span) for k in range(n)]
+    deltas = [
+        np.asarray(best[k]) + near[k][2] if near[k] is not None else np.array([best[k]])
+        for k in range(n)
+    ]
+    steps = max(len(d) for d in deltas)
+    out = np.full((n, P), np.nan)
+    for p in range(P):
+        alt = copy.copy(problem)
+        alt.sides = with_side_scaled(problem.sides, 2 * p, float(np.exp(step)))
+        change = [np.full(len(d), np.nan) for d in deltas]
+        for i in range(steps):
+            rho, _ = alt.state(at([d[min(i, len(d) - 1)] for d in deltas]), scale)
+            for k in range(n):
+                if near[k] is None or i >= len(deltas[k]):
+                    continue
+                r0, r1 = near[k][0][i], rho[pixels[k]]
+                both = np.isfinite(r0) & np.isfinite(r1)
+                change[k][i] = np.sum(r1[both] - r0[both])
+        for k in range(n):
+            if near[k] is None:
+                continue
+            rho0, prior, x, X = near[k]
+            common = np.all(np.isfinite(rho0), axis=0)
+            E = rho0[:, common].sum(axis=1) + prior
+            c = np.linalg.lstsq(X, E, rcond=None)[0][2]
+            g = np.polyfit(x, change[k], 1)[0]
+            if c > 0:
+                out[k, p] = -g / (2.0 * c) / step
+    return out
+
+
+SIGMA_SAMPLES = 64  # Monte Carlo draws of the control points' posterior (sigma to ~9 %)
+"""Why ``SIGMA_SAMPLES`` holds on any rig: it is a count of draws, whose
+relative error in a standard deviation is ``1 / sqrt(2 (n - 1))`` whatever
+the rig (64: 9 %), enough to tell a 1-sigma share of 0.68 from 0.6 or 0.76."""
+
+
+def correlated_gain(sides: HelmholtzSides) -> float:
+    """Variance gain of a smooth average of the sides' blurred noise over independent
+    rows: the sum of the noise's correlation over the 2D pixel lattice (1 unblurred)."""
+    if not sides.blurred:
+        return 1.0
+    corr = noise_correlation(sides.blur_px, int(np.ceil(6 * sides.blur_px)) + 1)
+    return float(corr[0] + 2.0 * corr[1:].sum()) ** 2
+
+
+def depth_sigma(problem, c, samples: int = SIGMA_SAMPLES, seed: int = 0) -> np.ndarray:
+    """1-sigma uncertainty (n,) of each pixel's depth on the spline ``c``, metres.
+
+    ``problem`` is E over the spline (``refine._Problem``).
+
+    Beyond the paper. Near E's minimum the control points' posterior is
+    Gaussian with covariance ``level * A^-1``, where ``A = (J B)^T W (J B) +
+    level D^T D`` is the Gauss-Newton matrix of E (the IRLS-weighted rows
+    of every pixel in noise units, :func:`hs_residuals`, and the spline
+    prior) and ``level`` the residuals' excess over the noise model (1 when
+    the noise model explains them; larger where rendering, sampling or
+    calibration leave more). A pixel's variance is ``b_p^T A^-1 b_p`` (its
+    row of the basis B); it holds the depth mode that E determines weakly
+    (the valley of :func:`depth_search`) as well as the local shape.
+
+    Computed without inverting A: ``x = A^-1 (J_c^T g_1 + sqrt(level) D^T
+    g_2)`` with standard normal g has covariance ``A^-1`` (``A`` is the
+    Gram matrix of the stacked rows), so ``samples`` solves with one
+    factorisation give each pixel's variance as the mean square of ``B x``.
+
+    The Gauss-Newton covariance treats every row's noise as independent; the
+    sides are blurred before sampling (:func:`colourhs.reconstruct.sides.side_maps`),
+    so neighbouring rows share their noise, and a shape smoother than the
+    blur (the spline's cells span several pixels) averages fewer independent
+    samples than it has rows: the variance is scaled by the correlated noise's
+    gain over the pixel lattice, ``(sum_k corr[|k|])^2`` (4 pi sigma^2 for a
+    blur of sigma pixels; 1 without blur). Pixels whose rows are unusable get NaN.
+    """
+    J, r, info = problem._residuals(c, robust=problem.robust)  # its own robust scale
+    sc = info["scale"]
+    level = sc / (problem.robust**2 * problem.sides.pairs)
+    A = (problem.gram.matrix(info["jacobian_values"]) + problem.DtD * level).tocsc()
+    Jc = (J @ problem.B).tocsr()
+    Dw = problem.prior(sc)
+    rng = np.random.default_rng(seed)
+    g1 = rng.standard_normal((Jc.shape[0], samples))
+    g2 = rng.standard_normal((Dw.shape[0], samples))
+    rhs = Jc.T @ g1 + Dw.T @ g2
+    diag = A.diagonal()
+    A = A + sp.diags(1e-12 * max(diag.mean(), 1e-300) * np.ones(A.shape[0]))
+    x = _factor(A).solve(np.asarray(rhs, float))
+    zs = problem.B @ x
+    var = np.mean(zs * zs, axis=1) * level * correlated_gain(problem.sides)
+    return np.where(info["valid"], np.sqrt(var), np.nan)
+
+
+FILL_SIGMA = 2.0  # a filled hole's sigma, in units of its nearest measured depth's
+"""Why ``FILL_SIGMA`` holds on any rig: a ratio of two sigmas. A hole's depth
+is the quadric through a ring of measured depths around it (:func:`fill_holes`),
+an extrapolation whose error is at least the ring's and grows inside it:
+twice the nearest measured pixel's sigma bounds it without a figure of the rig."""
+
+
+def filled_sigma(sigma: np.ndarray, filled: np.ndarray, shape) -> np.ndarray:
+    """Sigmas (k,) of the ``filled`` pixels (H*W,): ``FILL_SIGMA`` times that of
+    the nearest pixel with a finite ``sigma`` (H*W,); NaN where there is none."""
+    from scipy.ndimage import distance_transform_edt
+
+    known = np.isfinite(sigma).reshape(shape)
+    if not known.any():
+        return np.full(int(filled.sum()), np.nan)
+    _, (ii, jj) = distance_transform_edt(~known, return_indices=True)
+    nearest = (ii * shape[1] + jj).ravel()[filled]
+    return FILL_SIGMA * sigma[nearest]
+
+
+ML_SIGMA_STEP = 1e-4  # the curvature's half-step, relative to the depth (0.08 mm at 0.8 m)
+"""Why ``ML_SIGMA_STEP`` holds on any rig: it is relative to the depth, so it
+stays a fixed fraction of a pixel's disparity step at any working distance,
+far below the cost's width (a label is 0.26 % of the depth) and far above
+rounding."""
+
+
+def ml_sigma(sides, rays, z, centre, step: float = ML_SIGMA_STEP) -> np.ndarray:
+    """1-sigma uncertainty (N,) of ML depths ``z`` along ``rays`` (N, 3), metres.
+
+    Beyond the paper. The whitened ML cost (:func:`colourhs.reconstruct.sides.whitened_cost`)
+    is a chi-square with one degree of freedom along the ray, so the depth's
+    variance is ``2 / (d^2 chi2 / dz^2)``, its second derivative taken by
+    central differences ``step * z`` either side. NaN where the cost does not
+    curve upwards there or a sample is unusable.
+    """
+    from colourhs.reconstruct.sides import whitened_cost
+
+    h = step * np.abs(z)
+    chi = [whitened_cost(sides, centre + rays * (z + d)[:, None], rays)[0] for d in (-h, 0, h)]
+    curv = (chi[0] - 2.0 * chi[1] + chi[2]) / (h * h)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(curv > 0, np.sqrt(2.0 / curv), np.nan)

@@ -1,0 +1,202 @@
+"""Each surface's depth along E's valley: the depth search (beyond the paper).
+
+Under noise the energy E of :mod:`colourhs.reconstruct.bayes.surface` has a long,
+nearly flat valley along each surface's depth (a scale of the surface about
+the camera centre); :func:`depth_search` walks it and takes E's minimum
+there, and gives the depth mode's uncertainty from its own trials
+(:mod:`colourhs.reconstruct.bayes.uncertainty`). :func:`search_stride` subsamples
+the pixels it uses at high resolution. Called by
+:func:`colourhs.reconstruct.bayes.refine.refine_surface`.
+"""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+
+from colourhs.reconstruct.bayes.uncertainty import (
+    VALLEY_BLOCK,
+    ratio_sensitivity,
+    rim_valley_pull,
+    valley_sigma,
+)
+
+SEARCH_STEP = 0.005  # depth search step, relative (0.5 % of the depth)
+SEARCH_STEPS = 12  # at most 6 % of the depth either way
+SEARCH_FITS = 3  # LM steps that re-fit the shape at each depth of the search
+SEARCH_PARABOLAS = (1.0, 0.25, 0.05)  # half-widths of the parabolas through E, in steps
+SEARCH_CELL_PX = 5.0  # the depth search keeps at least this many pixels across a control cell
+"""Why these values hold on any rig:
+
+- ``SEARCH_STEP``: a relative depth, so the same at any working distance;
+  the labelling's error on smooth surfaces is a few labels to a few per cent
+  of the depth (measured 9 mm at 0.8 m on a noisy sheet; 28 mm at 0.6 m on an
+  external capture), so ``SEARCH_STEPS`` steps of 0.5 % (6 %) cover it.
+- ``SEARCH_FITS``: with 1 re-fitting step per depth the valley's energy was
+  noisy enough to move a sheet by 1 mm; 3 converge the shape (measured on 4
+  random rigs, sheet 0.46 mm worst against 1.6). 2 fits and one parabola
+  measured as good under noise (4 random rigs x plane, sheet, statue, toy,
+  every nuisance on, pipeline calibration: sheet 0.23 / 0.08 / 0.23 / 0.03
+  mm against 0.33 / 0.34 / 0.29 / 0.03, the rest within 0.07 mm, 21 % less
+  time) but not on exact data, where E's minimum is sharp: plane 0.55 and
+  0.083 mm (seeds 1, 2 of tests/test_exact.py) against 0.037 and 0.035;
+  with 3 fits but one parabola 0.46 and 0.062, with 2 fits and both
+  parabolas 0.15 and 0.057. Exact data decide: 3 fits, two parabolas.
+- ``SEARCH_PARABOLAS``: half-widths (in steps) of the parabolas fitted
+  through E around the best depth, each through the previous vertex (see
+  ``SEARCH_FITS`` for the second one's measured worth). On exact data E is
+  sharp and, beyond a few tenths of a millimetre, flattened by the robust
+  function, so a parabola a quarter step (1 mm at 0.8 m) wide put its
+  vertex up to 0.08 mm off the minimum (a uniform offset; E at the result
+  above E at the truth); the third, a twentieth of a step wide, is within
+  the parabola's own range. Measured on tests/test_exact.py's seeds 1, 2,
+  4 (plane) and 1 (sheet) with the 25 % working radius: 0.081, 0.036,
+  0.012, 0.020 mm with two parabolas, 0.008, 0.011, 0.013, 0.016 with
+  three; under noise (random rigs 0, 1, 5, every nuisance, pipeline
+  calibration; plane, sheet, statue, toy) within 0.07 mm either way.
+- ``SEARCH_CELL_PX``: in pixels of the spline's own spacing, which is a
+  fixed fraction of the image width, so the subsampling
+  (:func:`search_stride`) is the same on any rig at a given resolution:
+  none below 1200 pixels wide (spacing < 10 px: the demo and random presets),
+  every 2nd pixel in rows and columns from 1200 to 1799 (the paper preset's
+  1280: 28 of a cell's 114 pixels, 85 rows, kept).
+"""
+
+
+def search_stride(spacing: float) -> int:
+    """Pixel stride of the depth search: ``floor(spacing / SEARCH_CELL_PX)``, at least 1.
+
+    Beyond the paper (speed). The search fits each trial depth's shape and
+    compares E along the valley; both rest on many pixels per control cell
+    (``spacing^2``), so at high resolution a subsample decides them as well
+    and each trial costs a ``stride^2``-th of the pixels' work; the final
+    Levenberg-Marquardt steps use every pixel.
+    """
+    return max(1, int(spacing // SEARCH_CELL_PX))
+
+
+def depth_search(
+    problem,
+    c,
+    step=SEARCH_STEP,
+    max_steps=SEARCH_STEPS,
+    clear_sides=None,
+    ratio_sigma=None,
+    say=None,
+):
+    """Each surface's depth from the minimum of E along its family of shapes.
+
+    Beyond the paper. Under noise E has a long, nearly flat valley: at each
+    depth (a scale of the surface about the camera centre) some shape agrees
+    with the HS normals evaluated there, and Gauss-Newton creeps along that
+    valley (measured: 8 iterations moved a sheet 1 of its 9 mm). Along the
+    valley E still has a clear minimum, at the true depth (there alone the
+    rows are rank 2 and the normals integrable). So every surface walks its
+    own scale factor in relative steps of ``step`` (re-fitting its shape at
+    each depth with ``SEARCH_FITS`` LM steps, the robust scale fixed so that
+    energies compare), downhill until E rises, at most ``max_steps`` steps;
+    parabolas through the best depth and its neighbours ``SEARCH_PARABOLAS``
+    steps either side (a step, then a quarter step about the first vertex)
+    give the minimum.
+
+    Returns the control points at each surface's best depth (shape re-fitted),
+    the factors (n_surfaces,) applied and the relative 1-sigma uncertainty
+    of each factor (:func:`valley_sigma`, from the trial depths' energies;
+    with ``clear_sides``, the sides with only the samples clear of every
+    edge usable, the rim rows' bias :func:`rim_valley_pull` added in
+    variance; with ``ratio_sigma`` (P,), each pair's log-ratio uncertainty
+    from the photometric calibration, its move of the depth mode,
+    :func:`ratio_sensitivity` times it, added in variance).
+    ``problem`` is E over the spline (``refine._Problem``, subsampled with
+    :func:`search_stride`). ``say(text)``, if given, reports each trial depth (each is
+    ``SEARCH_FITS`` LM steps).
+    """
+    n = problem.n
+    sc = problem.scale(c)
+    mine = [problem.ctrl_surface == k for k in range(n)]
+    pixels = [problem.graph.surface == k for k in range(n)]
+    tried = [{} for _ in range(n)]  # surface -> offset -> (rho, prior, control points)
+    trials = [0]  # how many trial depths so far (progress)
+
+    def key(delta) -> float:
+        return round(float(delta), 9)
+
+    def energies(k, deltas) -> np.ndarray:
+        """Surface k's energies at ``deltas`` (inf where not tried), compared."""
+        have = [key(d) in tried[k] for d in deltas]
+        out = np.full(len(deltas), np.inf)
+        if any(have):
+            states = [tried[k][key(d)][:2] for d, h in zip(deltas, have, strict=True) if h]
+            common = np.all([np.isfinite(rho) for rho, _ in states], axis=0)
+            out[np.flatnonzero(have)] = [np.sum(rho[common]) + pr for rho, pr in states]
+        return out
+
+    def at(deltas) -> np.ndarray:
+        return np.concatenate([tried[k][key(deltas[k])][2] for k in range(n)])
+
+    def trial(base, base_delta, new_delta, record) -> None:
+        trials[0] += 1
+        if say is not None:
+            shown = ", ".join(f"{100 * d:+.2f}" for d in new_delta[record][:4])
+            say(f"refinement: depth search, trial {trials[0]} at {shown} % (first surfaces)")
+        cc = problem.scaled(base, (1.0 + new_delta) / (1.0 + base_delta))
+        cc, _, (rho, prior) = problem.lm(cc, SEARCH_FITS, scale=sc)
+        for k in np.flatnonzero(record):
+            tried[k][key(new_delta[k])] = (rho[pixels[k]], prior[k], cc[mine[k]])
+
+    def pick(candidates) -> np.ndarray:
+        """Per surface, the candidate offset of least energy."""
+        out = np.empty(n)
+        for k in range(n):
+            cand = np.unique([key(d) for d in candidates[k] if key(d) in tried[k]])
+            out[k] = cand[np.argmin(energies(k, cand))]
+        return out
+
+    zero, everyone = np.zeros(n), np.ones(n, bool)
+    trial(c, zero, zero, everyone)
+    for d in (step, -step):
+        trial(at(zero), zero, zero + d, everyone)
+    best = pick([(0.0, step, -step)] * n)
+    direction = np.sign(best)
+    active = best != 0.0
+    for _ in range(max_steps - 1):
+        if not active.any():
+            break
+        nxt = best + direction * step * active
+        trial(at(best), best, nxt, active)
+        improved = active & (pick(list(zip(best, nxt, strict=True))) == nxt)
+        best = np.where(improved, nxt, best)
+        active = improved
+    for h in step * np.asarray(SEARCH_PARABOLAS):
+        for side in (-1.0, 1.0):
+            need = np.array([key(best[k] + side * h) not in tried[k] for k in range(n)])
+            if need.any():
+                trial(at(best), best, best + side * h * need, need)
+        vertex = best.copy()
+        for k in range(n):
+            em, e0, ep = energies(k, best[k] + np.array([-h, 0.0, h]))
+            den = em - 2.0 * e0 + ep
+            if np.isfinite(den) and den > 0:
+                vertex[k] += h * float(np.clip(0.5 * (em - ep) / den, -1.0, 1.0))
+        trial(at(best), best, vertex, everyone)
+        best = pick(list(zip(best, vertex, strict=True)))
+    g = problem.graph
+    block = VALLEY_BLOCK * problem.spline.spacing
+    groups = (g.rows // block).astype(np.int64) * (int(g.shape[1] // block) + 1) + g.cols // block
+    sigma = np.array([valley_sigma(tried[k], best[k], groups[pixels[k]], step) for k in range(n)])
+    if clear_sides is not None:  # the rim rows' pull on each surface's depth mode
+        alt = copy.copy(problem)
+        alt.sides = clear_sides
+        clear = np.isfinite(alt.state(at(best), sc)[0])
+        pull = [
+            rim_valley_pull(tried[k], best[k], step, clear[pixels[k]], groups[pixels[k]])
+            for k in range(n)
+        ]
+        sigma = np.hypot(sigma, np.asarray(pull))
+    if ratio_sigma is not None and np.any(np.isfinite(ratio_sigma)):
+        # The calibrated pair ratios' uncertainty, through each depth mode's gain.
+        gain = ratio_sensitivity(problem, tried, best, step, pixels, at, sc)
+        moved = np.sqrt(np.nansum((gain * np.asarray(ratio_sigma)[None, :]) ** 2, axis=1))
+        sigma = np.hypot(sigma, np.where(np.all(np.isnan(gain), axis=1), 0.0, moved))
+    return at(best), 1.0 + best, sigma

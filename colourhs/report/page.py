@@ -1,0 +1,553 @@
+"""The evaluation report ``reports/NAME/index.html``: one HTML page that reads at a glance.
+
+:func:`build_report` gathers what earlier stages wrote (the metrics table of the
+results contract, the calibration and per-scene figures, Snakemake benchmark
+files, the run's configuration, the dataset's rig and scene descriptions, the
+result files) into one page rendered from the jinja2 template
+``colourhs/report/templates/report.html`` (package data). Images are linked from
+``reports/NAME/figures/`` by relative paths (or, with ``embed_images``, embedded
+as base64 data URIs so the page stands alone); styles are inline. The page is
+built in memory and written atomically, so a failure leaves no partial HTML
+behind.
+
+The tables are computed by the small functions :func:`summarise_metrics`,
+:func:`read_benchmarks` and :func:`summarise_benchmarks` in
+:mod:`colourhs.report.tables` (re-exported here); provenance, rig summary, file
+links and the figures' arrangement by :mod:`colourhs.report.provenance`. This module
+holds the paper's reference numbers, the software versions and the page.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import importlib.metadata
+import importlib.util
+import os
+import platform
+import sys
+from collections.abc import Iterable, Mapping, Sequence
+from datetime import UTC, datetime
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import yaml
+
+from colourhs.common.files import atomic_output
+from colourhs.common.progress import stage
+from colourhs.report.calibration import calibration_diagnostics
+from colourhs.report.provenance import (
+    arrange_figures,
+    frame_error_svg,
+    git_provenance,
+    result_files,
+    rig_summary,
+    run_command,
+    scene_descriptions,
+)
+from colourhs.report.tables import (
+    AGGREGATION,
+    BENCHMARK_COLUMNS,
+    METRIC_COLUMNS,
+    REQUIRED_COLUMNS,
+    _aggregation_of,
+    drop_table,
+    expected_error_table,
+    find_benchmarks,
+    format_number,
+    read_benchmarks,
+    read_metrics,
+    sigma_calibration_table,
+    summarise_benchmarks,
+    summarise_metrics,
+)
+from colourhs.report.view3d import scene_views
+from colourhs.workflow.variants import VARIANT_LABELS, VARIANT_ORDER
+
+__all__ = [
+    "AGGREGATION",
+    "BENCHMARK_COLUMNS",
+    "METRIC_COLUMNS",
+    "PAPER_REFERENCE",
+    "PAPER_REFERENCE_SOURCE",
+    "REQUIRED_COLUMNS",
+    "VARIANT_LABELS",
+    "VARIANT_ORDER",
+    "build_report",
+    "find_benchmarks",
+    "format_number",
+    "read_benchmarks",
+    "read_metrics",
+    "software_versions",
+    "summarise_benchmarks",
+    "summarise_metrics",
+]
+
+#: Numbers the paper states, as ``{scene: {variant: {column: value}}}``. The paper
+#: gives only these two: the RMS Hausdorff distance (mm) of the ``plane`` scene
+#: (a held-out calibration board pose, real capture; no chromaticity calibration
+#: was needed for it, so BayesianHS_wPhCalib is our ``bayes_ph``). No other scene
+#: has a quantitative figure in the paper (Monster, Slinky and the dynamic
+#: scenes are evaluated qualitatively only, for lack of ground truth).
+PAPER_REFERENCE: dict[str, dict[str, dict[str, float]]] = {
+    "plane": {
+        "bayes_nocalib": {"hausdorff_rms_mm": 2.5},
+        "bayes_ph": {"hausdorff_rms_mm": 2.0},
+    },
+}
+#: Where :data:`PAPER_REFERENCE` comes from.
+PAPER_REFERENCE_SOURCE = (
+    "Colour Helmholtz Stereopsis, Section IV-A.1 'Quantitative evaluation' (with Figure 5): "
+    "RMS Hausdorff distance of 2.5 mm for BayesianHS_w/oPhCalib and 2 mm for "
+    "BayesianHS_wPhCalib on the real test plane; Section V repeats the 2 mm."
+)
+
+#: Packages whose versions the report lists: label -> (import name, distribution names).
+SOFTWARE = {
+    "numpy": ("numpy", ("numpy",)),
+    "scipy": ("scipy", ("scipy",)),
+    "pandas": ("pandas", ("pandas",)),
+    "matplotlib": ("matplotlib", ("matplotlib",)),
+    "open3d": ("open3d", ("open3d", "open3d-cpu")),
+    "opencv": (
+        "cv2",
+        (
+            "opencv-python-headless",
+            "opencv-python",
+            "opencv-contrib-python-headless",
+            "opencv-contrib-python",
+        ),
+    ),
+    "h5py": ("h5py", ("h5py",)),
+    "snakemake": ("snakemake", ("snakemake",)),
+    "numba": ("numba", ("numba",)),
+    "pyyaml": ("yaml", ("PyYAML", "pyyaml")),
+}
+
+_MIME = {
+    ".png": "image/png",
+    ".gif": "image/gif",
+    ".jpg": "image/jpeg",
+    ".jpeg": "image/jpeg",
+    ".svg": "image/svg+xml",
+    ".webp": "image/webp",
+}
+
+
+# --------------------------------------------------------------------------- environment
+
+
+def _version(import_name: str, dists: Sequence[str]) -> str:
+    if importlib.util.find_spec(import_name) is None:
+        return "not installed"
+    for d in dists:
+        try:
+            return importlib.metadata.version(d)
+        except importlib.metadata.PackageNotFoundError:
+            continue
+    try:  # importable but without distribution metadata: ask the module itself
+        return str(getattr(importlib.import_module(import_name), "__version__", "unknown"))
+    except Exception:  # noqa: BLE001 - a broken install is still worth a line
+        return "not importable"
+
+
+def software_versions() -> dict[str, str]:
+    """Versions of Python, colourhs (``"dev"`` when not installed) and the key packages.
+
+    Versions come from the installed distributions' metadata (no heavy imports);
+    a package that cannot be found reads ``"not installed"``.
+    """
+    try:
+        ours = importlib.metadata.version("colourhs")
+    except importlib.metadata.PackageNotFoundError:
+        ours = "dev"
+    out = {"python": platform.python_version(), "colourhs": ours}
+    for label, (mod, dists) in SOFTWARE.items():
+        out[label] = _version(mod, dists)
+    return out
+
+
+def _plain(obj):
+    """``obj`` with only YAML-safe types (paths, tuples, numpy values converted)."""
+    if isinstance(obj, Mapping):
+        return {str(k): _plain(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple | set | frozenset):
+        return [_plain(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return _plain(obj.tolist())
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if obj is None or isinstance(obj, bool | int | float | str):
+        return obj
+    return str(obj)
+
+
+# --------------------------------------------------------------------------- page pieces
+
+#: What each metric column means (units in the names), for the summary's legend.
+COLUMN_LEGEND = {
+    "frames": "frames of the scene evaluated",
+    "hausdorff_rms_mm": "accuracy: RMS distance from the reconstructed mesh to the seen "
+    "ground-truth surface (the paper's 'RMS Hausdorff distance'), mean over frames",
+    "hausdorff_mean_mm": "accuracy: mean of that distance, mean over frames",
+    "hausdorff_max_mm": "accuracy: largest such distance, max over frames",
+    "depth_median_mm": "median |depth error| per pixel against the ground truth rendered "
+    "into the reference camera, median over frames",
+    "depth_rms_mm": "RMS depth error per pixel, RMS over frames",
+    "normal_median_deg": "median angle between reconstructed and true normals, median over frames",
+    "coverage": "share of the ground truth's pixels that have a depth, mean over frames",
+}
+#: The summary table's metric columns (those present are shown).
+SUMMARY_COLUMNS = (
+    "frames",
+    "hausdorff_rms_mm",
+    "depth_median_mm",
+    "depth_rms_mm",
+    "normal_median_deg",
+    "coverage",
+)
+
+
+#: Columns a scene's metrics table shows right after another (column -> the one it
+#: follows): the signed median depth error (the bias) beside the absolute one.
+BESIDE = {"depth_signed_median_mm": "depth_median_mm"}
+
+
+def beside(table: pd.DataFrame, pairs: Mapping[str, str] = BESIDE) -> pd.DataFrame:
+    """``table`` with each column of ``pairs`` moved right after the column it names
+    (where both are present; the others keep their order)."""
+    cols = list(table.columns)
+    for col, anchor in pairs.items():
+        if col in cols and anchor in cols:
+            cols.remove(col)
+            cols.insert(cols.index(anchor) + 1, col)
+    return table[cols]
+
+
+def _image_src(path: Path, out_dir: Path, embed: bool) -> str:
+    if not embed:
+        return Path(os.path.relpath(path.resolve(), out_dir.resolve())).as_posix()
+    mime = _MIME.get(path.suffix.lower(), "application/octet-stream")
+    return f"data:{mime};base64," + base64.b64encode(path.read_bytes()).decode("ascii")
+
+
+def _figure(path: Path, out_dir: Path, embed: bool, cls: str = "") -> dict:
+    """A figure for the template: src, a link to the file (when linked), caption."""
+    src = _image_src(path, out_dir, embed)
+    href = None if embed else src
+    return {"src": src, "href": href, "caption": path.stem.replace("_", " "), "cls": cls}
+
+
+def _check_figures(paths: Iterable[str | Path] | str | Path, what: str) -> list[Path]:
+    """The figure files ``paths`` names; a folder stands for its images, sorted by name."""
+    if isinstance(paths, str | Path):
+        paths = [paths]
+    out = []
+    for p in paths:
+        path = Path(p)
+        if path.is_dir():
+            out += sorted(f for f in path.iterdir() if f.suffix.lower() in _MIME and f.is_file())
+            continue
+        if not path.is_file():
+            raise ValueError(f"{path}: {what} figure not found")
+        out.append(path)
+    return out
+
+
+def _table(df: pd.DataFrame, css_class: str) -> str:
+    """``DataFrame.to_html`` with escaping, empty NaN cells and :func:`format_number`."""
+    return df.to_html(
+        classes=css_class,
+        index=False,
+        na_rep="",
+        float_format=format_number,
+        escape=True,
+        border=0,
+    )
+
+
+def with_paper_columns(table: pd.DataFrame) -> tuple[pd.DataFrame, bool]:
+    """``table`` (columns ``scene``, ``variant``, metrics) with the paper's name of each
+    variant and, right after each metric the paper states, a column ``paper <metric>``
+    (:data:`PAPER_REFERENCE`; empty where the paper gives no number). Also returns
+    whether any such column was added."""
+    t = table.copy()
+    t.insert(
+        t.columns.get_loc("variant") + 1, "paper name", t["variant"].map(VARIANT_LABELS).fillna("")
+    )
+    scenes = set(t["scene"]) if "scene" in t.columns else set()
+    refs = {s: PAPER_REFERENCE[s] for s in scenes if s in PAPER_REFERENCE}
+    ref_cols = sorted({c for r in refs.values() for per in r.values() for c in per})
+    for c in ref_cols:
+        col = f"paper {c}"
+        t[col] = [
+            refs.get(s, {}).get(v, {}).get(c, np.nan)
+            for s, v in zip(t["scene"], t["variant"], strict=True)
+        ]
+        t[col] = t[col].astype(float)
+        if c in t.columns:  # right after our column
+            cols = list(t.columns)
+            cols.remove(col)
+            cols.insert(cols.index(c) + 1, col)
+            t = t[cols]
+    return t, bool(ref_cols)
+
+
+def _aggregation_text(summary: pd.DataFrame) -> str:
+    words = {"mean": "mean", "max": "max", "median": "median", "rms": "RMS", "sum": "sum"}
+    cols = [c for c in summary.columns if c not in ("scene", "variant", "frames")]
+    items = "; ".join(f"{c}: {words[_aggregation_of(c)]}" for c in cols)
+    return f"Aggregation over a scene's frames: {items}."
+
+
+def _same_as_note(metrics: pd.DataFrame, scene: str) -> str:
+    """A note naming the variants whose rows copy another's on ``scene`` (or "")."""
+    if "same_as" not in metrics.columns:
+        return ""
+    rows = metrics[(metrics["scene"] == scene) & metrics["same_as"].notna()]
+    rows = rows[rows["same_as"].astype(str) != ""]
+    pairs = sorted(
+        {(str(v), str(o)) for v, o in zip(rows["variant"], rows["same_as"], strict=True)}
+    )
+    if not pairs:
+        return ""
+    text = "; ".join(f"<code>{_e(v)}</code> is <code>{_e(o)}</code>" for v, o in pairs)
+    return (
+        f'<p class="note">{text} on this scene: it has no chromatic object, so the '
+        "chromaticity calibration has nothing to change; computed once and copied.</p>"
+    )
+
+
+def _e(s) -> str:
+    return html.escape(str(s), quote=True)
+
+
+def _frames_note(metrics: pd.DataFrame, scene: str, figures: Sequence[Path]) -> str:
+    """Which frame the maps show, for a scene of several frames (or "")."""
+    frames = sorted(metrics.loc[metrics["scene"] == scene, "frame"].astype(str).unique())
+    if len(frames) < 2:
+        return ""
+    anim = " The animation shows every frame." if any(p.suffix == ".gif" for p in figures) else ""
+    return (
+        f"Sequence of {len(frames)} frames ({frames[0]} to {frames[-1]}): the tables "
+        f"aggregate every frame; the maps and renders show frame {frames[0]}.{anim}"
+    )
+
+
+def _file_links(results_dir, scene: str, out_dir: Path) -> dict:
+    files = result_files(results_dir, scene)
+    return {
+        v: {
+            k: [
+                {
+                    "href": Path(os.path.relpath(p.resolve(), out_dir.resolve())).as_posix(),
+                    "label": p.stem,
+                }
+                for p in ps
+            ]
+            for k, ps in kinds.items()
+            if ps
+        }
+        for v, kinds in files.items()
+    }
+
+
+def _template():
+    import jinja2
+
+    env = jinja2.Environment(
+        loader=jinja2.PackageLoader("colourhs.report", "templates"),
+        autoescape=True,
+        undefined=jinja2.StrictUndefined,
+        trim_blocks=True,
+        lstrip_blocks=True,
+    )
+    return env.get_template("report.html")
+
+
+# --------------------------------------------------------------------------- the report
+
+
+def build_report(
+    out_html: str | Path,
+    dataset_name: str,
+    metrics_csv: str | Path,
+    calibration_pngs: Sequence[str | Path],
+    scene_figures: Mapping[str, Sequence[str | Path]],
+    benchmark_tsvs: Sequence[str | Path],
+    config: Mapping | str | Path,
+    extra: Mapping | None = None,
+    *,
+    embed_images: bool = False,
+    dataset=None,
+    results_dir: str | Path | None = None,
+    provenance: Mapping | None = None,
+    config_resolved: bool = False,
+    calibration_dir: str | Path | None = None,
+    views: bool = False,
+    progress: bool = True,
+) -> Path:
+    """Write the evaluation report ``reports/NAME/index.html`` and return its path.
+
+    The page (template ``colourhs/report/templates/report.html``) opens with a summary
+    table (scene x variant, key metrics beside the paper's numbers, a legend);
+    per scene: its description, every metric in a scrollable table, its
+    expected depth error (the median ``depth_sigma``, with or without ground
+    truth: :func:`colourhs.report.tables.expected_error_table`) and, with ground
+    truth, how well sigma predicts the error
+    (:func:`colourhs.report.tables.sigma_calibration_table`) and where the
+    ground truth's pixels without a depth went
+    (:func:`colourhs.report.tables.drop_table`), the Figure 7 renders, error
+    and sigma maps full width, the other figures as thumbnails, a per-frame
+    plot for sequences and links to the result files;
+    then timing, provenance, configuration and software versions.
+
+    Parameters
+    ----------
+    out_html
+        Where to write the page (atomically: a temporary sibling renamed into place).
+    dataset_name
+        The dataset's NAME (``results/NAME``).
+    metrics_csv
+        ``reports/NAME/metrics.csv`` of the results contract; aggregated by
+        :func:`summarise_metrics`.
+    calibration_pngs
+        Calibration figures (mu maps, chromaticity maps). A folder stands for
+        its images (PNG, GIF, JPEG, SVG, WebP), sorted by name.
+    scene_figures
+        ``{scene: [figure paths]}`` (or ``{scene: folder}``), arranged by
+        :func:`colourhs.report.provenance.arrange_figures`. Scenes here without
+        metrics still get a section.
+    benchmark_tsvs
+        Snakemake benchmark files; summarised per rule by :func:`summarise_benchmarks`.
+    config
+        The run's configuration (a mapping, or a YAML file's path), shown as YAML.
+    extra
+        Further ``{label: value}`` lines for the page's header table.
+    embed_images
+        Embed images as base64 data URIs (the page then stands alone); by
+        default they are linked by paths relative to the page.
+    dataset
+        The :class:`colourhs.capture.Dataset` (or None): its rig summary and
+        the scenes' descriptions are shown.
+    results_dir
+        ``results/NAME`` (or None): each scene's meshes, error-coloured meshes
+        and depth files are linked.
+    provenance
+        ``{label: value}`` for the provenance table (default: the git commit of
+        the colourhs code and this process's command line, see
+        :func:`colourhs.report.provenance.git_provenance` and
+        :func:`~colourhs.report.provenance.run_command`).
+    config_resolved
+        Whether ``config`` has the package's defaults filled in (said on the page).
+    calibration_dir
+        ``results/NAME/calib`` (or None): the calibration's diagnostics tables
+        (:func:`colourhs.report.calibration.calibration_diagnostics`: marker reprojection
+        RMS, cross-talk matrices, photometric residual, mu error against the
+        dataset's ``gt/photometric.h5`` when it has one).
+    views
+        Embed each scene's first-frame error-coloured meshes (``results_dir``),
+        simplified, in an offline 3D viewer (:func:`colourhs.report.view3d.scene_views`),
+        seen first from the dataset's first camera.
+    progress
+        A line before the calibration's diagnostics and a bar over each scene's
+        3D views on stderr (:mod:`colourhs.common.progress`; about 2 s per mesh).
+
+    Raises
+    ------
+    ValueError
+        When ``metrics_csv`` is missing or lacks contract columns (naming the file
+        and the columns), or a figure or benchmark file is missing. Nothing is
+        written then.
+    """
+    out = Path(out_html)
+    out_dir = out.parent
+    # read and check every input before anything is written
+    if views and results_dir is None:
+        raise ValueError("the 3D views need results_dir (colourhs report --results): the meshes")
+    metrics = read_metrics(metrics_csv)
+    summary = summarise_metrics(metrics)
+    calib = _check_figures(calibration_pngs, "calibration")
+    figs = {str(s): _check_figures(ps, f"scene {s!r}") for s, ps in scene_figures.items()}
+    bench = summarise_benchmarks(read_benchmarks(benchmark_tsvs))
+    if isinstance(config, str | Path):
+        config = yaml.safe_load(Path(config).read_text()) or {}
+    if provenance is None:
+        provenance = {**git_provenance(Path(__file__).parent), **run_command()}
+    descriptions = scene_descriptions(dataset) if dataset is not None else {}
+    if calibration_dir:
+        stage(f"report: calibration diagnostics of {calibration_dir}", enabled=progress)
+    diagnostics = calibration_diagnostics(calibration_dir, dataset) if calibration_dir else []
+
+    scenes = list(dict.fromkeys([*sorted(summary["scene"].unique()), *figs]))
+    turn = dataset.rig.cameras[0].R if views and dataset is not None else None
+    key = [c for c in SUMMARY_COLUMNS if c in summary.columns]
+    top, has_paper = with_paper_columns(summary[["scene", "variant", *key]])
+    top = top.drop(columns="paper name")  # in each scene's table; the summary stays narrow
+    sections = []
+    for scene in scenes:
+        arranged = arrange_figures(figs.get(scene, []))
+        s = {
+            "name": scene,
+            "description": descriptions.get(scene, ""),
+            "table": "",
+            "frames_note": _frames_note(metrics, scene, figs.get(scene, [])),
+            "plot": frame_error_svg(metrics, scene),
+            "plot_caption": "Median depth error per frame and variant (depth_median_mm, mm).",
+            **{
+                k: [_figure(p, out_dir, embed_images, "wide" if k == "wide" else "") for p in ps]
+                for k, ps in arranged.items()
+            },
+        }
+        rows = summary[summary["scene"] == scene]
+        expected, calibration = expected_error_table(rows), sigma_calibration_table(rows)
+        s["expected"] = _table(expected, "metrics") if len(expected) else ""
+        s["sigma_calibration"] = _table(calibration, "metrics") if len(calibration) else ""
+        dropped = drop_table(metrics[metrics["scene"].astype(str) == scene])
+        s["dropped"] = _table(dropped, "metrics") if len(dropped) else ""
+        if len(rows):
+            t, _ = with_paper_columns(beside(rows))
+            s["table"] = _table(t.drop(columns="scene"), "metrics")
+            s["n_columns"] = t.shape[1] - 1
+            s["aggregation"] = _aggregation_text(summary)
+            s["same_as"] = _same_as_note(metrics, scene)
+        s["files"] = _file_links(results_dir, scene, out_dir) if results_dir else {}
+        s["views"] = (
+            scene_views(results_dir, scene, rotation=turn, progress=progress) if views else {}
+        )
+        s["n_files"] = sum(len(ls) for k in s["files"].values() for ls in k.values())
+        sections.append(s)
+
+    env = dict(software_versions())
+    env["platform"] = platform.platform()
+    env["python executable"] = sys.executable
+    env["CPU count"] = os.cpu_count() or "unknown"
+    header = {
+        "dataset": dataset_name,
+        "generated": datetime.now(UTC).strftime("%Y-%m-%d %H:%M:%S UTC"),
+    }
+    header.update({str(k): v for k, v in (extra or {}).items()})
+    page = _template().render(
+        name=dataset_name,
+        header=header,
+        reproduce=provenance.get("workflow command")
+        or f"colourhs run DATASET_DIR --name {dataset_name}",
+        summary_table=_table(top, "summary") if len(top) else "",
+        has_paper=has_paper,
+        legend={c: COLUMN_LEGEND[c] for c in key if c in COLUMN_LEGEND}
+        | ({"paper …": "the paper's number (see below)"} if has_paper else {}),
+        paper_source=PAPER_REFERENCE_SOURCE,
+        calibration=[_figure(p, out_dir, embed_images) for p in calib],
+        diagnostics=[{**d, "table": _table(d["table"], "bench")} for d in diagnostics],
+        scenes=sections,
+        timing_table=_table(bench, "bench") if not bench.empty else "",
+        provenance=provenance,
+        rig=rig_summary(dataset) if dataset is not None else {},
+        env=env,
+        config_resolved=config_resolved,
+        config_yaml=yaml.safe_dump(_plain(config), sort_keys=False, allow_unicode=True),
+    )
+    with atomic_output(out) as tmp:
+        tmp.write_text(page, encoding="utf-8")
+    return out

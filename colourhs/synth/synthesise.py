@@ -1,0 +1,585 @@
+"""Render whole synthetic datasets in the capture format (``capture-format.md``).
+
+A dataset holds: board poses for photometric calibration, chromatic
+captures of the white reference and of every coloured object under red,
+green and blue light, the scenes ``plane`` (a held-out board pose),
+``statue``, ``toy`` and ``sheet`` (dynamic), ground-truth meshes per frame,
+silhouettes, the true mu maps (``gt/photometric.h5``) and, as optional
+extensions of the format, the full rig model (``gt/rig_model.json``), the
+true board poses (``gt/board_poses.json``) and true chromaticity maps
+(``scenes/<scene>/gt/chromaticity.h5``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import hashlib
+import json
+import multiprocessing
+import os
+import shutil
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import cv2
+import h5py
+import numpy as np
+
+from colourhs.common.ply import write_ply
+from colourhs.common.progress import bar, stage
+from colourhs.common.raycast import raycasting_scene
+from colourhs.synth import scenes as sc
+from colourhs.synth.groundtruth import true_mu_maps
+from colourhs.synth.groundtruth import true_poses_csv as true_poses_csv  # re-exported
+from colourhs.synth.image_formation import (
+    camera_rays,
+    channel_signal,
+    light_transport,
+    trace_camera,
+)
+from colourhs.synth.poses import board_poses
+from colourhs.synth.simulated_rig import COLOURS, Nuisances, RigModel, make_rig, sensor
+
+FORMAT = "colourhs-capture/1"
+
+
+def _board(markers: dict, length: float, size=(0.26, 0.2)) -> dict:
+    return {
+        "dictionary": "DICT_4X4_50",
+        "marker_length": length,
+        "size": list(size),
+        "markers": {str(k): list(v) for k, v in markers.items()},
+    }
+
+
+DEMO_BOARD = _board(
+    {
+        0: (0.0275, 0.0275),
+        1: (0.13, 0.0275),
+        2: (0.2325, 0.0275),
+        3: (0.2325, 0.1725),
+        4: (0.13, 0.1725),
+        5: (0.0275, 0.1725),
+    },
+    0.035,
+)
+TINY_BOARD = _board(
+    {0: (0.045, 0.045), 1: (0.215, 0.045), 2: (0.215, 0.155), 3: (0.045, 0.155)}, 0.07
+)
+
+
+@dataclass(frozen=True)
+class Preset:
+    """Size and content of a synthetic dataset.
+
+    A ``randomised`` preset draws its rig, board, encoding and scenes from the
+    seed, from the ranges ``randomrig.RANGES_BY_NAME[random_ranges]`` (see
+    :mod:`colourhs.synth.randomrig`; ``focal_px``, ``board``, ``bit_depth``,
+    ``black_level`` and ``white_level`` are then ignored). ``bit_depth`` is the
+    PNGs' (8 or 16); ``white_level`` the raw value of full scale, None for
+    ``2**bit_depth - 1`` (4095 for 12-bit data in 16-bit PNGs).
+    """
+
+    name: str
+    width: int
+    height: int
+    focal_px: float
+    supersample: int
+    n_poses: int = 7
+    sheet_frames: int = 12
+    statue_level: int = 6
+    board: dict = field(default_factory=lambda: DEMO_BOARD)
+    bit_depth: int = 16
+    black_level: int = 512
+    white_level: int | None = None
+    randomised: bool = False
+    random_ranges: str = "random"
+
+
+PRESETS = {
+    "tiny": Preset("tiny", 160, 120, 312.5, 3, sheet_frames=3, statue_level=5, board=TINY_BOARD),
+    "demo": Preset("demo", 640, 480, 1250.0, 2, sheet_frames=12),
+    "paper": Preset("paper", 1280, 960, 2500.0, 2, sheet_frames=201),
+    "random": Preset("random", 640, 480, 0.0, 2, sheet_frames=4, randomised=True),
+    "random-tiny": Preset(
+        "random-tiny",
+        160,
+        120,
+        0.0,
+        3,
+        sheet_frames=4,
+        statue_level=5,
+        randomised=True,
+        random_ranges="random-tiny",
+    ),
+}
+# random-tiny with skewed cameras and rational and thin-prism lens terms
+# (randomranges.RANGES_BY_NAME), for the camera model's less common coefficients.
+PRESETS["random-tiny-lens"] = replace(
+    PRESETS["random-tiny"], name="random-tiny-lens", random_ranges="random-tiny-lens"
+)
+# The hard ends of the ranges combined (randomranges.CORNER_RANGES), at the
+# random presets' sizes.
+PRESETS["corner"] = replace(PRESETS["random"], name="corner", random_ranges="corner")
+PRESETS["corner-tiny"] = replace(
+    PRESETS["random-tiny"], name="corner-tiny", random_ranges="corner-tiny"
+)
+
+
+@dataclass(frozen=True)
+class Content:
+    """What a dataset's captures show, beyond the rig and the board poses.
+
+    Builders are callables returning a :class:`~colourhs.synth.scenes.SceneGeometry`
+    (``sheet`` takes the phase in [0, 1]). ``mask_mode``: ``"exact"``
+    (coverage >= 0.5), ``"none"`` (no ``masks/`` folder), ``"dilated"`` or
+    ``"eroded"`` (by 1 px, 3x3). ``extra_gt``: more about the draw for
+    ``gt/rig_model.json`` (key ``draw``).
+    """
+
+    white: object
+    statue: object
+    toy: object
+    sheet: object
+    mask_mode: str = "exact"
+    scene_meta: dict = field(default_factory=lambda: SCENE_META)
+    extra_gt: dict | None = None
+
+
+def fixed_content(preset: Preset) -> Content:
+    """The scenes of the fixed presets (tiny, demo, paper)."""
+    return Content(
+        white=sc.white_reference,
+        statue=lambda: sc.statue(preset.statue_level),
+        toy=sc.toy,
+        sheet=sc.sheet,
+    )
+
+
+PARTS = ("photometric", "chromatic", "scenes")
+
+
+def rig_json(rig: RigModel, preset: Preset, board: dict) -> dict:
+    """The dataset's rig.json (capture format, version 1)."""
+    return {
+        "format": FORMAT,
+        "units": "m",
+        "image": {
+            "width": preset.width,
+            "height": preset.height,
+            "bit_depth": preset.bit_depth,
+            "black_level": preset.black_level,
+            "white_level": _white_level(preset),
+        },
+        "cameras": [c.to_json() for c in rig.cameras],
+        "board": board,
+        "chromatic_light": {"position": rig.chromatic_lights["red"].position.tolist()},
+    }
+
+
+def _white_level(preset: Preset) -> int:
+    """The preset's raw value of full scale: its ``white_level``, else ``2**bit_depth - 1``."""
+    return 2**preset.bit_depth - 1 if preset.white_level is None else preset.white_level
+
+
+def _image_rng(seed: int, relpath: str) -> np.random.Generator:
+    digest = hashlib.sha256(f"{seed}:{relpath}".encode()).digest()
+    return np.random.default_rng(int.from_bytes(digest[:8], "little"))
+
+
+def write_png(path: Path, rgb: np.ndarray) -> None:
+    """Write an R, G, B image (H, W, 3) as PNG (OpenCV stores B, G, R)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if not cv2.imwrite(str(path), np.ascontiguousarray(rgb[..., ::-1])):
+        raise OSError(f"{path}: could not write PNG")
+
+
+@dataclass(frozen=True)
+class _Job:
+    """One geometry seen by every camera, and the images to make of it."""
+
+    geometry: object  # callable () -> SceneGeometry (built lazily)
+    frames: tuple[str, ...] = ()  # relpaths (without camera) of all-lights-on images
+    chromatic: str | None = None  # relpath prefix of red/green/blue chromatic captures
+    mask: str | None = None  # relpath prefix of silhouettes
+    gt_mesh: str | None = None  # relpath of the ground-truth mesh
+    gt_chroma: str | None = None  # relpath of the true chromaticity maps
+
+
+def _jobs(preset: Preset, poses, parts, content: Content | None = None, frames=None) -> list[_Job]:
+    content = fixed_content(preset) if content is None else content
+    masks = content.mask_mode != "none"
+    board = preset.board
+    jobs = []
+    if "photometric" in parts:
+        for k, (R, t) in enumerate(poses[:-1]):
+            jobs.append(
+                _Job(lambda R=R, t=t: sc.board_geometry(board, R, t), (f"photometric/pose{k:02d}",))
+            )
+    if "chromatic" in parts:
+        jobs.append(_Job(content.white, chromatic="chromatic/white"))
+    if "scenes" in parts:
+        R, t = poses[-1]
+        jobs.append(
+            _Job(
+                lambda: sc.board_geometry(board, R, t, name="plane"),
+                ("scenes/plane/frames/000000",),
+                mask="scenes/plane/masks/000000" if masks else None,
+                gt_mesh="scenes/plane/gt/000000.ply",
+            )
+        )
+    for name, build in (("statue", content.statue), ("toy", content.toy)):
+        jobs.append(
+            _Job(
+                build,
+                ("scenes/" + name + "/frames/000000",) if "scenes" in parts else (),
+                chromatic=f"chromatic/{name}" if "chromatic" in parts else None,
+                mask=f"scenes/{name}/masks/000000" if "scenes" in parts and masks else None,
+                gt_mesh=f"scenes/{name}/gt/000000.ply" if "scenes" in parts else None,
+                gt_chroma=f"scenes/{name}/gt/chromaticity.h5" if "scenes" in parts else None,
+            )
+        )
+    if "scenes" in parts:
+        n = preset.sheet_frames
+        for f in range(n) if frames is None else frames:
+            jobs.append(
+                _Job(
+                    lambda f=f: content.sheet(f / max(n - 1, 1)),
+                    (f"scenes/sheet/frames/{f:06d}",),
+                    mask=f"scenes/sheet/masks/{f:06d}" if masks else None,
+                    gt_mesh=f"scenes/sheet/gt/{f:06d}.ply",
+                )
+            )
+    return [j for j in jobs if j.frames or j.chromatic]
+
+
+def _scene_of(job: _Job) -> str | None:
+    """The scene (or chromatic object) a job renders; None for the board and white captures."""
+    path = (job.frames or (job.chromatic,))[0]
+    parts = path.split("/")
+    return parts[1] if parts[0] in ("scenes", "chromatic") and parts[1] != "white" else None
+
+
+# One description per scene for every preset (true whatever a random draw's
+# materials), so scene.json tells nothing about the preset.
+SCENE_META = {
+    "plane": {
+        "chromatic": None,
+        "dynamic": False,
+        "description": "held-out pose of the white marker board",
+    },
+    "statue": {
+        "chromatic": "statue",
+        "dynamic": False,
+        "description": "white monster head with smooth dirt",
+    },
+    "toy": {
+        "chromatic": "toy",
+        "dynamic": False,
+        "description": "multi-coloured toy dog: pure colours, specular plastic, metal",
+    },
+    "sheet": {"chromatic": None, "dynamic": True, "description": "white sheet folding and doming"},
+}
+
+
+def synthesise(
+    out: str | Path,
+    preset: str | Preset = "demo",
+    seed: int = 0,
+    nuisances: Nuisances | None = None,
+    parts: tuple[str, ...] = PARTS,
+    progress: bool = True,
+    overwrite: bool = False,
+    workers: int | None = None,
+    scenes: tuple[str, ...] | None = None,
+    exact: bool = False,
+    frames=None,
+    ranges=None,
+) -> Path:
+    """Render a synthetic colour HS dataset into ``out`` (capture format v1).
+
+    The dataset is written to a sibling folder and moved into place at the
+    end, so an interrupted run leaves no partial dataset behind. The same
+    ``seed`` and preset give the same images, whatever ``parts`` are asked.
+
+    Parameters
+    ----------
+    out : dataset folder to create.
+    preset : a name of :data:`PRESETS` (``"tiny"``, ``"demo"``, ``"paper"``,
+        ``"random"``, ``"random-tiny"``, ``"random-tiny-lens"``, ``"corner"``,
+        ``"corner-tiny"``) or a :class:`Preset`.
+    seed : seed of every random choice (rig, poses, noise; with a randomised
+        preset also the rig's design, board, encoding, masks and scenes).
+    nuisances : effects to simulate (default: all on, :class:`Nuisances`). With a
+        randomised preset only its switches count (and ``gain_spread``,
+        ``chromatic_filter_tilt`` as magnitudes); the geometry, scenes, poses
+        and encoding drawn do not depend on it.
+    parts : subset of ``("photometric", "chromatic", "scenes")`` to render.
+    scenes : render only these of ``plane``, ``statue``, ``toy``, ``sheet`` (their
+        frames and chromatic captures); default all.
+    progress : progress on stderr: the mu maps, bars over the camera rays and views.
+    overwrite : replace an existing ``out``.
+    workers : processes rendering views in parallel (default: CPU count).
+    exact : randomised presets: force 16-bit images and exact masks, keeping
+        the rest of the seed's draw (for consistency tests). The fixed
+        presets are always so.
+    frames : render only these frames of the sheet's sequence (indices in
+        ``range(preset.sheet_frames)``, e.g. ``range(40, 60)``); default all. A
+        frame's shape (its phase is ``i / (sheet_frames - 1)``) and noise (drawn
+        per image from ``seed`` and the image's path) do not depend on which other
+        frames are rendered: its files equal those of a full render.
+    ranges : randomised presets: a :class:`colourhs.synth.randomranges.RandomRanges`
+        to draw from instead of the preset's named ranges (one range moved at a time,
+        as ``benchmarks/light_offset.py`` does; a quantity with its own random
+        stream, as the light offsets, leaves the rest of the seed's draw as it was).
+
+    Returns
+    -------
+    Path of the dataset.
+    """
+    out = Path(out)
+    p = PRESETS[preset] if isinstance(preset, str) else preset
+    nuis = Nuisances() if nuisances is None else nuisances
+    unknown = set(parts) - set(PARTS)
+    if unknown:
+        raise ValueError(f"unknown parts {sorted(unknown)}; choose from {PARTS}")
+    if scenes is not None and set(scenes) - set(SCENE_META):
+        unknown = sorted(set(scenes) - set(SCENE_META))
+        raise ValueError(f"unknown scenes {unknown}; scenes: {', '.join(SCENE_META)}")
+    if frames is not None and ("scenes" not in parts or "sheet" not in (scenes or ("sheet",))):
+        raise ValueError("frames selects frames of the sheet, which is not rendered")
+    if out.exists() and not overwrite:
+        raise FileExistsError(f"{out}: already exists (pass overwrite=True to replace it)")
+    workers = (os.cpu_count() or 1) if workers is None else int(workers)
+    frames = _frame_selection(p, frames)
+    if p.randomised:
+        from colourhs.synth.randomrig import RANGES_BY_NAME, describe, draw_random
+
+        d = draw_random(
+            seed,
+            p.width,
+            p.height,
+            nuis,
+            RANGES_BY_NAME[p.random_ranges] if ranges is None else ranges,
+            n_poses=p.n_poses,
+            sheet_frames=p.sheet_frames,
+            statue_level=p.statue_level,
+            exact=exact,
+        )
+        rig, poses = d.rig, d.poses
+        p = replace(
+            p,
+            board=d.board,
+            bit_depth=d.bit_depth,
+            black_level=d.black_level,
+            white_level=d.white_level,
+        )
+        nuis = rig.nuisances
+        b = d.builders
+        content = Content(
+            b["white"],
+            b["statue"],
+            b["toy"],
+            b["sheet"],
+            d.mask_mode,
+            SCENE_META,
+            describe(d),
+        )
+    else:
+        rng = np.random.default_rng(seed)
+        rig = make_rig(p.width, p.height, p.focal_px, rng, nuis)
+        poses = board_poses(rig, p.board, p.n_poses + 1, rng)
+        content = fixed_content(p)
+    tmp = out.with_name(out.name + ".partial")
+    if tmp.exists():
+        shutil.rmtree(tmp)
+    tmp.mkdir(parents=True)
+    try:
+        with _single_threaded_blas():
+            _write_dataset(
+                tmp, rig, p, poses, seed, nuis, parts, progress, workers, scenes, content, frames
+            )
+        if out.exists():
+            shutil.rmtree(out)
+        os.replace(tmp, out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return out
+
+
+def _frame_selection(preset: Preset, frames=None) -> tuple[int, ...] | None:
+    """The sheet frames to render, checked: sorted unique indices in
+    ``range(preset.sheet_frames)``, or None (all)."""
+    if frames is None:
+        return None
+    out = tuple(sorted({int(f) for f in frames}))
+    bad = [f for f in out if not 0 <= f < preset.sheet_frames]
+    if bad or not out:
+        raise ValueError(
+            f"frames {bad or '(none)'}: the {preset.name} preset's sheet has frames "
+            f"0-{preset.sheet_frames - 1}"
+        )
+    return out
+
+
+def _write_dataset(
+    root, rig, p, poses, seed, nuis, parts, progress, workers, scenes, content, frames
+):
+    (root / "rig.json").write_text(json.dumps(rig_json(rig, p, p.board), indent=2))
+    gt = root / "gt"
+    gt.mkdir()
+    model = rig.to_json()
+    if content.extra_gt is not None:
+        model["draw"] = content.extra_gt
+    (gt / "rig_model.json").write_text(json.dumps(model, indent=1))
+    names = [f"pose{k:02d}" for k in range(len(poses) - 1)] + ["plane"]
+    (gt / "board_poses.json").write_text(
+        json.dumps(
+            {n: {"R": R.tolist(), "t": t.tolist()} for n, (R, t) in zip(names, poses, strict=True)}
+        )
+    )
+    stage(f"synth {p.name}: ground-truth mu maps (gt/photometric.h5)", enabled=progress)
+    with h5py.File(gt / "photometric.h5", "w") as f:
+        f.attrs["note"] = "mu = rho / sigma (eq. 2) on pixel centres; one scale per pair is free"
+        for key, mu in true_mu_maps(rig).items():
+            f.create_dataset(key, data=mu, compression="gzip")
+    if "scenes" in parts:
+        for name, meta in content.scene_meta.items():
+            if scenes is not None and name not in scenes:
+                continue
+            d = root / "scenes" / name
+            d.mkdir(parents=True, exist_ok=True)
+            (d / "scene.json").write_text(json.dumps(meta, indent=2))
+    jobs = _jobs(p, poses, parts, content, frames)
+    if scenes is not None:
+        jobs = [j for j in jobs if _scene_of(j) in (None, *scenes)]
+    cams = bar(rig.cameras, f"synth {p.name}: camera rays", enabled=progress, unit="camera")
+    rays = [camera_rays(c, p.width, p.height, p.supersample) for c in cams]
+    args = [(root, rig, rays, p, job, seed, nuis, content.mask_mode) for job in jobs]
+    views = bar(None, f"synth {p.name}", len(jobs), progress, unit="view")
+    _render_all(args, workers, views)
+    views.close()
+
+
+def _render_all(args, workers, bar):
+    if workers <= 1:
+        for a in args:
+            _render_job(*a)
+            bar.update()
+    else:
+        # Jobs hold closures, so workers are forked rather than spawned.
+        global _ARGS
+        _ARGS = args
+        ctx = multiprocessing.get_context("fork")
+        with ProcessPoolExecutor(workers, mp_context=ctx) as pool:
+            for _ in pool.map(_render_indexed, range(len(args))):
+                bar.update()
+        _ARGS = None
+
+
+_ARGS = None
+
+
+@contextlib.contextmanager
+def _single_threaded_blas():
+    """Run the block with NumPy's bundled OpenBLAS on one thread, if it can be found.
+
+    The renderer's (M, 3) x (3, 3) products are several times slower with
+    OpenBLAS's threads (they compete with the worker processes for the cores);
+    one thread gives the same results. Without a bundled OpenBLAS this does
+    nothing.
+    """
+    lib = None
+    try:
+        libs = sorted((Path(np.__file__).parent.parent / "numpy.libs").glob("*openblas*.so*"))
+        if libs:
+            lib = ctypes.CDLL(str(libs[0]))
+            get = lib.scipy_openblas_get_num_threads64_
+            put = lib.scipy_openblas_set_num_threads64_
+            before = int(get())
+            put(1)
+    except (OSError, AttributeError):
+        lib = None
+    try:
+        yield
+    finally:
+        if lib is not None:
+            put(before)
+
+
+def _render_indexed(k: int) -> None:
+    _render_job(*_ARGS[k])
+
+
+def _render_job(root, rig, rays, p, job, seed, nuis, mask_mode="exact"):
+    geom = job.geometry()
+    scene = raycasting_scene(geom.vertices, geom.triangles)
+    if job.gt_mesh:
+        write_ply(root / job.gt_mesh, geom.vertices, geom.triangles, geom.vertex_normals)
+    chroma_maps = {}
+    for cam, cam_rays in zip(rig.cameras, rays, strict=True):
+        hits = trace_camera(geom, scene, cam_rays)
+        sens = cam.sensitivity(hits.xy[hits.sample])  # (M, 3)
+        if job.frames:
+            transports = {
+                light.colour: light.radiance(hits.points)
+                * light_transport(geom, scene, hits, light.position)[:, COLOURS.index(light.colour)]
+                for light in rig.lights
+            }
+            signal = channel_signal(hits, cam, transports, sensitivity=sens)
+            for rel in job.frames:
+                _write_image(root, f"{rel}/{cam.name}.png", signal, seed, nuis, p)
+        if job.chromatic:
+            base = light_transport(geom, scene, hits, rig.chromatic_lights["red"].position)
+            for colour, light in rig.chromatic_lights.items():
+                T = light.radiance(hits.points) * base[:, COLOURS.index(colour)]
+                signal = channel_signal(hits, cam, {colour: T}, cam.chromatic_crosstalk, sens)
+                rel = f"{job.chromatic}/{colour}/{cam.name}.png"
+                _write_image(root, rel, signal, seed, nuis, p)
+        if job.mask:
+            mask = _mask(hits.coverage(), mask_mode)
+            path = root / f"{job.mask}/{cam.name}.png"
+            path.parent.mkdir(parents=True, exist_ok=True)
+            cv2.imwrite(str(path), mask)
+        if job.gt_chroma:
+            cov = hits.coverage()
+            p_mean = hits.pixel_mean(hits.albedo / sc.WHITE_ALBEDO)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                p_map = p_mean / cov[..., None]
+            p_map[cov < 0.999] = np.nan
+            chroma_maps[cam.name] = p_map.astype(np.float32)
+    if job.gt_chroma:
+        path = root / job.gt_chroma
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with h5py.File(path, "w") as f:
+            f.attrs["note"] = (
+                "diffuse surface reflectance per light band relative to the white "
+                "reference, (1, 1, 1) = white; pixel mean over fully covered pixels, NaN "
+                "elsewhere; a white or metallic specular lobe is not in it"
+            )
+            for name, m in chroma_maps.items():
+                f.create_dataset(name, data=m, compression="gzip")
+
+
+def _mask(coverage: np.ndarray, mode: str) -> np.ndarray:
+    """8-bit silhouette (0 / 255) from sample coverage: exact, or dilated / eroded by 1 px."""
+    mask = (coverage >= 0.5).astype(np.uint8) * 255
+    kernel = np.ones((3, 3), np.uint8)
+    if mode == "dilated":
+        mask = cv2.dilate(mask, kernel)
+    elif mode == "eroded":
+        mask = cv2.erode(mask, kernel, borderType=cv2.BORDER_CONSTANT, borderValue=0)
+    elif mode != "exact":
+        raise ValueError(f"unknown mask mode {mode!r}")
+    return mask
+
+
+def _write_image(root, rel, signal, seed, nuis, p):
+    rng = _image_rng(seed, rel)
+    dn = sensor(signal, rng, nuis, p.bit_depth, p.black_level, _white_level(p))
+    if dn.dtype.kind == "f":
+        raise ValueError("datasets are written quantised: Nuisances.quantise must be on")
+    write_png(root / rel, dn)

@@ -1,0 +1,6 @@
+"""The Snakemake workflow's side in the package.
+
+:mod:`.plan`: datasets, targets, inputs and command-line options of the rules;
+:mod:`.variants`: the paper's ablation, the variants every scene is
+reconstructed with.
+"""

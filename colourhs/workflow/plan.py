@@ -1,0 +1,457 @@
+"""The Snakemake workflow's plan: datasets, targets, input files and command-line options.
+
+``workflow/rules/common.smk`` makes one :class:`WorkflowPlan` of the run's config
+(validated against ``workflow/schemas/config.schema.yaml`` by the Snakefile, which
+fills in the schema's defaults) and the rules call its methods: the files a job
+reads (its inputs, so that reruns follow them; listed by
+:func:`colourhs.capture.open_dataset`, the one reader of the capture format), the
+files a stage makes, and the options of the ``colourhs`` subcommands (plain
+strings, quoted for the shell).
+
+A synthetic dataset (a ``synth`` entry) is rendered by the workflow's checkpoint
+into ``data/synthetic/<name>``: until then ``wait(name)`` raises Snakemake's
+IncompleteCheckpointException, and only its preset's chromatic objects are known
+(:meth:`WorkflowPlan.chromatic_objects`).
+"""
+
+from __future__ import annotations
+
+import shlex
+import sys
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from colourhs.capture import COLOURS, CaptureFormatError, Dataset, all_images, open_dataset
+from colourhs.capture import validate as validate_dataset
+from colourhs.workflow.variants import VARIANTS, same_as
+
+#: The folder of the synthetic datasets: SYNTH_ROOT/<name>.
+SYNTH_ROOT = "data/synthetic"
+#: Result kind (a folder of results/NAME/SCENE/VARIANT/) -> file extension.
+RESULT_EXT = {"depth": "h5", "mesh": "ply", "eval": "json"}
+
+
+class MalformedDatasetError(ValueError):
+    """A configured dataset breaks the capture format: no stage was run."""
+
+    def __init__(self, name: str, error: CaptureFormatError) -> None:
+        super().__init__(f"dataset {name!r} is malformed, no stage was run: {error}")
+
+
+def cli_options(values: dict) -> str:
+    """``--key value`` options of the non-null entries of a dict (plain values, quoted):
+    the one formatter of the config's options."""
+    return " ".join(
+        f"--{k.replace('_', '-')} {shlex.quote(str(v))}"
+        for k, v in sorted(values.items())
+        if v is not None
+    )
+
+
+def same_option(input) -> str:
+    """``--same-as PATH`` when the rule's ``same`` input names an equal result."""
+    return f"--same-as {shlex.quote(str(input.same))}" if input.same else ""
+
+
+def hull_ply(name: str, scene: str, frame: str) -> str:
+    """A frame's visual hull mesh (rule visual_hull)."""
+    return f"results/{name}/{scene}/hull/{frame}.ply"
+
+
+def _paths(paths: Iterable[Path]) -> list[str]:
+    """Path strings, sorted."""
+    return sorted(str(p) for p in paths)
+
+
+def _chromatic_images(ds: Dataset, obj: str) -> list[Path]:
+    """A chromatic object's captures (every colour and camera); [] when it has no folder."""
+    if obj not in ds.chromatic_objects:
+        return []
+    cams = ds.rig.camera_names
+    return [ds.chromatic_image(obj, colour, c) for colour in COLOURS for c in cams]
+
+
+def _scene_jsons(ds: Dataset) -> list[Path]:
+    """The scenes' scene.json files (optional in the format)."""
+    paths = (ds.root / "scenes" / s / "scene.json" for s in ds.scenes)
+    return [p for p in paths if p.is_file()]
+
+
+@dataclass
+class WorkflowPlan:
+    """The jobs' inputs, targets and options for one run's config.
+
+    Parameters
+    ----------
+    config : dict
+        The workflow config, validated with the schema's defaults set.
+    wait : callable
+        ``wait(name)``: the folder of synthetic dataset ``name`` once its checkpoint has
+        rendered it (raises Snakemake's IncompleteCheckpointException before).
+
+    Attributes
+    ----------
+    datasets : list of str
+        The datasets to process: the config's ``only``, else every configured one.
+    """
+
+    config: dict
+    wait: Callable[[str], str]
+    datasets: list[str] = field(init=False)
+    _layouts: dict[str, Dataset] = field(init=False, default_factory=dict, repr=False)
+
+    def __post_init__(self) -> None:
+        entries = self.config["datasets"]
+        self.datasets = self.config.get("only") or list(entries)
+        unknown = sorted(set(self.datasets) - set(entries))
+        if unknown:
+            raise ValueError(f"config: `only` names unknown datasets {unknown}")
+        for name, entry in entries.items():
+            path = self.dataset_path(name)
+            if self.synthetic(name) and entry.get("path", path) != path:
+                raise ValueError(
+                    f"config: datasets.{name}: a synthetic dataset lives at {path}; "
+                    "drop `path` or the `synth` entry"
+                )
+
+    # ---------------------------------------------------------------- datasets
+
+    def synthetic(self, name: str) -> bool:
+        """Whether the workflow renders the dataset (a ``synth`` entry)."""
+        return "synth" in self.config["datasets"][name]
+
+    def dataset_path(self, name: str) -> str:
+        """The dataset folder (a synthetic one: data/synthetic/<name>)."""
+        if self.synthetic(name):
+            return f"{SYNTH_ROOT}/{name}"
+        return self.config["datasets"][name]["path"]
+
+    def synth_settings(self, name: str) -> dict:
+        """The dataset's ``synth`` entry (preset, seed)."""
+        entry = self.config["datasets"].get(name, {}).get("synth")
+        if entry is None:
+            raise ValueError(f"config: dataset {name!r} is not synthetic (no `synth` entry)")
+        return entry
+
+    def _open(self, name: str, root: str) -> Dataset:
+        """open_dataset(root) without opening an image, once per folder."""
+        if root not in self._layouts:
+            try:
+                self._layouts[root] = open_dataset(root, check_images=False)
+            except CaptureFormatError as e:
+                raise MalformedDatasetError(name, e) from None
+        return self._layouts[root]
+
+    def layout(self, name: str) -> Dataset:
+        """The dataset's rig, poses, chromatic objects and scenes (a synthetic one: once
+        rendered); :class:`MalformedDatasetError` when its folders or JSON files break
+        the capture format (images are checked by :meth:`check_captures`)."""
+        root = self.wait(name) if self.synthetic(name) else self.dataset_path(name)
+        return self._open(name, root)
+
+    def check_layouts(self) -> None:
+        """Check the layout of every dataset to process that exists before the run
+        (given by ``path``), before any job is planned."""
+        for name in self.datasets:
+            if not self.synthetic(name):
+                self.layout(name)
+
+    def unvalidated_captures(self) -> list[str]:
+        """Datasets (given by ``path``) whose validation summary is missing or older than
+        one of their capture files."""
+        out = []
+        for name in self.datasets:
+            if self.synthetic(name):
+                continue  # rendered by the workflow, then validated by its rule
+            summary = Path(f"results/{name}/capture/summary.json")
+            if not summary.exists():
+                out.append(name)
+            elif any(
+                Path(f).stat().st_mtime > summary.stat().st_mtime for f in self.capture_files(name)
+            ):
+                out.append(name)
+        return out
+
+    def check_captures(self) -> None:
+        """Validate (every image decoded) each dataset :meth:`unvalidated_captures` names;
+        :class:`MalformedDatasetError` with the validator's message (file and problem).
+        What is valid but costs accuracy (the summary's ``warnings``) goes to stderr."""
+        for name in self.unvalidated_captures():
+            try:
+                summary = validate_dataset(self.dataset_path(name))
+            except CaptureFormatError as e:
+                raise MalformedDatasetError(name, e) from None
+            for warning in summary["warnings"]:
+                print(f"colourhs: dataset {name}: warning: {warning}", file=sys.stderr)
+
+    def chromatic_objects(self, name: str) -> list[str]:
+        """Coloured objects of a dataset: its chromatic objects but ``white``.
+
+        Known before the run: a synthetic dataset not rendered yet has its preset's
+        objects.
+        """
+        if Path(self.dataset_path(name)).is_dir():
+            objects = self._open(name, self.dataset_path(name)).chromatic_objects
+            return [obj for obj in objects if obj != "white"]
+        if self.synthetic(name):
+            from colourhs.synth.synthesise import SCENE_META
+
+            return sorted({m["chromatic"] for m in SCENE_META.values() if m["chromatic"]})
+        return []
+
+    def selected_scenes(self, name: str) -> dict:
+        """Scene name -> :class:`colourhs.capture.Scene` of the config's
+        ``reconstruction.scenes`` (null: every scene)."""
+        wanted = self.config["reconstruction"]["scenes"]
+        scenes = self.layout(name).scenes
+        return {s: scene for s, scene in scenes.items() if not wanted or s in wanted}
+
+    # ---------------------------------------------------------------- input files
+
+    def capture_files(self, name: str) -> list[str]:
+        """Every file of a dataset that validation reads (JSON metadata, images, masks,
+        meshes)."""
+        ds = self.layout(name)
+        gt = [ds.gt_mesh(s, f) for s, sc in ds.scenes.items() if sc.has_gt for f in sc.frames]
+        return _paths({ds.rig.path, *all_images(ds), *_scene_jsons(ds), *gt})
+
+    def photometric_inputs(self, name: str) -> list[str]:
+        """rig.json and every photometric board image."""
+        ds = self.layout(name)
+        cams = ds.rig.camera_names
+        images = [ds.photometric_image(pose, c) for pose in ds.poses for c in cams]
+        return [str(ds.rig.path)] + _paths(images)
+
+    def chromatic_inputs(self, name: str, obj: str) -> list[str]:
+        """rig.json and one chromatic object's captures."""
+        ds = self.layout(name)
+        return [str(ds.rig.path)] + _paths(_chromatic_images(ds, obj))
+
+    def chromaticity_inputs(self, name: str, obj: str) -> list[str]:
+        """What ``colourhs chromaticity`` reads: rig.json, the object's and the white
+        reference's captures, every scene.json (to find the object's scene) and the first
+        frame's masks of the scenes that show the object (its silhouette,
+        chromaticity.object_silhouette)."""
+        ds = self.layout(name)
+        out = self.chromatic_inputs(name, obj) + _paths(_chromatic_images(ds, "white"))
+        out += _paths(_scene_jsons(ds))
+        for s, scene in ds.scenes.items():
+            if scene.chromatic == obj and scene.has_masks:
+                masks = [ds.mask_image(s, scene.frames[0], c) for c in ds.rig.camera_names]
+                out += _paths(masks)
+        return out
+
+    @staticmethod
+    def _scene_files(ds, scene: str) -> list[str]:
+        """rig.json and the scene's scene.json when it has one."""
+        meta = Path(ds.root) / "scenes" / scene / "scene.json"
+        return [str(ds.rig.path)] + ([str(meta)] if meta.exists() else [])
+
+    def silhouette_inputs(self, name: str, scene: str, frame: str) -> list[str]:
+        """rig.json, the scene's scene.json (read when the dataset is opened) and a
+        frame's masks; the frame's images when the scene has no masks."""
+        ds = self.layout(name)
+        image = ds.mask_image if ds.scene(scene).has_masks else ds.frame_image
+        cams = ds.rig.camera_names
+        return self._scene_files(ds, scene) + _paths(image(scene, frame, c) for c in cams)
+
+    def frame_inputs(self, name: str, scene: str, frame: str) -> list[str]:
+        """rig.json, the scene's scene.json (read when the dataset is opened), a
+        frame's images and its silhouettes (when the scene has masks)."""
+        ds = self.layout(name)
+        cams = ds.rig.camera_names
+        out = self._scene_files(ds, scene) + _paths(ds.frame_image(scene, frame, c) for c in cams)
+        if ds.scene(scene).has_masks:
+            out += _paths(ds.mask_image(scene, frame, c) for c in cams)
+        return out
+
+    def gt_mesh(self, name: str, scene: str, frame: str) -> list[str]:
+        """The frame's ground-truth mesh as a list (empty without ground truth)."""
+        ds = self.layout(name)
+        return [str(ds.gt_mesh(scene, frame))] if ds.scene(scene).has_gt else []
+
+    # ---------------------------------------------------------------- calibration
+
+    def calibration(self, name: str) -> dict:
+        """Calibration settings of a dataset: the config's ``calibration`` (with the
+        schema's defaults) < the dataset's own (which overrides only what it names)."""
+        out = {
+            k: (dict(v) if isinstance(v, dict) else v)
+            for k, v in self.config["calibration"].items()
+        }
+        for key, value in self.config["datasets"][name].get("calibration", {}).items():
+            out[key] = {**out.get(key, {}), **value} if isinstance(value, dict) else value
+        return out
+
+    def unmix_crosstalk(self, name: str) -> bool:
+        """Whether the dataset's images are unmixed (calibration.unmix_crosstalk)."""
+        return bool(self.calibration(name)["unmix_crosstalk"])
+
+    def photometric_options(self, name: str, crosstalk) -> str:
+        """Command-line options of ``colourhs photometric`` (plain values, no arrays)."""
+        opts = [f"--crosstalk {shlex.quote(crosstalk)}"] if crosstalk else []
+        return " ".join(opts + [cli_options(self.calibration(name)["photometric"])])
+
+    def calibration_targets(self, name: str) -> list[str]:
+        """The dataset's calibration files (known before the run, synthetic or not)."""
+        out = [
+            f"results/{name}/calib/marker_poses.csv",
+            f"results/{name}/calib/photometric.h5",
+            f"results/{name}/calib/noise.json",
+        ]
+        if self.unmix_crosstalk(name):
+            out.append(f"results/{name}/calib/crosstalk.json")
+        out += [
+            f"results/{name}/calib/chromaticity/{obj}.h5" for obj in self.chromatic_objects(name)
+        ]
+        return out
+
+    # ---------------------------------------------------------------- reconstruction
+
+    def variants(self) -> list[str]:
+        """The config's variants (null: every one, in the paper's order)."""
+        return self.config["reconstruction"]["variants"] or list(VARIANTS)
+
+    def variant_calibration(self, name: str, scene: str, variant: str) -> dict:
+        """Calibration files a variant reads (inputs, so reruns follow their changes)."""
+        v = VARIANTS[variant]
+        out = {} if v["method"] == "vh" else {"noise": f"results/{name}/calib/noise.json"}
+        if v["photometric"]:
+            out["photometric"] = f"results/{name}/calib/photometric.h5"
+            if self.unmix_crosstalk(name):
+                out["crosstalk"] = f"results/{name}/calib/crosstalk.json"
+        obj = self.layout(name).scene(scene).chromatic
+        if v["chromaticity"] and obj:
+            out["chromaticity"] = f"results/{name}/calib/chromaticity/{obj}.h5"
+        return out
+
+    def reconstruct_options(self, name: str, scene: str, variant: str) -> str:
+        """Command-line options of ``colourhs reconstruct`` (plain values)."""
+        opts = [f"--method {VARIANTS[variant]['method']}"]
+        for key, path in self.variant_calibration(name, scene, variant).items():
+            opts.append(f"--{key} {shlex.quote(path)}")
+        return " ".join(opts + [cli_options(self.config["reconstruction"]["params"])])
+
+    def reconstruction_hull(self, name: str, scene: str, frame: str) -> list[str]:
+        """The frame's visual hull as a list when the config takes the depth range from
+        it (reconstruction.depth_from_hull)."""
+        if self.config["reconstruction"]["depth_from_hull"]:
+            return [hull_ply(name, scene, frame)]
+        return []
+
+    def same_result(self, name: str, scene: str, variant: str, frame: str, kind: str) -> list:
+        """[the equal result of another variant] (colourhs.workflow.variants.same_as), or [].
+
+        ``kind``: depth, mesh or eval (its JSON). On a scene without a chromatic object
+        bayes_full equals bayes_ph: computed once, copied.
+        """
+        other = same_as(variant, bool(self.layout(name).scene(scene).chromatic))
+        if other is None:
+            return []
+        return [f"results/{name}/{scene}/{other}/{kind}/{frame}.{RESULT_EXT[kind]}"]
+
+    def mesh_uses_hull(self, variant: str) -> bool:
+        """Whether a variant's meshes are closed with hull points (always for vh)."""
+        return variant == "vh" or bool(self.config["surfaces"]["mesh_with_hull"])
+
+    def _frame_results(self, name: str, kind: str) -> list[str]:
+        """One result per selected scene, variant and frame."""
+        return [
+            f"results/{name}/{s}/{v}/{kind}/{f}.{RESULT_EXT[kind]}"
+            for s, scene in self.selected_scenes(name).items()
+            for v in self.variants()
+            for f in scene.frames
+        ]
+
+    def reconstruction_targets(self, name: str) -> list[str]:
+        """Every selected frame's depth file per variant."""
+        return self._frame_results(name, "depth")
+
+    def evaluation_targets(self, name: str) -> list[str]:
+        """Every frame's metrics JSON (which needs its mesh and depth)."""
+        return self._frame_results(name, "eval")
+
+    # ---------------------------------------------------------------- report
+
+    def animation_variant(self) -> str:
+        """The variant animated for a dynamic scene: the last of the configured ones."""
+        return self.variants()[-1]
+
+    def figure_inputs(self, name: str, scene: str) -> dict:
+        """Depth files and meshes of a scene's first frame per variant, its ground truth,
+        and the animated variant's meshes of every frame (dynamic scenes)."""
+        frames = self.layout(name).scene(scene).frames
+        f0, variants = frames[0], self.variants()
+        out = {
+            "depth": [f"results/{name}/{scene}/{v}/depth/{f0}.h5" for v in variants],
+            "mesh": [f"results/{name}/{scene}/{v}/mesh/{f0}.ply" for v in variants],
+            "gt": self.gt_mesh(name, scene, f0),
+            "animation": [],
+            "coloured": [],
+        }
+        if out["gt"]:
+            out["coloured"] = [f"results/{name}/{scene}/{v}/eval/{f0}.ply" for v in variants]
+        if len(frames) > 1:
+            a = self.animation_variant()
+            out["animation"] = [f"results/{name}/{scene}/{a}/mesh/{f}.ply" for f in frames]
+        return out
+
+    def figure_options(self, name: str, scene: str) -> str:
+        """``colourhs figures`` options: VARIANT=path pairs (plain strings)."""
+        inp = self.figure_inputs(name, scene)
+        frames, variants = self.layout(name).scene(scene).frames, self.variants()
+        opts = ["--depth"] + [f"{v}={p}" for v, p in zip(variants, inp["depth"], strict=True)]
+        opts += ["--mesh"] + [f"{v}={p}" for v, p in zip(variants, inp["mesh"], strict=True)]
+        if inp["gt"]:
+            opts += ["--gt", inp["gt"][0], "--coloured"]
+            opts += [f"{v}={p}" for v, p in zip(variants, inp["coloured"], strict=True)]
+        if inp["animation"]:
+            opts += ["--animate"]
+            opts += [f"{f}={p}" for f, p in zip(frames, inp["animation"], strict=True)]
+        return shlex.join(opts)
+
+    def report_inputs(self, name: str) -> dict:
+        """The report's metrics table, recorded config, calibration figures, the
+        selected scenes' figure folders, the dataset's rig.json and scene.json, the
+        calibration files its diagnostics read (:mod:`colourhs.report.calibration`: marker
+        poses, cross-talk, photometric maps, and the dataset's true mu maps where it
+        has them) and each scene's first-frame error-coloured meshes (its 3D view,
+        :mod:`colourhs.report.view3d`)."""
+        objects = self.chromatic_objects(name)
+        calib = [f"results/{name}/calib/marker_poses.csv", f"results/{name}/calib/photometric.h5"]
+        if self.unmix_crosstalk(name):
+            calib.append(f"results/{name}/calib/crosstalk.json")
+        truth = self.layout(name).gt_photometric
+        scenes = self.selected_scenes(name)
+        views = []
+        for scene, meta in scenes.items():
+            f0 = meta.frames[0]
+            views += [f"results/{name}/{scene}/{v}/eval/{f0}.ply" for v in self.variants()]
+        return {
+            "metrics": f"reports/{name}/metrics.csv",
+            "config": f"results/{name}/config.yaml",
+            "calibration": [
+                f"results/{name}/calib/photometric.png",
+                *[f"results/{name}/calib/chromaticity/{o}.png" for o in objects],
+            ],
+            "figures": [f"reports/{name}/figures/{s}" for s in scenes],
+            # rig.json and every scene.json: the rig and scene summaries.
+            "dataset": self._dataset_files(name),
+            "calib": calib + ([str(truth)] if truth else []),
+            "views": views,
+        }
+
+    def _dataset_files(self, name: str) -> list[str]:
+        """rig.json and the scene.json of every scene (what opening the dataset reads)."""
+        ds = self.layout(name)
+        out = [str(ds.rig.path)]
+        for scene in ds.scenes:
+            meta = Path(ds.root) / "scenes" / scene / "scene.json"
+            out += [str(meta)] if meta.exists() else []
+        return out
+
+    def report_targets(self, name: str) -> list[str]:
+        """The report, requested once the dataset's scenes are known (after synthesis)."""
+        self.selected_scenes(name)
+        return [f"reports/{name}/index.html"]
