@@ -28,7 +28,7 @@ hours in all; it writes some GB under data/bench/paper_slice)::
 
 ``--frames-only 5`` runs the jobs of 5 of the 20 rendered frames (about an hour);
 ``--data DIR`` reuses a rendered dataset (a sheet with those frames); ``--preset
-tiny --frames 2`` runs the same in about two minutes (tests/test_bench_paper.py
+tiny --frames 2`` runs the same in about two minutes (tests/benchmarks/test_bench_paper.py
 runs one frame's jobs).
 """
 

@@ -4,7 +4,7 @@ Run: ``.venv/bin/python benchmarks/depth_offsets.py [--seeds 1-4] [--modes exact
 [--blur 1,0,1c,0c]``.
 
 For every seed (a random rig of the ``random-tiny`` ranges at ``--size``, 7 board
-poses: a different draw than ``tests/test_exact.py``'s 3-pose rigs) it renders the
+poses: a different draw than ``tests/reconstruct/test_exact.py``'s 3-pose rigs) it renders the
 plane and one sheet frame per mode, with the TRUE calibration
 (``gt/photometric.h5``):
 

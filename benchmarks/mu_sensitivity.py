@@ -5,7 +5,7 @@ Run: ``.venv/bin/python benchmarks/mu_sensitivity.py [--seeds 1-3]
 [--errors 0,0.005,0.01,0.02,0.04,0.08]``.
 
 For every seed it renders an exact random rig (the ``random-tiny`` ranges at
-320 x 240, noise and cross-talk off, 16 bit, exact masks: ``tests/test_exact.py``'s
+320 x 240, noise and cross-talk off, 16 bit, exact masks: ``tests/reconstruct/test_exact.py``'s
 setting) with its plane and one sheet frame, and reconstructs both from the
 TRUE mu maps (``gt/photometric.h5``, eqs. 6-8) with every map of the first
 camera multiplied by ``1 + e``: the two reciprocal pairs with that camera

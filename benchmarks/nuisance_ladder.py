@@ -10,7 +10,7 @@ photometric calibration, to see which effect moves it):
 
 - ``exact``: noise and cross-talk off, 16 bit, exact masks, the TRUE
   calibration (``gt/photometric.h5``; no cross-talk to undo): the same as
-  ``tests/test_exact.py``.
+  ``tests/reconstruct/test_exact.py``.
 - ``none``: every effect off but quantisation (:meth:`Nuisances.none`), the
   seed's own encoding (8 or 16 bit, its masks); from here on every
   calibration comes from the pipeline (marker poses, cross-talk with the

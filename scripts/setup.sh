@@ -6,9 +6,9 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 # System libraries that open3d (the pipeline) and pymeshlab (test-only: the test
-# extra's MeshLab reference, tests/test_evaluate.py) load, and venv support.
+# extra's MeshLab reference, tests/evaluation/test_accuracy.py) load, and venv support.
 pkgs=(libusb-1.0-0 libgl1 libegl1 libx11-6 libudev1 libglib2.0-0 libgomp1)
-# Headless Chromium for the report's browser test (tests/test_report_browser.py).
+# Headless Chromium for the report's browser test (tests/report/test_report_browser.py).
 pkgs+=(chromium)
 py=$(command -v python3.11 || command -v python3)
 if ! "$py" -m venv --help >/dev/null 2>&1 || ! "$py" -c "import ensurepip" >/dev/null 2>&1; then

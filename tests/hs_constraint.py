@@ -4,10 +4,13 @@ checked against ``colourhs.reconstruct.reference`` and through these rows)."""
 
 from __future__ import annotations
 
+import h5py
 import numpy as np
 import open3d as o3d
 
-from colourhs.capture import Camera
+from colourhs.capture import Camera, load_rig, read_image
+from colourhs.common.geometry import project
+from colourhs.common.ply import load_mesh
 from colourhs.common.raycast import cast_pixels
 from colourhs.common.sampling import sample_bilinear
 from colourhs.synth.image_formation import SHADOW_EPS_M
@@ -154,3 +157,40 @@ def surface_points(
             r = np.concatenate([points + SHADOW_EPS_M * d, d], axis=1).astype(np.float32)
             keep &= ~scene.test_occlusions(o3d.core.Tensor(r), tfar=float(dist.min())).numpy()
     return points[keep], n[keep], np.flatnonzero(hit)[keep]
+
+
+def frame_images(root, scene, frame="000000"):
+    """The rig, and each camera's image and saturation mask of one frame of a dataset."""
+    rig = load_rig(root)
+    images, saturated = {}, {}
+    for cam in rig.camera_names:
+        path = root / "scenes" / scene / "frames" / frame / f"{cam}.png"
+        images[cam], saturated[cam] = read_image(path, rig.image)
+    return rig, images, saturated
+
+
+def gt_points(root, scene, rig, saturated):
+    """Ground-truth surface points and normals seen by the reference camera, without those
+    near a saturated pixel in any camera."""
+    v, t, n = load_mesh(root / "scenes" / scene / "gt" / "000000.ply")
+    pts, nrm, _ = surface_points(
+        v, t, n, rig.cameras[0], rig.cameras, rig.image.width, rig.image.height
+    )
+    near_sat = np.zeros(len(pts), bool)
+    for cam in rig.cameras:
+        uv = project(pts, cam.K, cam.dist, cam.R, cam.t)
+        near_sat |= sample_bilinear(saturated[cam.name].astype(float), uv) > 0
+    return pts[~near_sat], nrm[~near_sat]
+
+
+def true_calibration(root, scene):
+    """The true mu maps ({camera/channel: map}) and chromaticity sampler (or None)."""
+    with h5py.File(root / "gt" / "photometric.h5") as f:
+        mu = {f"{c}/{k}": f[c][k][()] for c in f for k in f[c]}
+    chroma = None
+    path = root / "scenes" / scene / "gt" / "chromaticity.h5"
+    if path.exists():
+        with h5py.File(path) as f:
+            maps = {c: f[c][()] for c in f}
+        chroma = lambda cam, uv: sample_bilinear(maps[cam], uv)  # noqa: E731
+    return mu, chroma

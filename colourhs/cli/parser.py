@@ -547,7 +547,7 @@ def _check_maps(args) -> None:
 def main(argv: list[str] | None = None) -> int:
     """Run a subcommand. Exit status: 0 done; 1 an error in the input (one line on
     stderr naming the file or name and what exists); 2 a usage error (argparse)."""
-    if os.environ.get("COLOURHS_AUDIT_READS"):  # opt-in, for tests (tests/test_workflow.py)
+    if os.environ.get("COLOURHS_AUDIT_READS"):  # opt-in, for tests/workflow/test_workflow.py
         from colourhs.common.files import record_reads
 
         record_reads(os.environ["COLOURHS_AUDIT_READS"])

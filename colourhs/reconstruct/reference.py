@@ -10,7 +10,7 @@ indexing, ``numpy.linalg.eigh`` of W^T W in float64. No numba, no float32
 arithmetic, no fused loops, no attempt at speed: it exists so that
 ``benchmarks/bench_reconstruct.py`` reports the compiled kernel's speed as a
 ratio to a plain implementation run on the same pixels, and so that a test
-(``tests/test_exact.py``) checks the kernel against an independent one.
+(``tests/reconstruct/test_exact.py``) checks the kernel against an independent one.
 """
 
 from __future__ import annotations

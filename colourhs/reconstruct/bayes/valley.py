@@ -40,7 +40,7 @@ SEARCH_CELL_PX = 5.0  # the depth search keeps at least this many pixels across 
   every nuisance on, pipeline calibration: sheet 0.23 / 0.08 / 0.23 / 0.03
   mm against 0.33 / 0.34 / 0.29 / 0.03, the rest within 0.07 mm, 21 % less
   time) but not on exact data, where E's minimum is sharp: plane 0.55 and
-  0.083 mm (seeds 1, 2 of tests/test_exact.py) against 0.037 and 0.035;
+  0.083 mm (seeds 1, 2 of tests/reconstruct/test_exact.py) against 0.037 and 0.035;
   with 3 fits but one parabola 0.46 and 0.062, with 2 fits and both
   parabolas 0.15 and 0.057. Exact data decide: 3 fits, two parabolas.
 - ``SEARCH_PARABOLAS``: half-widths (in steps) of the parabolas fitted
@@ -50,7 +50,7 @@ SEARCH_CELL_PX = 5.0  # the depth search keeps at least this many pixels across 
   function, so a parabola a quarter step (1 mm at 0.8 m) wide put its
   vertex up to 0.08 mm off the minimum (a uniform offset; E at the result
   above E at the truth); the third, a twentieth of a step wide, is within
-  the parabola's own range. Measured on tests/test_exact.py's seeds 1, 2,
+  the parabola's own range. Measured on tests/reconstruct/test_exact.py's seeds 1, 2,
   4 (plane) and 1 (sheet) with the 25 % working radius: 0.081, 0.036,
   0.012, 0.020 mm with two parabolas, 0.008, 0.011, 0.013, 0.016 with
   three; under noise (random rigs 0, 1, 5, every nuisance, pipeline

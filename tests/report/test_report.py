@@ -5,7 +5,6 @@ from __future__ import annotations
 import base64
 import math
 import re
-from html.parser import HTMLParser
 from pathlib import Path
 
 import cv2
@@ -13,6 +12,7 @@ import numpy as np
 import pandas as pd
 import pytest
 from PIL import Image
+from report_html import as_dicts, page_tables
 
 from colourhs.report.page import (
     PAPER_REFERENCE,
@@ -121,51 +121,6 @@ def benchmarks(tmp_path) -> list[Path]:
 
 
 # --------------------------------------------------------------------------- html parsing
-
-
-class _Tables(HTMLParser):
-    """Tables of a page by the id of the ``<h2>`` before them: {section: [[row cells]]}."""
-
-    def __init__(self):
-        super().__init__()
-        self.section = ""
-        self.tables: dict[str, list[list[list[str]]]] = {}
-        self.cell: list[str] | None = None
-        self.row: list[str] | None = None
-
-    def handle_starttag(self, tag, attrs):
-        if tag == "h2":
-            self.section = dict(attrs).get("id", "")
-        elif tag == "table":
-            self.tables.setdefault(self.section, []).append([])
-        elif tag == "tr":
-            self.row = []
-        elif tag in ("td", "th"):
-            self.cell = []
-
-    def handle_endtag(self, tag):
-        if tag in ("td", "th") and self.cell is not None:
-            self.row.append("".join(self.cell).strip())
-            self.cell = None
-        elif tag == "tr" and self.row is not None:
-            self.tables[self.section][-1].append(self.row)
-            self.row = None
-
-    def handle_data(self, data):
-        if self.cell is not None:
-            self.cell.append(data)
-
-
-def _tables(text: str) -> dict:
-    p = _Tables()
-    p.feed(text)
-    return p.tables
-
-
-def _as_dicts(table: list[list[str]]) -> dict[str, dict[str, str]]:
-    """{first cell: {header: cell}} of a table whose first row is its header."""
-    header, *rows = table
-    return {r[0]: dict(zip(header, r, strict=True)) for r in rows}
 
 
 @pytest.fixture
@@ -290,10 +245,10 @@ def test_report_is_self_contained(report, images):
 
 def test_report_metric_tables(report, metrics_csv):
     text = report.read_text(encoding="utf-8")
-    tables = _tables(text)
+    tables = page_tables(text)
     raw = read_metrics(metrics_csv)
     (plane_table,) = tables["scene-plane"]
-    plane = _as_dicts(plane_table)
+    plane = as_dicts(plane_table)
     assert list(plane) == ["vh", "bayes_nocalib", "bayes_ph"]  # the paper's order
     for variant in VARIANTS:
         assert variant in text
@@ -319,7 +274,7 @@ def test_report_metric_tables(report, metrics_csv):
     assert PAPER_REFERENCE["plane"]["bayes_ph"]["hausdorff_rms_mm"] == 2.0
     # a scene without ground truth: variants and frame counts, empty metric cells
     (sheet_table,) = tables["scene-sheet"]
-    sheet = _as_dicts(sheet_table)
+    sheet = as_dicts(sheet_table)
     assert list(sheet) == ["vh", "bayes_nocalib", "bayes_ph"]
     assert "paper hausdorff_rms_mm" not in sheet_table[0]
     for row in sheet.values():
@@ -328,9 +283,9 @@ def test_report_metric_tables(report, metrics_csv):
 
 
 def test_report_timing_and_environment(report):
-    tables = _tables(report.read_text(encoding="utf-8"))
+    tables = page_tables(report.read_text(encoding="utf-8"))
     (timing,) = tables["timing"]
-    t = _as_dicts(timing)
+    t = as_dicts(timing)
     assert t["reconstruct"]["jobs"] == "2"
     assert t["reconstruct"]["total_s"] == "10.0"
     assert t["reconstruct"]["mean_s"] == "5.00"
@@ -418,7 +373,7 @@ def test_folders_config_file_and_find_benchmarks(tmp_path, metrics_csv, images, 
     text = out.read_text(encoding="utf-8")
     assert text.count("data:image/png;base64,") == 6 and text.count("data:image/gif;") == 2
     assert "lambda: 0.25" in text
-    assert _as_dicts(_tables(text)["timing"][0])["sum of jobs"]["total_s"] == "16.1"
+    assert as_dicts(page_tables(text)["timing"][0])["sum of jobs"]["total_s"] == "16.1"
 
 
 # --------------------------------------------------------------------------- layout and provenance
@@ -484,7 +439,7 @@ def test_report_layout_provenance_and_links(tmp_path, metrics_csv, images):
         results_dir=results,
     )
     text = out.read_text(encoding="utf-8")
-    tables = _tables(text)
+    tables = page_tables(text)
     # the summary (first section) with the key columns and the paper's number
     (summary,) = tables["summary"]
     assert summary[0] == [
@@ -626,12 +581,12 @@ def test_report_expected_error_and_sigma_calibration(tmp_path, images):
     pd.DataFrame(rows, columns=cols).to_csv(csv, index=False)
     out = build_report(tmp_path / "index.html", "demo", csv, [], {"plane": [], "sheet": []}, [], {})
     text = out.read_text(encoding="utf-8")
-    tables = _tables(text)
+    tables = page_tables(text)
     sheet = text[text.index('id="scene-sheet"') : text.index('id="timing"')]
     assert "Expected depth error" in sheet and "Sigma calibration" not in sheet
     _, expected = tables["scene-sheet"]  # after the scene's metrics
     assert expected[0] == ["variant", *EXPECTED_ERROR_COLUMNS]
-    assert _as_dicts(expected) == {
+    assert as_dicts(expected) == {
         "bayes_full": {
             "variant": "bayes_full",
             "expected_depth_error_mm": "2.00",
@@ -645,9 +600,9 @@ def test_report_expected_error_and_sigma_calibration(tmp_path, images):
     metrics, expected, calibration = tables["scene-plane"]
     header = metrics[0]
     assert header[header.index("depth_median_mm") + 1] == "depth_signed_median_mm"
-    assert _as_dicts(metrics)["bayes_full"]["depth_signed_median_mm"] == "-0.500"
-    assert _as_dicts(expected)["bayes_full"]["expected_depth_error_mm"] == "1.30"
-    assert _as_dicts(expected)["bayes_full"]["depth_signed_median_mm"] == "-0.500"
+    assert as_dicts(metrics)["bayes_full"]["depth_signed_median_mm"] == "-0.500"
+    assert as_dicts(expected)["bayes_full"]["expected_depth_error_mm"] == "1.30"
+    assert as_dicts(expected)["bayes_full"]["depth_signed_median_mm"] == "-0.500"
     assert calibration == [
         ["variant", "within 1 sigma", "within 2 sigma", "within 3 sigma"],
         ["bayes_full", "0.550", "0.900", "0.980"],

@@ -14,7 +14,7 @@ import pytest
 
 from colourhs.common.metrics_csv import DROP_COLUMNS
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 import generalisation as gen  # noqa: E402

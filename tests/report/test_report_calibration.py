@@ -10,7 +10,7 @@ import h5py
 import numpy as np
 import pandas as pd
 import pytest
-from test_rig_schema import contract_example
+from rig_examples import contract_example
 
 from colourhs.capture import rig_from_dict
 from colourhs.cli.parser import main

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 import pytest
-from test_report import _as_dicts, _tables
+from report_html import as_dicts, page_tables
 
 from colourhs.capture import Camera
 from colourhs.common.depthfile import DepthMap, DepthResult, write_depth
@@ -208,10 +208,10 @@ def test_report_shows_where_the_missing_depth_goes(tmp_path):
     plane = text[text.index('id="scene-plane"') : text.index('id="scene-sheet"')]
     sheet = text[text.index('id="scene-sheet"') : text.index('id="timing"')]
     assert "Where the missing depth goes" in plane and "Where the missing depth goes" not in sheet
-    metrics, dropped = _tables(text)["scene-plane"]
+    metrics, dropped = page_tables(text)["scene-plane"]
     assert dropped[0] == list(expected)
-    assert _as_dicts(dropped) == {"bayes_full": expected}
+    assert as_dicts(dropped) == {"bayes_full": expected}
     assert sum(float(x) for x in list(expected.values())[3:]) == pytest.approx(45.0, abs=0.1)
-    assert len(_tables(text)["scene-sheet"]) == 1  # its metrics only
+    assert len(page_tables(text)["scene-sheet"]) == 1  # its metrics only
     assert drop_table(pd.DataFrame(rows[2:])).empty
     assert drop_table(pd.DataFrame(rows[2:])).columns.tolist() == list(expected)

@@ -1,7 +1,7 @@
 """The data term's bilinear footprint, LLVM intrinsic or plain numba loop
 (:mod:`colourhs.reconstruct.simd`, issue 12): the same numbers either way.
 
-Run as a script (``python tests/test_dataterm_simd.py DATASET OUT.npz``) it
+Run as a script (``python tests/reconstruct/test_dataterm_simd.py DATASET OUT.npz``) it
 writes the data term of :func:`_data_term` to OUT.npz: the test runs it so
 with ``COLOURHS_NO_SIMD=1``, since the kernel's footprint is chosen at import.
 """

@@ -175,15 +175,20 @@ def test_all_samples_masked_is_an_error(tiny_calibration):
 
 def test_unmixing_reduces_the_hs_residual(tiny_dataset):
     """Cross-talk unmixing lowers the eq. (5) residual at ground-truth points."""
-    from hs_constraint import constraint_residual, pair_rows
-    from test_synth import _frame, _gt_points, _truth
+    from hs_constraint import (
+        constraint_residual,
+        frame_images,
+        gt_points,
+        pair_rows,
+        true_calibration,
+    )
 
     mixing = {c: np.array(v["M"]) for c, v in calibrate_crosstalk(tiny_dataset)["cameras"].items()}
     med = {}
     for scene in ("plane", "statue", "sheet"):
-        rig, images, saturated = _frame(tiny_dataset, scene)
-        pts, nrm = _gt_points(tiny_dataset, scene, rig, saturated)
-        mu, chroma = _truth(tiny_dataset, scene)
+        rig, images, saturated = frame_images(tiny_dataset, scene)
+        pts, nrm = gt_points(tiny_dataset, scene, rig, saturated)
+        mu, chroma = true_calibration(tiny_dataset, scene)
         cams = {c.name: c for c in rig.cameras}
         for label, imgs in (
             ("mixed", images),

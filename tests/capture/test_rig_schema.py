@@ -1,7 +1,7 @@
 """rig.json's JSON Schema, colourhs/capture/rig.schema.json (issue 12).
 
 The schema is the format's machine-readable spec and the reader's first check;
-tests/test_capture_rig.py holds the reader's malformed-rig cases, one message each.
+tests/capture/test_capture_rig.py holds the reader's malformed-rig cases, one message each.
 """
 
 from __future__ import annotations
@@ -15,12 +15,13 @@ from typing import Any
 import numpy as np
 import pytest
 from jsonschema import Draft202012Validator
+from rig_examples import contract_example
 
 from colourhs.capture import DIST_LENGTHS, CaptureFormatError, rig_from_dict, rig_schema
 from colourhs.synth.simulated_rig import make_rig
 from colourhs.synth.synthesise import PRESETS, rig_json
 
-DOCS = Path(__file__).resolve().parents[1] / "docs" / "capture-format.md"
+DOCS = Path(__file__).resolve().parents[2] / "docs" / "capture-format.md"
 
 
 def demo_rig() -> dict[str, Any]:
@@ -28,12 +29,6 @@ def demo_rig() -> dict[str, Any]:
     p = PRESETS["demo"]
     rig = make_rig(p.width, p.height, p.focal_px, np.random.default_rng(0))
     return json.loads(json.dumps(rig_json(rig, p, p.board)))
-
-
-def contract_example() -> dict[str, Any]:
-    """The complete rig.json example of docs/capture-format.md."""
-    text = DOCS.read_text(encoding="utf-8").split("A complete example", 1)[1]
-    return json.loads(text.split("```json", 1)[1].split("```", 1)[0])
 
 
 def problem(data: Any) -> str:

@@ -10,55 +10,27 @@ import cv2
 import h5py
 import numpy as np
 import pytest
-from hs_constraint import constraint_residual, pair_rows, surface_points
+from hs_constraint import (
+    constraint_residual,
+    frame_images,
+    gt_points,
+    pair_rows,
+    true_calibration,
+)
 
 from colourhs.capture import CaptureFormatError, load_rig, open_dataset, read_image, validate
 from colourhs.cli.commands import frame_indices
 from colourhs.common.geometry import project
-from colourhs.common.ply import load_mesh
 from colourhs.common.sampling import sample_bilinear
 from colourhs.synth import synthesise as synth_dataset
 from colourhs.synth.simulated_rig import Nuisances, sensor
 from colourhs.synth.synthesise import PRESETS, synthesise
 
 
-def _frame(root, scene, frame="000000"):
-    rig = load_rig(root)
-    images, saturated = {}, {}
-    for cam in rig.camera_names:
-        path = root / "scenes" / scene / "frames" / frame / f"{cam}.png"
-        images[cam], saturated[cam] = read_image(path, rig.image)
-    return rig, images, saturated
-
-
-def _gt_points(root, scene, rig, saturated):
-    v, t, n = load_mesh(root / "scenes" / scene / "gt" / "000000.ply")
-    pts, nrm, _ = surface_points(
-        v, t, n, rig.cameras[0], rig.cameras, rig.image.width, rig.image.height
-    )
-    near_sat = np.zeros(len(pts), bool)
-    for cam in rig.cameras:
-        uv = project(pts, cam.K, cam.dist, cam.R, cam.t)
-        near_sat |= sample_bilinear(saturated[cam.name].astype(float), uv) > 0
-    return pts[~near_sat], nrm[~near_sat]
-
-
-def _truth(root, scene):
-    with h5py.File(root / "gt" / "photometric.h5") as f:
-        mu = {f"{c}/{k}": f[c][k][()] for c in f for k in f[c]}
-    chroma = None
-    path = root / "scenes" / scene / "gt" / "chromaticity.h5"
-    if path.exists():
-        with h5py.File(path) as f:
-            maps = {c: f[c][()] for c in f}
-        chroma = lambda cam, uv: sample_bilinear(maps[cam], uv)  # noqa: E731
-    return mu, chroma
-
-
 def _residuals(root, scene, offset_m=0.0, rotate_deg=0.0, **kw):
-    rig, images, saturated = _frame(root, scene)
-    pts, nrm = _gt_points(root, scene, rig, saturated)
-    mu, chroma = _truth(root, scene)
+    rig, images, saturated = frame_images(root, scene)
+    pts, nrm = gt_points(root, scene, rig, saturated)
+    mu, chroma = true_calibration(root, scene)
     args = {"mu": mu, "chromaticity": chroma} | kw
     c1 = rig.cameras[0]
     ray = pts - c1.centre
@@ -253,7 +225,7 @@ def test_sensor_noise_is_about_one_percent():
 
 
 def test_saturation_is_flagged(tiny_dataset):
-    rig, _, saturated = _frame(tiny_dataset, "statue")
+    rig, _, saturated = frame_images(tiny_dataset, "statue")
     assert any(s.any() for s in saturated.values())  # glossy highlights clip
     frac = np.mean([s.mean() for s in saturated.values()])
     assert frac < 0.02

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 # About 65-80 s of 20 workflow jobs as processes: opt-in, so the suite stays under 15
 # minutes on 2 cores (a clean-clone .ci/run took 860 s with it).
 pytestmark = pytest.mark.skipif(
