@@ -49,8 +49,12 @@ def main() -> None:
     table = summarise_benchmarks(
         read_benchmarks(find_benchmarks(ROOT / "benchmarks" / "snakemake", "demo"))
     )
+    commit = subprocess.run(
+        ["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True
+    ).stdout.strip()
     result = {
         "command": f"snakemake --cores {args.cores}",
+        "commit": commit or None,
         "fresh": args.fresh,
         "rendered": args.fresh and args.render,
         "wall_s": round(wall, 1),

@@ -8,19 +8,15 @@ __version__ = "0.1.0"
 # array with transparent huge pages (madvise). Where the kernel's THP defrag
 # setting is "madvise" (the upstream default), the first write to each such
 # page may then stall in direct memory compaction, and the pipeline's jobs
-# each fill fresh volumes of hundreds of MB once. Measured on a 2-core VM
-# (THP enabled and defrag both "madvise"), a demo Bayesian reconstruction
-# job, 3 runs each, alternating: 27.8-28.6 s with the advice, 22.2-23.2 s
-# without; a fresh 104 MB np.full took 0.02-0.70 s with it, 0.04 s without.
-# NumPy reads the setting when it is first imported, so this takes effect in
-# the command line and the workflow's jobs (which import colourhs first),
-# and not where NumPy was imported before; set NUMPY_MADVISE_HUGEPAGE=1 to
-# keep NumPy's default.
+# each fill fresh volumes of hundreds of MB once. NumPy reads the setting
+# when it is first imported, so this takes effect in the command line and
+# the workflow's jobs (which import colourhs first), and not where NumPy is
+# already imported; set NUMPY_MADVISE_HUGEPAGE=1 to keep NumPy's default.
 os.environ.setdefault("NUMPY_MADVISE_HUGEPAGE", "0")
 
 # Beyond the paper (speed): open3d's plotly viewer (dash) is imported on its
-# first use, not with open3d: 0.25 s less for each job that imports open3d
-# (colourhs.common.lazy_open3d).
+# first use, not with open3d, so a job that imports open3d but never plots
+# does not pay for dash's import (colourhs.common.lazy_open3d).
 from colourhs.common.lazy_open3d import defer_open3d_plotly  # noqa: E402
 
 defer_open3d_plotly()

@@ -1,4 +1,4 @@
-"""Issue 12: every job reads only its declared inputs (helpers of the workflow tests).
+"""Every job reads only its declared inputs (helpers of the workflow tests).
 
 A run with ``COLOURHS_AUDIT_READS=FOLDER`` set has every job's ``colourhs`` process
 record the files it opened to read (:func:`colourhs.common.files.record_reads`: Python's

@@ -1,4 +1,4 @@
-"""The package's shape: no import cycles (issue 12), counting imports inside functions."""
+"""The package's shape: no import cycles, counting imports inside functions."""
 
 from __future__ import annotations
 
@@ -58,7 +58,7 @@ def test_cycle_finder_finds_a_cycle():
 
 
 def test_no_import_cycles():
-    """Before issue 12's refactor: hull <-> reconstruct.frame (the depth file),
+    """Cycles there were once: hull <-> reconstruct.frame (the depth file),
     evaluate <-> figures, photometric <-> crosstalk, synth.dataset <-> synth.randomrig."""
     graph = import_graph()
     assert len(graph) > 30 and "colourhs.common.depthfile" in graph["colourhs.surfaces.hull"]
@@ -144,11 +144,11 @@ def test_one_variant_table():
 
 
 def test_each_stage_imports_only_what_it_needs(tmp_path):
-    """Issue 13: a job imports its own stage's libraries only. The command line
+    """A job imports its own stage's libraries only. The command line
     (cli, commands) none of the heavy ones; an evaluation open3d for its ray
     casting but not pandas, scipy, matplotlib (only when it colours a mesh),
     numba or pymeshlab; ``evaluate --help`` not the reconstruction (numba).
-    Issue 12: ``colourhs metrics`` (gathering metrics.csv) pandas only, not open3d
+    ``colourhs metrics`` (gathering metrics.csv) pandas only, not open3d
     (it imported colourhs.evaluation.accuracy); the command line not even numpy, cv2 or
     jsonschema (colourhs.capture loads its dataset reader on first use).
     Measured: about 2.4 s (one interpreter importing open3d)."""

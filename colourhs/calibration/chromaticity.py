@@ -438,7 +438,7 @@ def chromaticity_maps(
         See :func:`chromaticity_map`.
     progress : bool
         A bar over the cameras and a line before the writing, on stderr
-        (:mod:`colourhs.common.progress`; 7 s at the paper preset's 1280 x 960).
+        (:mod:`colourhs.common.progress`).
 
     Returns
     -------

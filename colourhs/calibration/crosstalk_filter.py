@@ -95,8 +95,7 @@ def legendre_grid(width: int, height: int, degree: int) -> np.ndarray:
 
     Beyond the paper (speed). Each column is the outer product of two 1-D
     polynomials, so only those are evaluated, not the recurrences at every
-    pixel (measured: the cross-talk calibration of a 1280 x 960 dataset took
-    57-59 s against 70.7 s, its file byte for byte the same).
+    pixel; the products are the same numbers as :func:`legendre_basis`'s.
     """
     px = _legendre_1d(np.arange(width, dtype=float), width, degree)
     py = _legendre_1d(np.arange(height, dtype=float), height, degree)
@@ -198,17 +197,18 @@ def fit_mixing_field(
       readings' noise exceeds the quantisation step (16-bit images).
     - Maximum likelihood of the integer readings when the noise is below
       about one step ``quantum`` (fraction of full scale per raw value: 8-bit
-      images, where a 2-8 % leak is a few DN with sub-DN noise, and least
-      squares -- or a median of ratios -- are biased by the rounding by up to
-      30 % of the leak): a reading v is ``round(mu + noise)``, mu = M I_b,
-      noise Gaussian of variance ``s_r^2 + g mu`` (read and shot noise, both
-      fitted), so ``P(v) = Phi((v + q/2 - mu) / s) - Phi((v - q/2 - mu) / s)``
+      images, where a leak of a few per cent is a few DN with sub-DN noise,
+      and least squares -- or a median of ratios -- are biased by the
+      rounding by a sizeable share of the leak): a reading v is
+      ``round(mu + noise)``, mu = M I_b, noise Gaussian of variance
+      ``s_r^2 + g mu`` (read and shot noise, both fitted), so
+      ``P(v) = Phi((v + q/2 - mu) / s) - Phi((v - q/2 - mu) / s)``
       (the lower bound open at 0, where readings below black clip), mixed
       with 0.1 % of outliers. At most ``max_pixels`` pixels (a regular
       subsample) enter this fit.
     - Zero where every reading of the channel is at the black level (a
       camera whose filters pass no measurable leak): that likelihood has no
-      maximum (it grows as the leak goes negative; a fit gave -0.94).
+      maximum (it grows as the leak goes negative).
 
     ``step``, if given, is called after each light colour's fit (progress).
 

@@ -14,9 +14,9 @@ does this for a whole dataset and writes one CSV.
 Conventions follow ``capture-format.md``: metres, world X = R X_board + t for
 the board pose, pixel (0, 0) is the centre of the top-left pixel.
 
-Corner refinement. On the renders, ArUco's ``CORNER_REFINE_SUBPIX`` corners
-sit about 0.2 px (demo, 640x480) to 0.35 px (tiny, 160x120) inside the true
-convex marker corners. :func:`detect_markers` therefore re-locates every
+Corner refinement. ArUco's ``CORNER_REFINE_SUBPIX`` corners sit a fraction
+of a pixel inside the true convex marker corners, more so on small images.
+:func:`detect_markers` therefore re-locates every
 border edge: along many points of each side it samples the grey-level profile
 across the edge, estimates the black and white levels locally (a linear trend
 along the side, from the profile's flat parts), takes the 50 % crossing, fits
@@ -505,8 +505,7 @@ def marker_poses(
     min_markers : int
         Fewest triangulated markers (each seen by two or more cameras) a pose needs.
     progress : bool
-        A bar over the board poses on stderr (:mod:`colourhs.common.progress`; about 1 s
-        per pose at 1280 x 960).
+        A bar over the board poses on stderr (:mod:`colourhs.common.progress`).
 
     Returns
     -------

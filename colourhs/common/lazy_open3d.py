@@ -2,11 +2,10 @@
 
 Beyond the paper (speed). ``import open3d`` runs
 ``open3d.visualization.draw_plotly``, which imports dash and plotly for
-open3d's browser viewer: 0.25 of the 0.53 s that importing open3d takes
-(measured on a 2-core VM, 3 runs each). colourhs never uses that viewer, and
-every evaluation, mesh and hull job of the workflow imports open3d once, so
-the workflow's demo run (about 170 such jobs) spends some 40 job-seconds
-there. :func:`defer_open3d_plotly` puts a stand-in for that one module in
+open3d's browser viewer, a large share of open3d's own import time. colourhs
+never uses that viewer, and every evaluation, mesh and hull job of the
+workflow imports open3d once, so that cost is paid once per job.
+:func:`defer_open3d_plotly` puts a stand-in for that one module in
 ``sys.modules`` before open3d is imported: every name open3d takes from it is
 a function that imports the real module on its first call and calls the real
 function, so ``open3d.visualization.draw_plotly(...)`` still works, a little

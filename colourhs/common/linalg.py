@@ -23,11 +23,9 @@ from scipy.sparse.linalg import LinearOperator, cg, splu
 def solve_spd(A: sp.spmatrix, b: np.ndarray) -> np.ndarray:
     """Solve ``A x = b`` for a sparse symmetric positive definite ``A``.
 
-    Measured on one 1280x960 frame (sheet, paper preset; best of 2):
-    the normal integration's 509,720 unknowns 4.5 s against spsolve's 7.7 s,
-    the refinement's 5,076 control points 0.11 s against 0.49 s; solutions
-    equal to 2e-12 and 5e-8 relative (the second system's damping is
-    1e-3 of its diagonal, so its condition number is large).
+    The solution equals :func:`scipy.sparse.linalg.spsolve`'s within
+    rounding, which grows with ``A``'s condition number (large for the
+    refinement's lightly damped systems).
 
     Parameters
     ----------
@@ -62,10 +60,9 @@ class NearbySolver:
     ``x0``, to a residual ``rtol`` times ``|b|``; where that takes more than
     ``max_iter`` iterations (or the size changed) it is factored anew.
 
-    ``rtol`` 1e-12 is the direct solve's own accuracy: measured on a
-    1280x960 frame's normal integration (509,720 unknowns, log-depths), the
-    second reweighted solve differed from the direct one by 7e-13 after 11
-    iterations, in 1.9 s against 5.1 s.
+    ``rtol`` 1e-12 is the direct solve's own accuracy, so CG's answer is as
+    good as a fresh factorisation's, in a few iterations where the
+    preconditioner still fits.
 
     Beyond a plain CG: the residual is checked at iterations
     ``check_at // 2`` and ``check_at``; where the rate between them (decades
@@ -73,22 +70,17 @@ class NearbySolver:
     all to reach ``rtol``, CG stops there and the system is factored anew,
     as it would be after ``max_iter`` iterations. The same answer, without
     the iterations that could not converge: when the normal integration's
-    links change between passes the old factors are a poor preconditioner
-    (measured at 1280x960: 40 iterations, 4.9 s, ending 10^-4 of the way,
-    twice per frame). ``slack`` allows for CG's rate improving as it goes
+    links change between passes the old factors are a poor preconditioner,
+    and CG would spend all ``max_iter`` iterations without reaching
+    ``rtol``. ``slack`` allows for CG's rate improving as it goes
     (superlinear convergence once the few outlying eigenvalues are
-    resolved). Measured on the 8 kept random rigs' 24 Bayesian frames
-    (plane, sheet, statue; 192 CG solves): the prediction at 6 iterations
-    was at most 42 where CG then converged (in 29) and at least 77 where
-    it did not, so ``slack`` 1.4 (56) sits between them. CG is stopped only
-    while its residual is still above ``stop_above`` (1 %) of ``|b|``: there
-    the old factors have not yet captured the system (the 18 solves that
-    failed were at 20-250 % at iteration 6). Below it a flat stretch is
-    CG's plateau before the outlying eigenvalues resolve: on the demo toy
-    one solve sat at 10^-4.7 from iteration 1 to 6 and then converged;
-    stopping it changed that frame's depths by up to 0.04 mm (median 0.7
-    um) through the refinement's discrete choices, where CG and the direct
-    solve agree to ``rtol``.
+    resolved), so it separates the solves that go on to converge from those
+    that do not. CG is stopped only while its residual is still above
+    ``stop_above`` of ``|b|``: there the old factors have not yet captured
+    the system. Below it a flat stretch is CG's plateau before the outlying
+    eigenvalues resolve, and stopping it would change the depths through
+    the refinement's discrete choices, where CG and the direct solve agree
+    to ``rtol``.
     """
 
     def __init__(

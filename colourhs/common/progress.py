@@ -63,8 +63,7 @@ def bar(iterable=None, desc: str = "", total: int | None = None, enabled: bool =
         mininterval=MIN_INTERVAL_S,
         # Every update may redraw (once MIN_INTERVAL_S has passed): tqdm's default
         # adapts a minimum of items between redraws to the first items' rate, so a
-        # loop whose items slow down went silent (measured: the paper preset's noise
-        # model, 11 of 30 images in 4 s, then no line for 6 s).
+        # loop whose items slow down would go silent.
         miniters=1,
         file=sys.stderr,
         dynamic_ncols=False,
@@ -76,8 +75,8 @@ def line_buffered(stream=None) -> None:
     """Make a text stream (default ``sys.stdout``) write each line as it is printed.
 
     A job's stdout goes to its log file, where Python buffers it in blocks: its
-    lines (``wrote ...``, per-camera summaries) reached the log only when the job
-    ended (measured: the paper preset's chromaticity job, 7 s with an empty log).
+    lines (``wrote ...``, per-camera summaries) would reach the log only when the
+    job ended.
     A stream that cannot be reconfigured (a test's capture) is left as it is.
     """
     stream = sys.stdout if stream is None else stream

@@ -76,7 +76,7 @@ import open3d as o3d
 from colourhs.common.depthfile import DepthMap, as_depth_map
 from colourhs.common.files import write_json
 from colourhs.common.geometry import camera_centre, project, world_to_camera
-from colourhs.common.metrics_csv import (  # metrics_table: re-exported, its old home
+from colourhs.common.metrics_csv import (  # metrics_table: re-exported for callers of this module
     EXTRA_COLUMNS,
     REQUIRED_COLUMNS,
     metrics_table,
@@ -385,12 +385,11 @@ def evaluate_frame(
         Pixels by which the GT's image mask is grown (selects evaluated vertices).
     completeness_samples : int
         At most this many seen-GT samples (every k-th visible pixel's hit) for
-        completeness (the metric's definition since MeshLab's radius search,
-        which slowed with the distance, computed it; the closest-point search
-        now takes about a second for all 70 k of a demo frame).
+        completeness: part of the metric's definition, so scores stay comparable,
+        not a limit of the closest-point search, which could take them all.
     progress : bool
         A line per step on stderr, with the seconds since the start
-        (:mod:`colourhs.common.progress`; 4.6 s in all at 1280 x 960).
+        (:mod:`colourhs.common.progress`).
 
     Returns
     -------

@@ -16,10 +16,9 @@ light, a pure colour in the wrong band) or has no chromaticity: with fewer
 than three rows W would be trivially rank 2, so such hypotheses are never
 scored as good. Beyond the paper, it is also invalid when its normal faces
 away from, or within 5 degrees of grazing to, a camera's light: with three
-pairs, det W(z) = 0 has further roots
-along a ray besides the surface, and many of them have such normals (on
-random rigs, 25-74 % of pixels' best hypotheses on exact data were such
-roots; 10-28 % remain false roots after this test).
+pairs, det W(z) = 0 has further roots along a ray besides the surface, and
+many of them have such normals (the test removes many false roots, not all:
+ML HS decides between the rest, :mod:`colourhs.reconstruct.ml`).
 """
 
 from __future__ import annotations
@@ -317,7 +316,7 @@ def _kernel(
                 lens = (fx, sk, cx, fy, cy)
                 cbase = c * plane
                 # One loop per lens kind (the flag a constant, folded once inlined):
-                # a branch inside the loop stops it vectorising (measured 2x slower).
+                # a branch inside the loop stops it vectorising.
                 if rational[c]:
                     _into_camera(
                         depths, geo, lens, dc, True, Ww, Hh, cbase, row, nv, wts, base, fall, ok, c
@@ -422,8 +421,7 @@ def _kernel(
             # 5. A point every camera sees and every light lights faces them all
             # (by more than MIN_FACING_COS): a normal that does not is a false
             # root of det W = 0. One pass per camera, so each vectorises over k
-            # (a camera loop inside the k loop stopped pass 4 vectorising: 3x
-            # slower, measured 46 -> 15 M hypotheses/s).
+            # (a camera loop inside the k loop stops pass 4 vectorising).
             for c in range(ncam):
                 l0, l1, l2 = lights[c, 0], lights[c, 1], lights[c, 2]
                 for k in range(Kn):

@@ -83,13 +83,11 @@ def foreground(frame: Frame, ref: int, threshold: float = LIT_THRESHOLD) -> np.n
     black markers, shadows), dilated by one pixel, since their rows carry no
     signal.
 
-    ``threshold`` is a fraction of the sensor's range, not of its noise.
-    Tried (random rigs 0-3, 640x480): "too dark" as 3 noise sigmas instead
-    doubled a toy's coverage (0.33 to 0.58: saturated plastics read 1-3 % of
-    full scale in the other lights' channels) but raised the toys' median
-    depth error over seeds from 0.39 to 1.68 mm, and on exact data (noise
-    only the quantisation) it took in the black markers, whose mixed
-    footprints moved a board from 0.037 to 0.065 mm; kept as it is.
+    ``threshold`` is a fraction of the sensor's range, not of its noise: a
+    threshold of a few noise sigmas would take in the weak readings of
+    saturated plastics in the other lights' channels, which add coverage but
+    spoil the depth, and on nearly exact data the black markers, whose mixed
+    footprints move a board's depth.
     """
     from scipy.ndimage import binary_dilation
 

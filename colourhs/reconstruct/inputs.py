@@ -80,8 +80,8 @@ def load_frame(
             for (a, b), (ca, cb) in zip(pair_cams, pair_ch, strict=True)
         ]
         mu = np.stack([[maps[ka], maps[kb]] for ka, kb in keys]).astype(np.float32)
-        # The jackknife part only: with the cross-talk term the corner rigs' smooth
-        # surfaces were within 1 sigma far more often than 68 %.
+        # The jackknife part only: with the cross-talk term the sigma is too wide
+        # (smooth surfaces fall within 1 sigma far more often than 68 % of the time).
         sigmas = read_ratio_sigma(photometric_h5, part="poses")
         if sigmas:
             ratio_sigma = np.array(

@@ -2,10 +2,10 @@
 
 The paper's ML HS picks, per pixel, the depth hypothesis of best data cost
 (eq. 5). With three reciprocal pairs that choice is ambiguous even on exact
-data: along a ray, det W(z) = 0 has roots besides the surface (measured on
-random rigs: 2-5 roots per pixel within the working range, several with a
-cost of zero), so the best hypothesis is the surface on only 40-60 % of
-pixels. Beyond the paper, this module keeps the paper's per-pixel data but
+data: along a ray, det W(z) = 0 has roots besides the surface (several per
+pixel within the working range, some with a cost of zero), so the best
+hypothesis is often not the surface. Beyond the paper, this module keeps the
+paper's per-pixel data but
 decides between the roots as Zickler et al.'s original HS does, with a
 window: each candidate root of a pixel, with its HS normal, defines a
 tangent plane; the candidate whose plane also explains the rows of the
@@ -14,12 +14,9 @@ units against the plane's normal) wins. On the true surface every
 neighbour agrees to second order in the pixel spacing; at a false root the
 neighbours' rows disagree with its normal. The depth is the root's
 continuous minimum (:func:`refine_ml`): each candidate takes ``PRESELECT``
-of its rounds before the window chooses, the chosen one the rest. Measured
-against refining every candidate fully, 8 random rigs at 640 px under noise
-with the pipeline's calibration: plane and sheet depth medians within 0.6 %
-of before on every rig (medians over rigs 21.12 -> 21.14 and 15.61 -> 15.57
-mm); a whole sheet frame 20.5 / 21.0 -> 15.8 / 19.3 s (idle, two rounds);
-exact planes unchanged (0.064 / 0.106 / 0.025 mm).
+of its rounds before the window chooses, the chosen one the rest (by then a
+candidate is close enough to its minimum for the window to judge it, and
+the losers' remaining rounds would change nothing).
 """
 
 from __future__ import annotations
@@ -86,10 +83,9 @@ def refine_ml(
 
     Also beyond the paper, for speed: a pixel leaves the rounds once its cost
     is unusable at its own depth (it could never move again) or once a
-    parabola's vertex moved it by at most ``tol`` labels (measured on a
-    640 px random rig's sheet: the median move is 39 um after 3 rounds,
-    0.26 um after 5, with a label of 2.5 mm), so later rounds evaluate the
-    cost only where it still changes anything.
+    parabola's vertex moved it by at most ``tol`` labels (the rounds converge
+    fast, so most pixels settle early), and later rounds evaluate the cost
+    only where it still changes anything.
 
     Parameters
     ----------
@@ -101,7 +97,7 @@ def refine_ml(
     h : (N,) half-widths to start from (default half a label), e.g. those
         an earlier call returned, to go on where it stopped.
     say : called with a line of text before each round (progress: a round
-        of a 1280x960 frame's 500k pixels takes 2-4 s), if given.
+        takes seconds at high resolution), if given.
 
     Returns
     -------
@@ -150,13 +146,10 @@ def _plane_chi2(s, var, v, n, out):
     """:func:`plane_chi2` per point, into ``out`` (N,).
 
     Beyond the paper (speed): replaces NumPy's five (N, P, 3) temporaries and
-    three einsums (4.3 s of an ML frame at 1280x960 on 2 threads, cProfile).
-    The dot products sum x, y, z in order, where einsum summed (x + z) + y,
-    so about 60 % of the values differ from NumPy's in the last bits. Division
-    as NumPy's (``error_model="numpy"``): x / 0 is inf or NaN, not an error.
-    Measured: the depths of the 8 kept random rigs' 24 ML frames and of
-    paper frame 99 are the same to the bit (the window's median picks the
-    same candidates).
+    three einsums. The dot products sum x, y, z in order, where einsum sums
+    (x + z) + y, so values may differ from NumPy's in the last bits, far
+    below anything the window's median tells apart. Division as NumPy's
+    (``error_model="numpy"``): x / 0 is inf or NaN, not an error.
     """
     P = s.shape[1]
     for i in nb.prange(s.shape[0]):
@@ -282,7 +275,7 @@ def ml_depth(
         take = score < best_s[on]
         best_z[on[take]], best_h[on[take]], best_s[on[take]] = z[take], h[take], score[take]
     # Beyond the paper, for speed: the window chooses after PRESELECT rounds
-    # (the median candidate is then within 2 % of a label of its minimum),
+    # (a candidate is then within a small fraction of a label of its minimum),
     # and only the chosen candidate takes the remaining rounds.
     win = np.flatnonzero(np.isfinite(best_s))
     best_n = np.full((N, 3), np.nan)

@@ -8,15 +8,12 @@ WORKING_RADIUS = 0.25  # depth hypotheses: the working depth +- this fraction of
 """Why ``WORKING_RADIUS`` holds on any rig: it is relative to the working
 distance, so a rig twice as far from its objects searches twice as deep.
 A rig's common volume (where the three views overlap) grows with its
-distance, and so do the poses a user gives the board and the objects: on
-the random rigs (working distance 0.5-1.0 m, boards up to 45 deg slanted
-and +-0.1 D off the fixation depth) the held-out boards reach 193 mm, or
-20 % of the working depth, in front of it (seeds 0 and 5, which lost 17 and
-29 % of the board to the former fixed +-0.15 m: coverage 0.77 -> 0.86 and
-0.83 -> 0.94, depth unchanged within 0.03 mm); statue, toy and sheet
-unchanged or better within 0.1 mm (seeds 0-1), the demo within 0.02 mm.
-A scene beyond it is reconstructed only where the hull gives the range
-(``depth_from_hull``) or ``depth_range`` is given.
+distance, and so do the poses a user gives the board and the objects: a
+board slanted up to 45 deg and held a tenth of the working depth D off the
+fixation depth reaches about a fifth of D in front of it, which a range
+fixed in metres cuts off on a far rig. A scene beyond it is reconstructed
+only where the hull gives the range (``depth_from_hull``) or
+``depth_range`` is given.
 """
 MAX_SIGMA = 0.05  # depths less certain than this fraction of themselves are flagged
 """Why ``MAX_SIGMA`` holds on any rig: relative to the depth, like the pixel
@@ -36,7 +33,7 @@ class ReconstructOptions:
     working_radius : half the depth range as a fraction of the working depth
         (see ``WORKING_RADIUS``).
     working_radius_m : the same in metres, instead of ``working_radius``
-        (the option of earlier versions; a fixed length fits one rig only).
+        (a fixed length fits one rig only).
     alpha : weight of the data term in the Bayesian energy.
     tau : truncation of the depth-normal prior, in labels.
     refine : continuous refinement after the Bayesian labelling.

@@ -33,10 +33,10 @@ FOOTPRINT_PX = 0.0  # footprint error at the edges of unusable regions, pixels (
 """Why ``FOOTPRINT_PX`` is 0 by default: weighing down the rows at the edges of
 unusable regions (``side_maps``) removes the bias that a board's dark markers
 give its depth at low signal, but the same edges are the silhouettes of
-curved objects and sheets, whose depth they fix: on random and corner rigs
-with every nuisance those lost more than the boards gained. The depth's
-error bar (:mod:`colourhs.reconstruct.bayes.uncertainty`) covers the markers'
-offset instead. A rig whose captures are all boards may set it (0.15 pixel:
+curved objects and sheets, whose depth they fix, so those lose more than the
+boards gain. The depth's error bar
+(:mod:`colourhs.reconstruct.bayes.uncertainty`) covers the markers' offset
+instead. A rig whose captures are all boards may set it (0.15 pixel:
 two views 12-30 degrees apart see a slanted surface foreshortened 10-20 %
 differently, so their 1-pixel blur kernels differ by about that much)."""
 BLUR_SUPPORT = 0.9  # least share of the blur kernel on usable pixels (see side_maps)
@@ -140,7 +140,7 @@ def side_maps(
         pair sample such an edge through footprints that do not match, an
         error that does not fall with the sensor noise; without this term
         the robust weights drop such rows only while the noise is small
-        against them, so a surface's depth moved with the noise level.
+        against them, so a surface's depth moves with the noise level.
     min_support : least share of the blur's kernel on usable pixels; below it the
         sample is unusable (:data:`BLUR_SUPPORT`; :data:`RIM_SUPPORT` keeps only
         samples clear of every edge,
@@ -186,11 +186,8 @@ def helmholtz_sides(
     at a sub-pixel offset t, a bias that differs between the two sides of a
     pair wherever the image curves (they see the surface at other scales and
     offsets); cubic convolution reproduces quadratics, so it has none to that
-    order. Measured (benchmarks/depth_offsets.py, 4 random rigs, true mu):
-    exact sheets 0.073 -> 0.028 mm median depth error with the 1-pixel blur,
-    0.007 mm without it; under noise the medians improved (plane 0.10 -> 0.08,
-    sheet 0.10 -> 0.08 mm) but the worst sheet did not (0.73 -> 1.97 mm), so
-    bilinear stays the default.
+    order. Bilinear is the default: under noise the worst surfaces come
+    out worse with cubic convolution.
     """
     blur_px = BLUR_PX if blur_px is None else float(blur_px)
     order = ORDER if order is None else int(order)
@@ -495,8 +492,8 @@ def _smallest_singular(u, vt, warm=False):
 def _whitened_rows(s, var, v, w, ok):
     """The rows ``w = s_a v_a - s_b v_b`` (N, P, 3) of eq. (5) at each point, and
     ``ok`` (N,): every row finite and every variance positive (else its rows are
-    0). One compiled pass instead of NumPy's temporaries (0.3 s a call at
-    1280x960); the same arithmetic, so the same bits."""
+    0). One compiled pass instead of NumPy's temporaries; the same
+    arithmetic, so the same bits."""
     N, P = s.shape[0], s.shape[1]
     for i in nb.prange(N):
         good = True
@@ -563,10 +560,9 @@ def whitened_cost(sides: HelmholtzSides, X: np.ndarray, R: np.ndarray, passes: i
     eigenvalue, the sum of the squared whitened rows along it), where
     numpy's batched ``eigh`` of W^T W squared W's condition number. Each pass
     after the first starts its rotations from the previous pass's singular
-    basis (the weights change the rows little): the kernel took 3.9 instead of
-    5.1 s in a demo ML job (sheet frame 5, one thread), and 63 of its 124,601
-    depths changed (ties between hypotheses; median error against the
-    Bayesian depth 5.4758 -> 5.4760 mm).
+    basis (the weights change the rows little, so fewer sweeps are needed;
+    only near-ties between hypotheses can come out differently than from a
+    cold start).
 
     Returns
     -------

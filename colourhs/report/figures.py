@@ -353,7 +353,7 @@ def shared_scale_images(
     vmax : float, optional
         Top of the shared scale (0 is the bottom; larger errors get the top colour);
         default the median over the labels of each one's 95th percentile, so that
-        one far worse variant (the visual hull's 100 mm beside HS's few mm)
+        one far worse variant (the visual hull's errors beside HS's)
         saturates instead of turning every other map black.
     cmap : str
         Matplotlib colormap name.
@@ -480,7 +480,7 @@ def scene_figures(
     fps : frames per second of the animation.
     coloured : variant -> error-coloured mesh PLY, or None.
     progress : bars over the variants' maps, the renders and the animation's frames
-        on stderr (:mod:`colourhs.common.progress`; about 2 s per map or render at 1280 x 960).
+        on stderr (:mod:`colourhs.common.progress`).
 
     Returns
     -------
@@ -582,6 +582,6 @@ def scene_figures(
             for i, (f, p) in enumerate(animation.items())
         ]
         plys = bar(animation.values(), "figures: animation", n, progress, unit="frame")
-        frames = (render(ply) for ply in plys)  # one at a time: 201 frames at 1280x960
+        frames = (render(ply) for ply in plys)  # one at a time: a long sequence at full size
         written.append(write_animation(frames, out / "animation.gif", fps=fps, labels=labels))
     return written

@@ -452,7 +452,7 @@ def build_report(
         seen first from the dataset's first camera.
     progress
         A line before the calibration's diagnostics and a bar over each scene's
-        3D views on stderr (:mod:`colourhs.common.progress`; about 2 s per mesh).
+        3D views on stderr (:mod:`colourhs.common.progress`).
 
     Raises
     ------

@@ -29,8 +29,8 @@ MAX_TRIANGLES = 3000
 
 #: A mesh of more than this many times the budget is first clustered to about
 #: that many triangles: quadric decimation then works on a mesh of its own
-#: output's order of size (its cost grows with the input; 14 s for a demo ML
-#: mesh of 861k triangles), and keeps its quality for the final step.
+#: output's order of size (its cost grows with the input), and keeps its quality
+#: for the final step.
 PRE_FACTOR = 10
 
 
@@ -96,9 +96,8 @@ def simplify(mesh, max_triangles: int = MAX_TRIANGLES):
     budget is first clustered onto voxels sized for that many triangles
     (:func:`_cluster_voxel`; vertex colours averaged), then reduced by quadric
     decimation. Quadric decimation stops short of the budget on a
-    non-manifold mesh (a noisy ML surface, or the clustering's output: 35k
-    triangles left of a demo ML plane's 861k); the rest is clustered again,
-    the voxel grown by 1.25 each time, until it fits.
+    non-manifold mesh (a noisy ML surface, or the clustering's output); the
+    rest is clustered again, the voxel grown by 1.25 each time, until it fits.
     """
     if len(mesh.triangles) <= max_triangles:
         return mesh
@@ -139,7 +138,7 @@ def scene_views(
 ) -> dict[str, dict]:
     """Variant -> :func:`mesh_payload` of its first frame's error-coloured mesh
     (``<variant>/eval/<frame>.ply``), variants in the paper's order; {} when none.
-    ``progress``: a bar over the meshes on stderr (about 2 s each at 1280 x 960)."""
+    ``progress``: a bar over the meshes on stderr."""
     files = result_files(results_dir, scene)
     plys = {v: k["error-coloured mesh"][0] for v, k in files.items() if k["error-coloured mesh"]}
     label = f"report: 3D views of {scene}"

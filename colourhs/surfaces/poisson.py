@@ -318,7 +318,7 @@ def frame_mesh(
         Threads for Poisson.
     progress : bool
         A line per step on stderr, with the seconds since the start
-        (:mod:`colourhs.common.progress`; Poisson takes 5 of 8.5 s at 1280 x 960).
+        (:mod:`colourhs.common.progress`; Poisson itself takes most of the time).
 
     Returns
     -------

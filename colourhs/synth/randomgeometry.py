@@ -229,9 +229,9 @@ def _draw_poses(rng, view, board, rg, geo, n_poses):
     """``n_poses`` calibration poses and the held-out plane (last), or None if unplaceable.
 
     With ``rg.plane_slant_deg`` the plane is drawn by :func:`_slanted_plane`
-    after the calibration poses, from the same stream; without it the draws
-    are those of the code before the option (the plane the last of
-    ``n_poses + 1`` calibration-like poses).
+    after the calibration poses, from the same stream; without it the plane
+    is the last of ``n_poses + 1`` calibration-like poses, so that presets
+    without the option keep their seeds' draws.
     """
     slanted = rg.plane_slant_deg is not None
     try:

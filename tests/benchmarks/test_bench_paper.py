@@ -1,4 +1,4 @@
-"""benchmarks/bench_paper.py (issue 13) at the tiny preset: every rule measured, the
+"""benchmarks/bench_paper.py at the tiny preset: every rule measured, the
 projection is the per-job figures x their counts."""
 
 from __future__ import annotations

@@ -428,7 +428,7 @@ def test_no_leak_gives_identity_not_a_crash():
 
 
 def test_calibration_reports_progress_on_stderr(random_tiny, capsys):
-    """Issue 13: the paper-scale cross-talk rule (60 s) printed nothing until it ended.
+    """The paper-scale cross-talk rule (60 s) printed nothing until it ended.
     Bars over the filter fields' fits (3 cameras x 3 light colours: 2.4-5.2 s apart at
     1280 x 960, where a bar over the cameras was 14 s apart), the board captures read
     and the board poses, a line per LED stage (the fixture's calibration wrote its

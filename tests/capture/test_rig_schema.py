@@ -1,4 +1,4 @@
-"""rig.json's JSON Schema, colourhs/capture/rig.schema.json (issue 12).
+"""rig.json's JSON Schema, colourhs/capture/rig.schema.json.
 
 The schema is the format's machine-readable spec and the reader's first check;
 tests/capture/test_capture_rig.py holds the reader's malformed-rig cases, one message each.

@@ -191,7 +191,7 @@ def test_triangulation_error_scales_with_noise(sigma_px):
 
 
 def test_mesh_volume_and_outward_winding():
-    """Issue 12: one signed volume (geometry.mesh_volume), which the hull and the
+    """One signed volume (geometry.mesh_volume), which the hull and the
     synthetic scenes both orient their meshes by (outward_triangles): a unit cube
     corner's tetrahedron is 1/6 m^3 wound outward, -1/6 inward, and is turned."""
     v = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])

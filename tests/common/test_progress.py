@@ -1,4 +1,4 @@
-"""Issue 13: every stage that runs more than a few seconds at the paper preset's scale
+"""Every stage that runs more than a few seconds at the paper preset's scale
 (1280 x 960) shows its progress on stderr (which the Snakemake rules send to the job's
 log), through the stage commands; with ``progress=False`` the functions print nothing.
 

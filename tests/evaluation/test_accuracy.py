@@ -143,7 +143,7 @@ def test_closest_points_are_the_nearest_of_all_triangles():
 
 def test_hausdorff_matches_meshlab():
     """The distances of MeshLab's Hausdorff filter (pymeshlab, which the evaluation used
-    until issue 13): here all 762 equal to 3e-17 m. MeshLab reports its statistics in
+    before): here all 762 equal to 3e-17 m. MeshLab reports its statistics in
     single precision (measured: at most 4.4e-10 m off here). On the demo its grid search
     missed the closest triangle for a few samples (27 of 18 596, by up to 0.06 mm)."""
     pymeshlab = pytest.importorskip("pymeshlab")

@@ -1,5 +1,5 @@
 """The data term's bilinear footprint, LLVM intrinsic or plain numba loop
-(:mod:`colourhs.reconstruct.simd`, issue 12): the same numbers either way.
+(:mod:`colourhs.reconstruct.simd`): the same numbers either way.
 
 Run as a script (``python tests/reconstruct/test_dataterm_simd.py DATASET OUT.npz``) it
 writes the data term of :func:`_data_term` to OUT.npz: the test runs it so
@@ -47,7 +47,7 @@ def test_intrinsic_and_loop_give_the_same_data_term(tiny_dataset, tmp_path):
     process with ``COLOURHS_NO_SIMD=1``). Measured: bit-identical costs and
     normals (max difference 0; 76,362 of the 921,600 hypotheses valid), as
     on the tiny statue's whole frame with 96 hypotheses with and without
-    chromaticity, and both bit-identical to the kernel before issue 12's
+    chromaticity, and both bit-identical to the kernel before its
     move. 9.5 s with both kernels cached, on 2 cores under a load of 10
     (about 60 s more on a fresh checkout: the subprocess compiles the
     loop's kernel)."""

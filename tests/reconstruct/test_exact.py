@@ -1,4 +1,4 @@
-"""Exact data gives exact answers (issue 11, item 2): random rigs, noise and
+"""Exact data gives exact answers: random rigs, noise and
 cross-talk off, the true calibration (gt/photometric.h5).
 
 Every other nuisance stays on (LED profiles, vignetting and colour shading,
@@ -32,7 +32,7 @@ EXACT = replace(
     sheet_frames=1,
 )
 SEEDS = (1, 2, 3, 4, 5)
-#: Seed 5's rig has lenses beyond the others' (issue 12, one camera model end to
+#: Seed 5's rig has lenses beyond the others' (one camera model end to
 #: end): a skew of up to 1 % of f and 12 distortion coefficients (rational k4-k6,
 #: thin prism s1-s4; the ranges ``random-tiny-lens``).
 LENS_SEED = 5
@@ -91,12 +91,12 @@ def test_exact_data_exact_answers(exact_rigs, scene):
       0.012-0.026 mm, normals <= 0.075 deg) (seed 1's board reaches 209 mm in front of the fixation
       point: with the former fixed +-0.15 m depth range 34 % of it was out
       of range; its median was 0.037, seed 2's 0.035 before the search's
-      third parabola). The issue's 0.05 mm and 0.3 deg: every case.
+      third parabola). The targets' 0.05 mm and 0.3 deg: every case.
     - ML HS: plane 0.063, 0.105, 0.108, 0.066, 0.025 mm (was 0.41 on seed 1
       with the fixed range: the true root was out of range on a third of
       the board), sheet 0.09-0.27 mm (earlier seeds); normals <= 0.05 deg.
       A pixel's own root moves by ~0.1 mm under image errors of 1e-4
-      (interpolation, the renderer's pixel integration): the issue's
+      (interpolation, the renderer's pixel integration): the target's
       0.05 mm is not reached by ML.
     - Bayesian never worse than ML: every case.
     - No bias: signed medians, Bayesian plane -0.009, 0.010, 0.031,

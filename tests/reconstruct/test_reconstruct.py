@@ -157,7 +157,7 @@ def test_depth_range_from_the_visual_hull(tiny_dataset, calib, tmp_path):
     # Measured on tiny (median normal / depth error): plane 0.59 deg / 0.27 mm
     # (its 7 cm markers leave little white board), statue 2.7 / 1.63, sheet
     # 0.29 / 0.075 (with the discrete-label refinement of the first Bayesian
-    # stage: 1.9 / 6.5, 3.97 / 6.0, 1.6 / 1.4). Pixels: 6539, 3737, 7697. Issue 12
+    # stage: 1.9 / 6.5, 3.97 / 6.0, 1.6 / 1.4). Pixels: 6539, 3737, 7697. A later
     # audit: plane 0.65 / 0.31, statue 1.43 / 0.78, sheet 0.29 / 0.064; 6540, 3723, 7696.
     [("plane", 0.75, 0.4, 6000), ("statue", 3.3, 2.0, 3400), ("sheet", 0.4, 0.1, 7000)],
 )
@@ -262,7 +262,7 @@ def test_no_foreground_is_an_error(tiny_dataset, calib):
 
 
 def test_plane_accuracy_at_demo_resolution(plane_calibrated):
-    """Issue 4's targets on the demo plane (640x480, every nuisance, pipeline calibration).
+    """The accuracy targets on the demo plane (640x480, every nuisance, pipeline calibration).
 
     Measured: Bayesian HS with photometric calibration 0.034 mm median, 0.055 mm
     RMS, 0.24 deg, 110103 pixels (markers filled), with the spline at 1/120 of
@@ -303,11 +303,11 @@ def test_foreground_drops_dark_channels_and_does_not_wrap(tiny_dataset, calib):
     assert not fg[:, 39:51].any()  # dark columns plus one of dilation
     assert fg[:, 51:].sum() == (W - 51) * H - 4 and fg[:, 60:70].all()
     assert not fg[50, W - 2 :].any() and not fg[49, W - 1] and not fg[51, W - 1]
-    assert fg[50, 0] and fg[0, 5]  # np.roll's dilation wrapped these round (issue 12)
+    assert fg[50, 0] and fg[0, 5]  # np.roll's dilation once wrapped these round
 
 
 def test_options_min_component_zero_keeps_all_and_unknown_names_are_refused(tiny_dataset):
-    """Issue 12: min_component=0 was replaced by the default (``or`` for ``is None``).
+    """min_component=0 was once replaced by the default (``or`` for ``is None``).
     0 keeps every component; None is 0.2 % of the image (38 of 160 x 120 pixels); a
     misspelt option is a TypeError naming it, before any work."""
     assert min_component_px(0, (120, 160)) == 0

@@ -167,7 +167,7 @@ def test_animation_streams_frames_into_the_same_gif(tmp_path):
 
 
 def test_animation_frames_carry_their_labels(tmp_path):
-    """Issue 14: each frame says which variant and frame it shows. The label box is
+    """Each frame says which variant and frame it shows. The label box is
     drawn into the frame's corner (dark text on a lightened box), the rest of the
     frame untouched; measured on 240x320 grey frames: 6.4 % of the pixels change, all
     in the top 21 rows."""
@@ -329,7 +329,7 @@ def test_sigma_maps_figure_size_and_scale(tmp_path):
 
 
 def test_mu_maps_diverge_about_one_and_grey_the_uncalibrated_part(tmp_path):
-    """Issue 14: the mu maps on a diverging colour map centred at 1, not a rainbow.
+    """The mu maps on a diverging colour map centred at 1, not a rainbow.
     Maps ramping from 0.7 to 1.3 of their median across the width show red and blue
     ends and no green-dominant pixel (a rainbow's middle is green: with "turbo" this
     test counts 25,071 of them). Measured: 24,814 red, 36,633 blue, 0 green pixels."""

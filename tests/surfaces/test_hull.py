@@ -333,7 +333,7 @@ def test_threshold_silhouette_cleanup():
 
 
 def test_padded_field_is_meshed_in_place_to_the_same_mesh(ring, monkeypatch):
-    """Issue 13: the paper-scale hull peaked at 8 GB from copies of its 1.8 GB field
+    """The paper-scale hull peaked at 8 GB from copies of its 1.8 GB field
     (the block upsampling, then the float32 copy, finite mask, inf replacement and
     padding of marching cubes' input). The padded field is built without copies
     and meshed in place: same numbers, and far less memory than the old copies."""
@@ -374,7 +374,7 @@ def test_padded_field_is_meshed_in_place_to_the_same_mesh(ring, monkeypatch):
 
 
 def test_visual_hull_reports_its_stages_on_stderr(tiny_dataset, tmp_path, capsys):
-    """Issue 13: the rule's log showed nothing for the 45 s of a paper-scale hull (now
+    """The rule's log showed nothing for the 45 s of a paper-scale hull (now
     at most 6 s apart there: the marching cubes, one library call; the depth map and
     the writes took 7.1 s after one line, now two)."""
     info = visual_hull(

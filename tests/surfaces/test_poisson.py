@@ -104,7 +104,7 @@ def corrupt_chunk(path, name: str) -> None:
     "case", ["all_nan", "empty", "no_normal", "bad_normal_shape", "corrupt_chunk"]
 )
 def test_bad_depth_files_are_refused_by_name(tmp_path, case):
-    """A ValueError naming the file and what is wrong. ``corrupt_chunk`` (issue 12):
+    """A ValueError naming the file and what is wrong. ``corrupt_chunk``:
     a dataset whose bytes are damaged mid-file raised h5py's OSError ("Can't
     synchronously read data (filter returned failure during read)"), without the file."""
     path = tmp_path / f"{case}.h5"

@@ -49,7 +49,7 @@ def _residuals(root, scene, offset_m=0.0, rotate_deg=0.0, **kw):
 def test_hs_constraint_holds_at_ground_truth(clean_dataset, scene):
     """Eq. (5) with the true mu and p: median |w.n|/|w| < 1e-3 (noise, cross-talk off).
 
-    Measured (640x480): plane 8e-5, statue 1.4e-4, toy 6e-4, sheet 3e-5 (issue 12
+    Measured (640x480): plane 8e-5, statue 1.4e-4, toy 6e-4, sheet 3e-5 (a later
     audit: 2.1e-5, 1.4e-4, 5.5e-4, 3.6e-5; pixels 99075, 58845, 36940, 132275).
     """
     r, n = _residuals(clean_dataset, scene)
@@ -63,7 +63,7 @@ def test_hs_constraint_discriminates_normals_and_depth(clean_dataset, scene):
 
     Measured factors (640x480), 10 degrees: plane 1700, statue 860, sheet 4700;
     5 mm along the reference camera's ray (true normal kept): plane 140,
-    statue 290, sheet 900 (issue 12 audit: 6100, 860, 3400; 410, 290, 620).
+    statue 290, sheet 900 (a later audit: 6100, 860, 3400; 410, 290, 620).
     The base is the rendering's rounding floor (plane 8e-5 before, 2e-5 now),
     so we require half the smallest factor ever measured: 400 and 70.
     """
@@ -118,7 +118,7 @@ def test_every_marker_detected_in_demo_board_images(plane_calibrated):
     assert len(n_images) == 3 * PRESETS["demo"].n_poses
     err = np.concatenate(errors)
     # No global shift (a half-pixel convention error would show here): measured
-    # mean (0.011, -0.006) px before, 0.0022 px in the issue 12 audit (the change
+    # mean (0.011, -0.006) px before, 0.0022 px in a later audit (the change
     # not traced); bound 0.025, twice the worst. ArUco's sub-pixel corners sit
     # ~0.2 px inside the true convex corner (a detector bias; the rendered edges
     # are unbiased, see test_rendered_marker_edges_are_unbiased): median 0.29 px.
@@ -130,7 +130,7 @@ def test_rendered_marker_edges_are_unbiased(clean_dataset):
     """The 50 % crossing of each marker edge lies on its true projection.
 
     Measured on 640x480 with 2x2 supersampling: mean offset below 0.01 px
-    (0.0012 px in the issue 12 audit; bound 0.0025), spread 0.1 px (0.127).
+    (0.0012 px in a later audit; bound 0.0025), spread 0.1 px (0.127).
     """
     rig = load_rig(clean_dataset)
     board = rig.board

@@ -413,7 +413,7 @@ def test_hs_constraint_holds_at_ground_truth(tmp_path, seed):
     """Eq. (5) with the true mu: median |w.n|/|w| on the plane and the sheet.
 
     Noise and cross-talk off, 16 bit (``exact``). Measured (320x240): plane
-    5e-5, sheet 8e-5..1.4e-4 (issue 12 audit: at most 1.38e-4, pixels 16206 and
+    5e-5, sheet 8e-5..1.4e-4 (a later audit: at most 1.38e-4, pixels 16206 and
     up); at 640x480 plane 4e-5, sheet 5e-5 (seed 1). Bound 3e-4 (the paper-level
     1e-3 holds with room).
     """

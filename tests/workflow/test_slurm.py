@@ -1,4 +1,4 @@
-"""The workflow on a running SLURM (issue 13): every job a SLURM job, results identical.
+"""The workflow on a running SLURM: every job a SLURM job, results identical.
 
 Starts a single-node SLURM with ``scripts/slurm-local.sh`` (munged, MariaDB,
 slurmdbd, slurmctld, slurmd), runs the tiny preset's statue (variants vh and

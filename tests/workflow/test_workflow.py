@@ -257,7 +257,7 @@ def test_first_run_made_every_output(run):
 
 
 def test_every_job_reads_only_its_declared_inputs(run):
-    """Issue 12 (tests/read_audit.py): every job of the first run read, under the
+    """The read audit (tests/read_audit.py): every job of the first run read, under the
     dataset and the run's folder, only its inputs, outputs and log."""
     n_jobs, problems = run.audit
     # 69 but `all`: 8 before the frames (validation, 6 calibrations, the recorded
@@ -384,7 +384,7 @@ def test_failed_stage_leaves_no_partial_output_and_rerun_resumes(run, tmp_path):
     assert not under(changed(before, failed), downstream)
     assert all(failed[p] == before[p] for p in under(before, downstream))
     # Nothing else: bayes_full's copy job (--same-as) refuses the truncated file at its
-    # input check (issue 12: before, h5py.is_hdf5 passed it and the job copied it), so
+    # input check (before, h5py.is_hdf5 passed it and the job copied it), so
     # its old output is at most removed (a failed job's), never rewritten.
     written = changed(before, failed) - {failed_mesh, depth.relative_to(work).as_posix()}
     assert written <= {copied_depth[1]}

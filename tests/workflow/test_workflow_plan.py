@@ -1,4 +1,4 @@
-"""colourhs.workflow.plan: what the Snakemake rules read, make and pass on (issue 12).
+"""colourhs.workflow.plan: what the Snakemake rules read, make and pass on.
 
 On the capture tests' small dataset (tests/capture/capture_helpers.py; scene toy: one frame,
 masks, ground truth, the chromatic object slinky; scene wave: two frames, nothing
@@ -173,7 +173,7 @@ def test_variants_targets_and_options(data):
         "results/d/calib/photometric.png",
         "results/d/calib/chromaticity/slinky.png",
     ]
-    # The report's calibration diagnostics and 3D views read these (issue 14).
+    # The report's calibration diagnostics and 3D views read these.
     assert plan.report_inputs("d")["calib"][:3] == [
         "results/d/calib/marker_poses.csv",
         "results/d/calib/photometric.h5",
@@ -236,7 +236,7 @@ def test_captures_are_validated_when_their_summary_is_stale(data, tmp_path, monk
 
 
 def test_rules_run_the_python_that_runs_snakemake(data, tmp_path, monkeypatch):
-    """Issue 12: common.smk's shell prefix exports the interpreter running Snakemake,
+    """common.smk's shell prefix exports the interpreter running Snakemake,
     quoted: a path with a space and a quote survives (no conda environment: README;
     test_cli.py's lint test checks no rule declares one). Loading the workflow with
     Snakemake's public API (tests/read_audit.py) sets the prefix snakemake.shell
@@ -260,7 +260,7 @@ def test_rules_run_the_python_that_runs_snakemake(data, tmp_path, monkeypatch):
 
 
 def test_config_yaml_states_the_package_defaults():
-    """Issue 12 (one value for each default): what config.yaml writes out for the
+    """One value for each default: what config.yaml writes out for the
     calibration and surfaces is the package's own default, and the command line's
     option defaults are the same (the mesh options repeat frame_mesh's: the command
     line must not import open3d). Measured: 1.5 s (importing colourhs.surfaces.poisson)."""

@@ -32,7 +32,8 @@ rule crosstalk:
     benchmark:
         "benchmarks/snakemake/crosstalk/{name}.tsv"
     threads: 1
-    # Measured at 1280x960 (paper preset, benchmarks/bench_paper.py): 2.07 GB, 57 s.
+    # Resources cover one job at the paper preset's 1280x960 (benchmarks/bench_paper.py
+    # measures every rule's memory and time).
     resources:
         mem_mb=2500,
         runtime=5,
@@ -52,7 +53,8 @@ rule noise_model:
     benchmark:
         "benchmarks/snakemake/noise_model/{name}.tsv"
     threads: 1
-    # Measured at 1280x960 (paper preset, benchmarks/bench_paper.py): 0.66 GB, 14-16 s.
+    # Resources cover one job at the paper preset's 1280x960 (benchmarks/bench_paper.py
+    # measures every rule's memory and time).
     resources:
         mem_mb=1000,
         runtime=5,
@@ -77,7 +79,8 @@ rule photometric_maps:
     benchmark:
         "benchmarks/snakemake/photometric_maps/{name}.tsv"
     threads: 1
-    # Measured at 1280x960 (paper preset, benchmarks/bench_paper.py): 1.39 GB, 16-21 s.
+    # Resources cover one job at the paper preset's 1280x960 (benchmarks/bench_paper.py
+    # measures every rule's memory and time).
     resources:
         mem_mb=2000,
         runtime=20,

@@ -24,7 +24,8 @@ rule evaluate_frame:
     wildcard_constraints:
         frame="[0-9]{6}",
     threads: 1
-    # Measured at 1280x960 (paper preset, benchmarks/bench_paper.py): 0.60-0.81 GB, 5-8 s.
+    # Resources cover one job at the paper preset's 1280x960 (benchmarks/bench_paper.py
+    # measures every rule's memory and time).
     resources:
         mem_mb=1500,
         runtime=10,

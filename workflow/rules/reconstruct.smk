@@ -22,7 +22,8 @@ rule reconstruct_frame:
     # One thread: two frames at once keep both cores busy (the solver and the
     # refinement are serial); raise with --set-threads reconstruct_frame=N.
     threads: 1
-    # Measured at 1280x960 (paper preset, sheet frame 99, 2 threads): bayes 2.47 GB, 43-49 s; ml 2.01 GB, 31-32 s.
+    # Resources cover one job at the paper preset's 1280x960 (benchmarks/bench_paper.py
+    # measures every rule's memory and time).
     resources:
         mem_mb=3000,
         runtime=10,

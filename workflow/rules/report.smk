@@ -37,8 +37,8 @@ rule scene_figures:
     benchmark:
         "benchmarks/snakemake/scene_figures/{name}/{scene}.tsv"
     threads: 1
-    # Measured at 1280x960 (paper preset, benchmarks/bench_paper.py): 5 variants and the
-    # animation of 20 frames 1.09 GB, 34 s; of the 201-frame sheet 1.31 GB, 3.0 min.
+    # Resources cover one job at the paper preset's 1280x960 (benchmarks/bench_paper.py
+    # measures every rule's memory and time).
     resources:
         mem_mb=1500,
         runtime=10,
@@ -60,7 +60,8 @@ rule report:
     log:
         "logs/report/{name}/index.log",
     threads: 1
-    # Measured at 1280x960 (paper preset, benchmarks/bench_paper.py): 0.67 GB, 16 s.
+    # Resources cover one job at the paper preset's 1280x960 (benchmarks/bench_paper.py
+    # measures every rule's memory and time).
     resources:
         mem_mb=1000,
         runtime=5,

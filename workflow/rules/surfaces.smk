@@ -18,7 +18,8 @@ rule visual_hull:
     # Before the reconstructions (priority 1) that read it.
     priority: 2
     threads: 1
-    # Measured at 1280x960 (paper preset, benchmarks/bench_paper.py): 2.39 GB, 40 s.
+    # Resources cover one job at the paper preset's 1280x960 (benchmarks/bench_paper.py
+    # measures every rule's memory and time).
     resources:
         mem_mb=3000,
         runtime=10,
@@ -46,7 +47,8 @@ rule frame_mesh:
     wildcard_constraints:
         frame="[0-9]{6}",
     threads: 1
-    # Measured at 1280x960 (paper preset, benchmarks/bench_paper.py): 0.45-0.71 GB, 6-11 s.
+    # Resources cover one job at the paper preset's 1280x960 (benchmarks/bench_paper.py
+    # measures every rule's memory and time).
     resources:
         mem_mb=1000,
         runtime=10,

@@ -8,7 +8,7 @@ entries at a pixel and its four neighbours,
 ``B`` the cubic B-spline basis (each pixel a 4 x 4 patch of control points,
 :class:`~colourhs.reconstruct.bayes.spline.SplineSurface`). Three general sparse
 products (``J^T J``, ``. B``, ``B^T .``) with their symbolic passes and
-transposes took about half of each step (measured, 1280 x 960 sheet).
+transposes would be a large share of each step.
 
 Here the pattern of ``A`` is found once per spline (it depends only on the
 pixels' links and patches, not on the values), and each step fills its
@@ -40,10 +40,9 @@ def _fill(vals, rows, nbr, bcols, bvals, gi, gj, order, starts, row_of, pos, out
 
     ``rows`` is any tuple of length P (the rows per pixel): a tuple's length
     is part of its numba type, so P is a compile-time constant and the
-    loops over the rows unroll (one compiled kernel per P, cached). Measured
-    on the demo sheet's fine spline (126k pixels, 3 rows): 110 -> 63 ms a
-    call on one thread, the same values to the bit, against P passed as an
-    integer. ``vals`` (M P, 5): row ``row_of[p] P + k``'s entries at pixel p and
+    loops over the rows unroll (one compiled kernel per P, cached): faster
+    than P passed as an integer, with the same values to the bit. ``vals``
+    (M P, 5): row ``row_of[p] P + k``'s entries at pixel p and
     its east, south, west and north neighbours (``nbr`` (4, n), -1 = none); ``bcols``,
     ``bvals`` (n, 16): each pixel's control points, row by row of its 4 x 4
     patch from the top left, and basis weights; ``gi``, ``gj`` (m,): each

@@ -107,8 +107,8 @@ def refine_depth(
     solver : solves the normal equations; pass one :class:`NearbySolver`
         to several calls (the passes of :func:`initial_surface`) so that
         each solve starts from the factors of an earlier one.
-    say : called with a line of text before each solve (progress: 1-5 s
-        each at 1280 x 960), if given.
+    say : called with a line of text before each solve (progress: a solve
+        takes seconds at high resolution), if given.
 
     Returns
     -------
@@ -125,7 +125,7 @@ def refine_depth(
     p, q, target = p[keep], q[keep], target[keep]
     r = len(p)
     # Row i: +1 at q, -1 at p, columns in increasing order (built as CSR
-    # directly: the conversion from COO took 0.36 s of each pass at 1280 x 960).
+    # directly: a conversion from COO would be a large share of each pass).
     iq, ip = idx[q], idx[p]
     sign = np.where(iq < ip, 1.0, -1.0)  # the first column's value
     A = sp.csr_matrix(
@@ -184,8 +184,8 @@ def initial_surface(
     tangent-plane links do not join to a surface of ``min_px`` pixels are
     left out. Its depth is still the labelling's: it only starts
     :func:`_consistent_surface`. ``say``, if given, is called with a line of
-    text per pass and per solve (progress: a pass took 5-8 s at 1280 x 960 on one
-    thread).
+    text per pass and per solve (progress: a pass takes seconds at high
+    resolution).
     """
     H, W = shape
     ok &= large_components(ok.reshape(H, W), min_px).ravel()

@@ -63,11 +63,9 @@ __all__ = ["labelling_energy", "sgm_depth_normal"]
 # fastmath without the "nnan"/"ninf" flags: the prior tests j_hat for NaN/inf,
 # which those flags would allow LLVM to fold away; and without "reassoc" and
 # "contract": with them a kernel compiled afresh and the same kernel loaded
-# from numba's cache summed S in different orders (S differed by ~1e-7
-# relative; a tiny statue frame's refined depth then by up to 0.22 mm), so
-# a fresh checkout's first run disagreed with every later one. Without them
-# the two agree to the bit, at the same speed (SGM 160x240x192: 2.5-2.7 s CPU
-# against 2.3-2.8 s, a loaded machine).
+# from numba's cache may sum S in different orders, enough to move a refined
+# depth, so a fresh checkout's first run would disagree with every later one.
+# Without them the two agree to the bit, at the same speed.
 _FASTMATH = {"nsz", "arcp", "afn"}
 _DEN_EPS = 1e-12  # |n . r_q| at or below this: prediction uninformative
 _JH_MAX = 1e6  # |j_hat| beyond this: treated as uninformative (V = tau either way)
@@ -463,7 +461,7 @@ def sgm_depth_normal(
     say : callable, optional
         Called with a line before each of the three sweeps and before each
         later band of ``SWEEP_BANDS`` of a vertical sweep's rows (progress: a
-        vertical sweep took 6 s at 1280 x 960 on one thread).
+        vertical sweep takes seconds at high resolution).
 
     Returns
     -------
@@ -496,7 +494,7 @@ def sgm_depth_normal(
     for down, text in ((True, "top to bottom"), (False, "bottom to top")):
         if say is not None:
             say(f"MRF: paths along the {columns}, {text}")
-        for b in range(SWEEP_BANDS):  # a line per band: 6 s a sweep at 1280x960, 1 thread
+        for b in range(SWEEP_BANDS):  # a line per band: a sweep is long at high resolution
             s0, s1 = b * H // SWEEP_BANDS, (b + 1) * H // SWEEP_BANDS
             if b and say is not None:
                 say(f"MRF: {text}, {s0} of {H} rows")

@@ -41,22 +41,19 @@ CONVERGED = 1e-6  # predicted decrease of E (chi2 units) below which a surface h
   data's own noise level (:meth:`_Problem.prior`), so it neither depends on
   the resolution nor on how close the data are to the noise model; 100 /m
   (a 1 cm radius) is far sharper than the objects' curvature, so the prior
-  only decides where there are no data (measured: 10x weaker changed no
-  statue by more than 0.08 mm).
+  only decides where there are no data.
 - ``LM_*``: dimensionless (relative to the Gauss-Newton diagonal).
 - ``CONVERGED``: E is in units of the noise (chi2), so 1e-6 is a millionth
   of one pixel's noise-level residual on any rig: nothing any estimate
-  could notice. Without it a converged surface (measured: a one-pixel
-  surface, E ~ 1e-27) raised its damping ``LM_TRIES`` times per step, one
-  solve each: 42 of 104 solves of a 640x480 board.
+  could notice. Without it a converged surface (a one-pixel surface, say,
+  whose E is at rounding level) would raise its damping ``LM_TRIES`` times
+  per step, one solve each.
 - ``COARSE``: a ratio of spacings, so free of units. The fine spline's
   first LM steps cannot pull in a part of a surface whose start is several
   millimetres off (its residuals are far beyond the robust scale, so it has
   no weight, and the fine spline lets it keep its own shape); on the coarse
   spline its control points are shared with the rest of the surface, which
-  carries it. Measured on an exact random rig's board (a 30-pixel strip of
-  it 5-18 mm off at the start): fine only 0.24 mm median, p95 6.5 mm;
-  coarse 8x first 0.035 mm, p95 0.05 mm; 16x then 4x 0.10 mm.
+  carries it.
 """
 
 
@@ -140,8 +137,8 @@ class _Problem:
         :func:`hs_residuals`): the prior is scaled by the same level, so that
         its weight against the data does not depend on how far the data are
         from the noise model (on exact data the predicted noise is only the
-        quantisation, and an unscaled prior left the holes' control points to
-        rounding errors).
+        quantisation, and an unscaled prior would leave the holes' control
+        points to rounding errors).
         """
         level = scale / (self.robust**2 * self.sides.pairs)
         return self.Dw * np.sqrt(level)
@@ -152,11 +149,11 @@ class _Problem:
 
         A pixel whose samples are unusable at a depth (off an image, outside a
         silhouette, in a shadow) carries no information on that depth, so it
-        must neither cost (at rho's ceiling, measured: it pulled a statue
-        0.5 mm towards the depth where more of its rim stayed inside the other
-        views' silhouettes) nor pay (nothing, or the mean of the others:
-        it pulled a sheet 1.6 mm the other way): energies compare over the
-        pixels usable in every state compared.
+        must neither cost (at rho's ceiling: it would pull a surface towards
+        the depth where more of its rim stays inside the other views'
+        silhouettes) nor pay (nothing, or the mean of the others: it would
+        pull the other way): energies compare over the pixels usable in every
+        state compared.
         """
         common = np.all([np.isfinite(rho) for rho, _ in states], axis=0)
         surf = self.graph.surface[common]
@@ -176,11 +173,11 @@ class _Problem:
         the depth, and the damping keeps each step where the linear model holds.
         ``scale`` fixes the robust scale (default: from the residuals at each
         step). ``say(text)``, if given, is called before each step (progress:
-        1-2 s a step at 1280 x 960). Returns the control points, the total energy after each step
-        and :meth:`state` at the returned control points at the last step's
-        scale (the same numbers a new :meth:`state` call gives: a pixel's
-        energy depends on its own surface's control points alone; None
-        without steps).
+        a step takes seconds at high resolution). Returns the control points,
+        the total energy after each step and :meth:`state` at the returned
+        control points at the last step's scale (the same numbers a new
+        :meth:`state` call gives: a pixel's energy depends on its own
+        surface's control points alone; None without steps).
         """
         lam = np.full(self.n, float(lam))
         history, s0, rows = [], None, None
@@ -278,9 +275,8 @@ def explained_surfaces(chi2, usable, surface, scale) -> np.ndarray:
     Beyond the paper. Where it is not, most of the surface's pixels have
     less than a quarter of their weight (rho'(chi2) = 1 / (1 + chi2 /
     scale)^2): the rows of eq. (5) do not agree with any shape near its
-    depth (measured on exact data: the white cells inside a marker, their
-    footprints mixed with its black, median chi2 10^3-10^7 times the board's
-    at their best depth, and 25-200 mm off). Such a surface is left out
+    depth (the white cells inside a marker, say, whose footprints mix with
+    its black: no depth explains them). Such a surface is left out
     (its pixels may still be filled as a hole of a surface around it)
     rather than reported at a depth the data do not support.
     """

@@ -21,20 +21,8 @@ def default_spacing(width: int) -> float:
     detail of an object at any resolution, and more pixels per control point
     (less noise per mode) as the resolution grows; 4 px is the floor under
     which a control point is no longer constrained by the pixels around it
-    (at 480 px wide and less the floor applies). Measured on randomised rigs
-    (``--preset random``, 640x480, so 8 / 5.3 / 4 px), statue depth median
-    |error| in mm for 1/80, 1/120, 1/160 of the width:
-
-    - all nuisances but cross-talk, true calibration, seeds 0-3: 0.61 / 0.21
-      / 0.35, 1.78 / 0.27 / 0.29, 0.28 / 0.09 / 0.24, 0.26 / 0.04 / 0.08
-      (normals 0.53-1.14 deg at 1/80, 0.29-0.54 at 1/120); six
-      Levenberg-Marquardt steps instead of three changed none of them by more
-      than 0.09 mm;
-    - exact data, seeds 1 and 3: 0.60 / 0.031 / 0.077 and 0.048 / 0.028 / 0.030.
-
-    Planes and sheets, and every scene with the pipeline's own calibration:
-    ``benchmarks/generalisation.py`` (the commit that set 1/120 gives its
-    before and after).
+    (at 480 px wide and less the floor applies). A coarser grid cannot hold
+    a statue's detail, a finer one gives the noise more modes to bend.
     """
     return max(4.0, width / 120.0)
 

@@ -22,11 +22,9 @@ noise-weighted form):
   fit: this is what pins the depth. It must be the normal *at p*, where the
   rows are sampled: each triangle's normal is the surface's normal a third
   of a pixel away, about footprint / (3 r) off on a surface of radius r,
-  and comparing the rows with those (as this module did until 2026-12-03)
-  left E a floor that falls as the surface flattens; E then preferred
-  flatter surfaces nearer the camera (measured with the true calibration
-  on exact data: a random rig's statue 1.60 mm off, a white ellipsoid 6.3
-  mm; 0.23 and 0.21 mm with the pixel's normal).
+  and comparing the rows with those would leave E a floor that falls as
+  the surface flattens, so that E would prefer flatter surfaces nearer the
+  camera.
 - ``var_k(N) = var(s_a) (v_a . N)^2 + var(s_b) (v_b . N)^2`` is the predicted
   variance of ``w_k . N`` from the sensor noise (:mod:`colourhs.calibration.noise`) and the
   interpolation error (a Sampson-normalised residual, so noise along the
@@ -96,8 +94,7 @@ class SurfaceGraph:
         # West and north are the inverse links of east and south, so that every
         # link goes both ways: judged from each end with its own footprint, a
         # pair at the threshold could be linked one way only, and a one-way
-        # link joins two surfaces (measured: one link on the demo's toy,
-        # where the spline's two surfaces then shared a pixel's rows).
+        # link joins two surfaces (whose splines would then share a pixel's rows).
         east, south = neighbour(0, 1), neighbour(1, 0)
         west, north = np.full(n, -1), np.full(n, -1)
         for fwd, back in ((east, west), (south, north)):
@@ -315,10 +312,10 @@ def hs_residuals(
         of several depth maps can be compared at one scale.
     active : (n,) bool, the pixels whose rows are evaluated (default all):
         J, r and ``jacobian_values`` hold their rows only, in pixel order
-        (M = P times their number; the depth search's subsample, where the
-        others' rows were zeros at 1280x960: three quarters of every array);
-        the others are unusable (their depths still give the active pixels'
-        normals).
+        (M = P times their number; the depth search's subsample, whose
+        other pixels' rows would otherwise be zeros filling most of every
+        array); the others are unusable (their depths still give the active
+        pixels' normals).
 
     Returns
     -------
@@ -365,8 +362,7 @@ def hs_residuals(
         )
     res = np.empty(len(idx) * P)
     # 32-bit indices: scipy keeps them as they are, where 64-bit ones are
-    # checked and copied down to 32 bits on every call (measured at 3 M rows:
-    # 0.37-1.0 s per call, against 1 ms).
+    # checked and copied down to 32 bits on every call.
     index = np.int32 if 5 * len(res) < np.iinfo(np.int32).max and n < 2**31 else np.int64
     cols = np.empty((len(res), 5), index)
     vals = np.empty((len(res), 5))

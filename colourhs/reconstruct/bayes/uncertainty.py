@@ -91,10 +91,9 @@ def rim_valley_pull(
     surface, differently in the two views of a pair: a model error that
     does not fall with the sensor noise, so the robust weights drop such
     rows only on nearly exact data, and under noise they move the depth
-    mode (a bias, not scatter: on exact images with the noise model's
-    weights, the rows clear of every edge alone bring a statue's and a
-    sheet's depth back to the truth). E's Gauss-Newton model does not see
-    that move (it does not follow the valley), so it is measured on the
+    mode (a bias, not scatter: it stays on exact images, where the rows
+    clear of every edge alone give the true depth). E's Gauss-Newton model
+    does not see that move (it does not follow the valley), so it is measured on the
     depth search's own energies: ``tried`` (delta -> per-pixel rho, prior
     energy, ...) at the trial depths, ``clear`` (the surface's pixels) those
     whose rows are clear of every edge. Quadratics through E over every

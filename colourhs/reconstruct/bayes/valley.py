@@ -31,36 +31,23 @@ SEARCH_CELL_PX = 5.0  # the depth search keeps at least this many pixels across 
 
 - ``SEARCH_STEP``: a relative depth, so the same at any working distance;
   the labelling's error on smooth surfaces is a few labels to a few per cent
-  of the depth (measured 9 mm at 0.8 m on a noisy sheet; 28 mm at 0.6 m on an
-  external capture), so ``SEARCH_STEPS`` steps of 0.5 % (6 %) cover it.
-- ``SEARCH_FITS``: with 1 re-fitting step per depth the valley's energy was
-  noisy enough to move a sheet by 1 mm; 3 converge the shape (measured on 4
-  random rigs, sheet 0.46 mm worst against 1.6). 2 fits and one parabola
-  measured as good under noise (4 random rigs x plane, sheet, statue, toy,
-  every nuisance on, pipeline calibration: sheet 0.23 / 0.08 / 0.23 / 0.03
-  mm against 0.33 / 0.34 / 0.29 / 0.03, the rest within 0.07 mm, 21 % less
-  time) but not on exact data, where E's minimum is sharp: plane 0.55 and
-  0.083 mm (seeds 1, 2 of tests/reconstruct/test_exact.py) against 0.037 and 0.035;
-  with 3 fits but one parabola 0.46 and 0.062, with 2 fits and both
-  parabolas 0.15 and 0.057. Exact data decide: 3 fits, two parabolas.
+  of the depth, so ``SEARCH_STEPS`` steps of 0.5 % (6 %) cover it.
+- ``SEARCH_FITS``: with fewer re-fitting steps per depth the shape has not
+  converged, and the valley's energy is then noisy enough to move a surface's
+  depth, most of all on exact data, where E's minimum is sharp.
 - ``SEARCH_PARABOLAS``: half-widths (in steps) of the parabolas fitted
-  through E around the best depth, each through the previous vertex (see
-  ``SEARCH_FITS`` for the second one's measured worth). On exact data E is
-  sharp and, beyond a few tenths of a millimetre, flattened by the robust
-  function, so a parabola a quarter step (1 mm at 0.8 m) wide put its
-  vertex up to 0.08 mm off the minimum (a uniform offset; E at the result
+  through E around the best depth, each through the previous vertex. On
+  exact data E is sharp and, beyond a few tenths of a millimetre, flattened
+  by the robust function, so a parabola a quarter step (1 mm at 0.8 m) wide
+  can put its vertex off the minimum (a uniform offset; E at the result
   above E at the truth); the third, a twentieth of a step wide, is within
-  the parabola's own range. Measured on tests/reconstruct/test_exact.py's seeds 1, 2,
-  4 (plane) and 1 (sheet) with the 25 % working radius: 0.081, 0.036,
-  0.012, 0.020 mm with two parabolas, 0.008, 0.011, 0.013, 0.016 with
-  three; under noise (random rigs 0, 1, 5, every nuisance, pipeline
-  calibration; plane, sheet, statue, toy) within 0.07 mm either way.
+  the parabola's own range.
 - ``SEARCH_CELL_PX``: in pixels of the spline's own spacing, which is a
   fixed fraction of the image width, so the subsampling
   (:func:`search_stride`) is the same on any rig at a given resolution:
   none below 1200 pixels wide (spacing < 10 px: the demo and random presets),
   every 2nd pixel in rows and columns from 1200 to 1799 (the paper preset's
-  1280: 28 of a cell's 114 pixels, 85 rows, kept).
+  1280: a quarter of each cell's pixels kept).
 """
 
 
@@ -90,15 +77,15 @@ def depth_search(
     Beyond the paper. Under noise E has a long, nearly flat valley: at each
     depth (a scale of the surface about the camera centre) some shape agrees
     with the HS normals evaluated there, and Gauss-Newton creeps along that
-    valley (measured: 8 iterations moved a sheet 1 of its 9 mm). Along the
+    valley (each iteration moves the depth a small part of its error). Along the
     valley E still has a clear minimum, at the true depth (there alone the
     rows are rank 2 and the normals integrable). So every surface walks its
     own scale factor in relative steps of ``step`` (re-fitting its shape at
     each depth with ``SEARCH_FITS`` LM steps, the robust scale fixed so that
     energies compare), downhill until E rises, at most ``max_steps`` steps;
     parabolas through the best depth and its neighbours ``SEARCH_PARABOLAS``
-    steps either side (a step, then a quarter step about the first vertex)
-    give the minimum.
+    steps either side (a step, then narrower ones, each about the previous
+    vertex) give the minimum.
 
     Returns the control points at each surface's best depth (shape re-fitted),
     the factors (n_surfaces,) applied and the relative 1-sigma uncertainty
