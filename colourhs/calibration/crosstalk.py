@@ -67,10 +67,10 @@ Two estimates, from data the capture format has:
 Unmixing is ``J = M(u)^-1 I`` per pixel (:func:`unmix`).
 
 The pieces: :mod:`colourhs.calibration.crosstalk_filter` (estimate 1: the constant matrix,
-the :class:`MixingField` and its fit), :mod:`colourhs.calibration.crosstalk_led` (estimate
-2: the LED factor) on the rows of :mod:`colourhs.calibration.crosstalk_led_rows`; this
-module unmixes, writes and reads the calibration file, and re-exports the
-public names of the others.
+the :class:`MixingField` and its fit) and :mod:`colourhs.calibration.crosstalk_led`
+(estimate 2: the LED factor, the rows of its fit and the fit); this module
+unmixes, writes and reads the calibration file, and re-exports the public
+names of the others.
 """
 
 from __future__ import annotations
@@ -88,13 +88,14 @@ from colourhs.calibration.crosstalk_filter import (
 )
 from colourhs.calibration.crosstalk_led import (
     LED_DEFAULTS,
+    OFF_DIAGONAL,
+    POSE_STEP,
     BoardShot,
     led_factor,
     led_factor_from_dataset,
     read_board_shots,
     shrink_towards_filter,
 )
-from colourhs.calibration.crosstalk_led_rows import OFF_DIAGONAL, POSE_STEP
 from colourhs.capture import COLOURS, open_dataset, read_image
 from colourhs.common.files import write_json
 from colourhs.common.progress import bar
@@ -176,9 +177,10 @@ def calibrate_crosstalk(
 
     Writes (atomically) a JSON file when ``out_json`` is given and returns the
     same dict: ``{"cameras": {name: {"M": 3x3, "spread": 3x3, ...}}, "method":
-    ...}``. "M" is always a constant matrix (today's, or the median over the
-    image of the final field), so readers of the first format still work; a
-    spatial calibration adds "filter_M" (today's matrix), "field"
+    ...}``. "M" is always a constant matrix (:func:`crosstalk_matrix`'s, or the
+    median over the image of the final field), so a reader that needs only a
+    constant matrix works on every such file; a spatial calibration adds
+    "filter_M" (:func:`crosstalk_matrix`'s), "field"
     (:meth:`MixingField.to_json`), "field_rms" and "field_quantised"; with the
     board "field" becomes the LED mixing, "filter_field" keeps the filters',
     and "led_factor" (F), "led_factor_sd" and "led_mixing_sd" (its standard
