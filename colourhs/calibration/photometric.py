@@ -32,12 +32,12 @@ implements:
    it scales a row of W). What fixes it is the other pair of each camera:
    the two maps of camera a are ``rho_a / sigma_{a,c1}`` and
    ``rho_a / sigma_{a,c2}``, so their log difference is the camera's colour
-   shading ``log(sigma_{a,c2} / sigma_{a,c1})``. The paper (and this module
-   before) took it as constant. Real lenses and sensors shade each colour
-   channel differently (per-channel vignetting with its own centre: a few
-   per cent, smooth), so here the coupling lets a polynomial of total degree
-   ``shading_order`` (default 2) in the camera's undistorted normalised image
-   coordinates be free: the penalty is on the gradient of
+   shading ``log(sigma_{a,c2} / sigma_{a,c1})``. The paper takes it as
+   constant. Real lenses and sensors shade each colour channel differently
+   (per-channel vignetting with its own centre: a few per cent, smooth), so
+   here the coupling lets a polynomial of total degree ``shading_order``
+   (default 2) in the camera's undistorted normalised image coordinates be
+   free: the penalty is on the gradient of
    ``lambda_{a,c1} - lambda_{a,c2} - P beta_a`` (P the monomials, beta_a the
    camera's shading coefficients), beyond the paper.
 4. **What the data cannot tell, fixed by a prior.** Shading and the
@@ -45,10 +45,10 @@ implements:
    epipolar angle looks, in each camera, like a linear (quadratic) shading.
    Three pairs bring three such factors per order against six linear and nine
    quadratic shading coefficients, so the data fix most of the shading but
-   not all; a free polynomial alone would leave the maps tilted at random
-   (measured: 4-13 % RMS error). A weak ridge (``shading_prior``) on beta
-   takes, among the explanations the data allow, the one with the smallest
-   colour shading; it is too weak to bias what the data do determine.
+   not all; a free polynomial alone would leave the maps tilted at random.
+   A weak ridge (``shading_prior``) on beta takes, among the explanations the
+   data allow, the one with the smallest colour shading; it is too weak to
+   bias what the data do determine.
 5. **Regulariser.** A weak curvature (second-difference) penalty on every
    map (the paper uses first differences; beyond the paper): where data end
    it extends a map linearly instead of flat, and it leaves linear terms,
@@ -108,6 +108,7 @@ __all__ = [
     "DEFAULTS",
     "Grid",
     "KappaSamples",
+    "POSE_COLUMNS",
     "PoseView",
     "calibrate",
     "coverage",
@@ -122,6 +123,7 @@ __all__ = [
     "photometric_maps",
     "pixel_footprint_m",
     "read_mu_maps",
+    "read_poses_table",
     "read_ratio_sigma",
     "resolve_params",
     "shading_basis",
@@ -166,10 +168,9 @@ DEFAULTS = {
 - ``grid_spacing_px`` None: the pixels that ``grid_angle_deg`` of field
   angle spans (mean focal length x angle), at least ``min_grid_px``.
 - ``grid_angle_deg`` 1.0: mu = rho / sigma is a function of the ray's
-  direction (eq. 2): LED profiles and vignetting change over degrees
-  (the random presets' LED ripple has periods of 4-15 deg); nodes 1 deg
-  apart keep the bilinear surface within ~0.1 % RMS of such maps (measured
-  on the random rigs), whatever the focal length and image size.
+  direction (eq. 2): LED profiles and vignetting change over degrees, so
+  nodes 1 deg apart keep the bilinear surface close to such maps, whatever
+  the focal length and image size.
 - ``min_grid_px`` 8: a cell holds at least 64 pixels of each pose, so a node
   averages the pixel noise of hundreds of samples even on small images.
 - ``step_px`` None: ``grid_spacing_px / samples_per_cell`` rounded, at
@@ -199,8 +200,7 @@ DEFAULTS = {
   the edge of the data, where it continues a map linearly.
 - ``coupling`` 0.1: weight of the shading-corrected difference of one
   camera's two maps; only what neither data nor the shading polynomial
-  explain competes with it, so any value well above ``smoothness`` works
-  (measured flat from 0.1 to 100).
+  explain competes with it, so any value well above ``smoothness`` works.
 - ``shading_order`` 2: colour shading is per-channel vignetting, radial
   about slightly different centres: to second order a constant, a linear
   term (the centre shift) and a quadratic one (the strength difference);
@@ -208,11 +208,36 @@ DEFAULTS = {
 - ``shading_prior`` 0.01: a shading coefficient beta (at the image corner)
   costs like a misfit of 0.01 beta on every eq. (6) row: 100 times below a
   per-cent noise, so it cannot bias what the data determine, while it picks
-  the smallest shading where they cannot (measured flat from 0.003 to 0.03).
+  the smallest shading where they cannot.
 - ``min_support`` 0.05: a node needs 5 % of the median node's sample weight
   to count as calibrated (a relative count, so the same on any number of
   samples); below, a node is decided by the regulariser alone.
 """
+
+
+#: The columns of the marker poses table (:func:`colourhs.calibration.markers.marker_poses`)
+#: that the board poses are read from.
+POSE_COLUMNS = ("pose", *(f"R{i}{j}" for i in range(3) for j in range(3)), "t_x", "t_y", "t_z")
+
+
+def read_poses_table(poses_csv):
+    """The marker poses table (a DataFrame with :data:`POSE_COLUMNS`); ValueError naming
+    the file when it is not a CSV table or lacks a column (not what ``colourhs markers``
+    writes)."""
+    import pandas as pd  # here: a reconstruction job need not import it
+
+    try:
+        table = pd.read_csv(poses_csv)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as e:
+        reason = " ".join(str(e).split()) or type(e).__name__
+        raise ValueError(f"{poses_csv}: not a CSV table ({reason})") from None
+    missing = [c for c in POSE_COLUMNS if c not in table.columns]
+    if missing:
+        raise ValueError(
+            f"{poses_csv}: not a board poses table (no column {', '.join(missing[:4])}"
+            f"{', ...' if len(missing) > 4 else ''}; `colourhs markers` writes one)"
+        )
+    return table
 
 
 def load_views(
@@ -221,9 +246,7 @@ def load_views(
     """Read every usable board pose (from the marker poses table) and its images
     (``progress``: a bar over the poses on stderr)."""
     ds = open_dataset(dataset_dir, check_images=False, scenes=())
-    import pandas as pd  # here: a reconstruction job need not import it (0.1 s)
-
-    table = pd.read_csv(poses_csv)
+    table = read_poses_table(poses_csv)
     mixing = load_crosstalk(crosstalk_json) if crosstalk_json else {}
     views = []
     label = "photometric: reading" + (" and unmixing" if mixing else "") + " the board poses"

@@ -41,6 +41,7 @@ from colourhs.capture.base import (
     LIT_THRESHOLD,
     MIN_SIGNAL,
     CaptureFormatError,
+    CaptureFormatProblems,
     UnknownNameError,
 )
 
@@ -77,6 +78,7 @@ __all__ = [
     "Board",
     "Camera",
     "CaptureFormatError",
+    "CaptureFormatProblems",
     "Dataset",
     "ImageSpec",
     "ReciprocalPair",

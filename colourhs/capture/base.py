@@ -68,6 +68,22 @@ class CaptureFormatError(ValueError):
         return (type(self), (self.path, self.problem))
 
 
+class CaptureFormatProblems(CaptureFormatError):
+    """Several files of a dataset break the capture format: every one of them.
+
+    A :class:`CaptureFormatError` naming the dataset folder, whose message lists
+    each problem (file and reason) on a line of its own; ``problems`` holds them.
+    """
+
+    def __init__(self, root: str | Path, problems: list[CaptureFormatError]) -> None:
+        self.problems = list(problems)
+        lines = "\n".join(f"  {p}" for p in self.problems)
+        super().__init__(root, f"{len(self.problems)} problems:\n{lines}")
+
+    def __reduce__(self):
+        return (type(self), (self.path, self.problems))
+
+
 class UnknownNameError(KeyError):
     """A scene, frame, camera, object, pose or marker the dataset does not have.
 

@@ -15,7 +15,7 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
-from colourhs.capture.base import _NAME, COLOURS, FORMAT, CaptureFormatError
+from colourhs.capture.base import _NAME, COLOURS, FORMAT, CaptureFormatError, CaptureFormatProblems
 from colourhs.capture.dataset import Dataset, Scene, _known
 from colourhs.capture.jsonvalues import _as_object, _as_str, _read_json, _show
 from colourhs.capture.png import (
@@ -33,8 +33,32 @@ _FRAME = re.compile(r"[0-9]{6}")
 _STATIC_FRAME = "000000"
 
 
+def _problem(problems: list | None, path: Path, text: str) -> None:
+    """Raise the problem, or, collecting every problem (``problems`` a list), note it."""
+    error = CaptureFormatError(path, text)
+    if problems is None:
+        raise error
+    problems.append(error)
+
+
+def _near_miss(path: Path) -> str:
+    """A hint when ``path``'s folder holds the file under another case or suffix
+    (``cam1.PNG``, ``cam1.jpg``, ``cam1.tif`` for ``cam1.png``)."""
+    if not path.parent.is_dir():
+        return ""
+    found = sorted(
+        p.name
+        for p in path.parent.iterdir()
+        if p.name != path.name and p.stem.lower() == path.stem.lower()
+    )
+    return f"; found {', '.join(found)}: images are PNG files named <camera>.png" if found else ""
+
+
 def open_dataset(
-    root: str | Path, check_images: bool = True, scenes: Iterable[str] | None = None
+    root: str | Path,
+    check_images: bool = True,
+    scenes: Iterable[str] | None = None,
+    problems: list | None = None,
 ) -> Dataset:
     """Validate a whole dataset folder and describe its contents.
 
@@ -49,6 +73,10 @@ def open_dataset(
         Read only these scenes' folders and scene.json (each must exist; an empty
         one reads none), so that a stage reads no file of the scenes it does not
         use (the workflow's rules declare what they read); default every scene.
+    problems : list, optional
+        Collect every violation found here instead of raising at the first (what
+        :func:`validate` reports); the parts of the dataset that break the format
+        are left out of the result. A rig.json that cannot be read still raises.
 
     Returns
     -------
@@ -67,14 +95,21 @@ def open_dataset(
     if not root.is_dir():
         raise CaptureFormatError(root, "dataset folder not found")
     rig = load_rig(root / "rig.json")
-    poses, pose_images = _find_poses(root / "photometric", rig.camera_names)
-    objects, chromatic_images = _find_chromatic(root / "chromatic", rig.camera_names)
-    scenes, frame_images, masks = _find_scenes(root / "scenes", rig.camera_names, objects, scenes)
+    cams = rig.camera_names
+    poses, pose_images = _find_poses(root / "photometric", cams, problems)
+    objects, chromatic_images = _find_chromatic(root / "chromatic", cams, problems)
+    scenes, frame_images, masks = _find_scenes(root / "scenes", cams, objects, scenes, problems)
     if check_images:
-        for image in (*pose_images, *chromatic_images, *frame_images):
-            _check_image_header(image, _read_png_header(image, "image file"), rig.image)
-        for mask in masks:
-            _check_mask_header(mask, _read_png_header(mask, "mask file"), rig.image)
+        checks = [(p, "image file", _check_image_header) for p in (*pose_images, *chromatic_images)]
+        checks += [(p, "image file", _check_image_header) for p in frame_images]
+        checks += [(p, "mask file", _check_mask_header) for p in masks]
+        for path, what, check in checks:
+            try:
+                check(path, _read_png_header(path, what), rig.image)
+            except CaptureFormatError as error:
+                if problems is None:
+                    raise
+                problems.append(error)
     return Dataset(root, rig, poses, objects, scenes)
 
 
@@ -83,54 +118,66 @@ def _subfolders(folder: Path) -> list[Path]:
     return sorted(p for p in folder.iterdir() if p.is_dir() and not p.name.startswith("."))
 
 
-def _check_name(folder: Path, what: str) -> str:
+def _check_name(folder: Path, what: str, problems: list | None = None) -> str:
     if not _NAME.fullmatch(folder.name):
-        raise CaptureFormatError(
+        _problem(
+            problems,
             folder,
             f"{what} name {folder.name!r} has characters other than letters, digits, '_' and '-'",
         )
     return folder.name
 
 
-def _camera_images(folder: Path, cameras: tuple[str, ...], what: str) -> list[Path]:
-    """``folder/<camera>.png`` for every camera, refusing a missing one."""
+def _camera_images(
+    folder: Path, cameras: tuple[str, ...], what: str, problems: list | None = None
+) -> list[Path]:
+    """``folder/<camera>.png`` for every camera, refusing (or noting) a missing one."""
     if not folder.is_dir():
-        raise CaptureFormatError(folder, f"missing folder ({what})")
+        _problem(problems, folder, f"missing folder ({what})")
+        return []
     paths = [folder / f"{name}.png" for name in cameras]
     for path, name in zip(paths, cameras, strict=True):
         if not path.is_file():
-            raise CaptureFormatError(path, f"missing image of camera {name!r} ({what})")
-    return paths
+            hint = _near_miss(path)
+            _problem(problems, path, f"missing image of camera {name!r} ({what}){hint}")
+    return [p for p in paths if p.is_file()]
 
 
-def _find_poses(folder: Path, cameras: tuple[str, ...]) -> tuple[tuple[str, ...], list[Path]]:
+def _find_poses(
+    folder: Path, cameras: tuple[str, ...], problems: list | None = None
+) -> tuple[tuple[str, ...], list[Path]]:
     if not folder.is_dir():
-        raise CaptureFormatError(folder, "missing photometric/ folder (at least 3 board poses)")
-    poses = [_check_name(p, "pose") for p in _subfolders(folder)]
+        _problem(problems, folder, "missing photometric/ folder (at least 3 board poses)")
+        return (), []
+    poses = [_check_name(p, "pose", problems) for p in _subfolders(folder)]
     if len(poses) < 3:
-        raise CaptureFormatError(folder, f"found {len(poses)} poses, at least 3 are required")
+        _problem(problems, folder, f"found {len(poses)} poses, at least 3 are required")
     images = [
         path
         for pose in poses
-        for path in _camera_images(folder / pose, cameras, f"photometric pose {pose}")
+        for path in _camera_images(folder / pose, cameras, f"photometric pose {pose}", problems)
     ]
     return tuple(poses), images
 
 
-def _find_chromatic(folder: Path, cameras: tuple[str, ...]) -> tuple[tuple[str, ...], list[Path]]:
+def _find_chromatic(
+    folder: Path, cameras: tuple[str, ...], problems: list | None = None
+) -> tuple[tuple[str, ...], list[Path]]:
     if not folder.is_dir():
         return (), []
-    objects = [_check_name(p, "chromatic object") for p in _subfolders(folder)]
+    objects = [_check_name(p, "chromatic object", problems) for p in _subfolders(folder)]
     if objects and "white" not in objects:
-        raise CaptureFormatError(
-            folder / "white", "missing white reference folder (required when chromatic/ is used)"
+        _problem(
+            problems,
+            folder / "white",
+            "missing white reference folder (required when chromatic/ is used)",
         )
     images = [
         path
         for obj in objects
         for colour in COLOURS
         for path in _camera_images(
-            folder / obj / colour, cameras, f"chromatic {obj} under {colour} light"
+            folder / obj / colour, cameras, f"chromatic {obj} under {colour} light", problems
         )
     ]
     return tuple(objects), images
@@ -141,6 +188,7 @@ def _find_scenes(
     cameras: tuple[str, ...],
     objects: tuple[str, ...],
     wanted: Iterable[str] | None = None,
+    problems: list | None = None,
 ) -> tuple[dict[str, Scene], list[Path], list[Path]]:
     scenes: dict[str, Scene] = {}
     images: list[Path] = []
@@ -154,7 +202,10 @@ def _find_scenes(
             _known(name, tuple(f.name for f in folders), "scene")
         folders = [f for f in folders if f.name in wanted]
     for scene_dir in folders:
-        scene, scene_images, scene_masks = _find_scene(scene_dir, cameras, objects)
+        found = _find_scene(scene_dir, cameras, objects, problems)
+        if found is None:  # noted in problems: nothing of it to list
+            continue
+        scene, scene_images, scene_masks = found
         scenes[scene.name] = scene
         images += scene_images
         masks += scene_masks
@@ -162,25 +213,39 @@ def _find_scenes(
 
 
 def _find_scene(
-    folder: Path, cameras: tuple[str, ...], objects: tuple[str, ...]
-) -> tuple[Scene, list[Path], list[Path]]:
-    name = _check_name(folder, "scene")
+    folder: Path, cameras: tuple[str, ...], objects: tuple[str, ...], problems: list | None = None
+) -> tuple[Scene, list[Path], list[Path]] | None:
+    """The scene in ``folder``, its images and masks; None when it has no frames to
+    list (only while collecting ``problems``, where that is noted)."""
+    name = _check_name(folder, "scene", problems)
     frames_dir = folder / "frames"
     if not frames_dir.is_dir():
-        raise CaptureFormatError(frames_dir, f"scene {name!r} has no frames (missing folder)")
+        _problem(problems, frames_dir, f"scene {name!r} has no frames (missing folder)")
+        return None
     frames = []
     for frame_dir in _subfolders(frames_dir):
         if not _FRAME.fullmatch(frame_dir.name):
-            raise CaptureFormatError(
-                frame_dir, f"frame folder name {frame_dir.name!r} is not a 6-digit index"
+            _problem(
+                problems,
+                frame_dir,
+                f"frame folder name {frame_dir.name!r} is not a 6-digit index",
             )
+            continue
         frames.append(frame_dir.name)
     if not frames:
-        raise CaptureFormatError(frames_dir, f"scene {name!r} has no frames")
-    meta = _read_scene_json(folder / "scene.json", objects)
+        _problem(problems, frames_dir, f"scene {name!r} has no frames")
+        return None
+    try:
+        meta = _read_scene_json(folder / "scene.json", objects)
+    except CaptureFormatError as error:
+        if problems is None:
+            raise
+        problems.append(error)
+        meta = {}
     dynamic = meta.get("dynamic", frames != [_STATIC_FRAME])
     if not dynamic and frames != [_STATIC_FRAME]:
-        raise CaptureFormatError(
+        _problem(
+            problems,
             folder / "scene.json",
             f"static scene (dynamic: false) must have the single frame {_STATIC_FRAME}, "
             f"found frames {', '.join(frames)}",
@@ -188,14 +253,18 @@ def _find_scene(
     images = [
         path
         for frame in frames
-        for path in _camera_images(frames_dir / frame, cameras, f"scene {name} frame {frame}")
+        for path in _camera_images(
+            frames_dir / frame, cameras, f"scene {name} frame {frame}", problems
+        )
     ]
     masks_dir = folder / "masks"
     masks = (
         [
             path
             for frame in frames
-            for path in _camera_images(masks_dir / frame, cameras, f"mask of scene {name}")
+            for path in _camera_images(
+                masks_dir / frame, cameras, f"mask of scene {name}", problems
+            )
         ]
         if masks_dir.is_dir()
         else []
@@ -204,8 +273,10 @@ def _find_scene(
     if gt_dir.is_dir():
         for frame in frames:
             if not (gt_dir / f"{frame}.ply").is_file():
-                raise CaptureFormatError(
-                    gt_dir / f"{frame}.ply", f"missing ground-truth mesh of frame {frame}"
+                _problem(
+                    problems,
+                    gt_dir / f"{frame}.ply",
+                    f"missing ground-truth mesh of frame {frame}",
                 )
     scene = Scene(
         name=name,
@@ -282,9 +353,14 @@ def validate(
 
     Raises
     ------
-    CaptureFormatError naming the first offending file.
+    CaptureFormatError
+        Naming the offending file; where several break the format,
+        :class:`CaptureFormatProblems` naming every one (a rig.json that cannot be
+        read stops the check at once: the rest is read against it).
     """
-    ds = open_dataset(dataset)
+    problems: list[CaptureFormatError] = []
+    ds = open_dataset(dataset, problems=problems)
+    headers_bad = {p.path for p in problems}
     masks = {
         ds.mask_image(s, f, c)
         for s, sc in ds.scenes.items()
@@ -294,13 +370,22 @@ def validate(
     }
     n_pixels = n_saturated = 0
     paths = all_images(ds)
+    paths = [p for p in paths if p.is_file() and p not in headers_bad]
     for path in bar(paths, "validating images", enabled=progress, unit="image"):
-        if path in masks:
-            read_mask(path, ds.rig.image)
+        try:
+            if path in masks:
+                read_mask(path, ds.rig.image)
+                continue
+            _, saturated = read_image(path, ds.rig.image)
+        except CaptureFormatError as error:
+            problems.append(error)
             continue
-        _, saturated = read_image(path, ds.rig.image)
         n_pixels += saturated.size
         n_saturated += int(saturated.sum())
+    if len(problems) == 1:
+        raise problems[0]
+    if problems:
+        raise CaptureFormatProblems(ds.root, problems)
     summary = {
         "dataset": str(Path(dataset).resolve()),
         "format": FORMAT,

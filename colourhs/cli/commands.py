@@ -29,14 +29,14 @@ RECONSTRUCT_PARAMS = {
     "data_weight": (float, "weight of the labelling in the initial surface"),
     "max_cost": (float, "pixels whose best hypothesis costs more are left out (sigma3/sigma2)"),
     "cost_scale": (float, "typical noise level of sigma3/sigma2 (the data term's unit)"),
-    "erode_px": (int, "erosion of the Bayesian mask, pixels (default: 1 per 320 px of width)"),
+    "erode_px": (int, "erosion of the Bayesian mask, pixels (default: 1 per 320 of width)"),
     "edge_m": (float, "depth step that separates surfaces in the initial surface, metres"),
     "refine_passes": (int, "passes of the initial surface"),
     "min_component": (int, "smallest kept surface, pixels (default: 0.2 %% of the image)"),
     "link_m": (float, "tangent-plane distance that links neighbours into one surface, metres"),
     "surface_iterations": (int, "Levenberg-Marquardt steps before and after the depth search"),
     "spline_px": (float, "spline control spacing, pixels (default: 1/120 of the width)"),
-    "blur_px": (float, "blur of the Helmholtz sides, pixels (default: sides.BLUR_PX)"),
+    "blur_px": (float, "Gaussian blur of the Helmholtz sides, pixels (default 1)"),
     "max_sigma_mm": (
         float,
         "a depth less certain than this (1 sigma, mm) is flagged (default: 5 %% of the depth)",
@@ -51,7 +51,10 @@ PHOTOMETRIC_PARAMS = {
     "box_px": (int, "each reading the mean of a box this wide, pixels (default: the step, odd)"),
     "smoothness": (float, "curvature regulariser, relative to one eq. (6) row"),
     "coupling": (float, "gradient penalty on the difference of a camera's two maps"),
-    "margin_m": (float, "margin around markers and board edges, metres (default 2 px)"),
+    "margin_m": (
+        float,
+        "margin around markers and board edges, metres (default: two pixel footprints)",
+    ),
     "min_cos": (float, "grazing limit: smallest cosine of incidence and view"),
     "min_signal": (float, "darkest usable intensity, fraction of full scale"),
 }
@@ -117,6 +120,14 @@ def _validate(args) -> int:
     summary = validate(args.dataset, args.summary, progress=True)  # stderr: the log
     for warning in summary["warnings"]:
         print(f"warning: {warning}", file=sys.stderr)
+    scenes = summary["scenes"]
+    print(
+        f"{summary['dataset']}: valid: {summary['images']} images of "
+        f"{len(summary['cameras'])} cameras, {len(summary['poses'])} board poses, "
+        f"{len(summary['chromatic_objects'])} chromatic objects, {len(scenes)} scenes "
+        f"({sum(s['frames'] for s in scenes.values())} frames)"
+        + (f", {len(summary['warnings'])} warning(s)" if summary["warnings"] else "")
+    )
     print(json.dumps(summary, indent=2))
     return 0
 
@@ -128,14 +139,18 @@ def _run(args) -> int:
     from colourhs.workflow.variants import parse_variants
 
     dataset = Path(args.dataset).resolve()
+    if not dataset.is_dir():
+        what = "not a folder" if dataset.exists() else "no such folder"
+        raise FileNotFoundError(f"{dataset}: {what} (a dataset in the capture format)")
     if not (dataset / "rig.json").exists():
         raise FileNotFoundError(f"{dataset / 'rig.json'}: missing (not a capture-format dataset)")
-    # Everything the command line names is checked before anything is written.
+    # Everything the command line names, and the dataset's layout and rig.json, are
+    # checked before anything is written (the images when the workflow starts).
+    known = tuple(open_dataset(dataset, check_images=False).scenes)
     reconstruction = {}
     if args.variants is not None:  # "" too: an empty list is refused
         reconstruction["variants"] = parse_variants(args.variants)
     if args.scenes is not None:
-        known = tuple(open_dataset(dataset, check_images=False).scenes)
         scenes = [v.strip() for v in args.scenes.split(",") if v.strip()]
         unknown = [v for v in scenes if v not in known]
         if unknown or not scenes:

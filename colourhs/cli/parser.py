@@ -41,6 +41,13 @@ from colourhs.cli.commands import (  # noqa: F401 (imported from here by users)
 )
 from colourhs.common.progress import line_buffered
 
+DESCRIPTION = (
+    "Colour Helmholtz Stereopsis, from raw captures to evaluated meshes. "
+    "`colourhs run DATASET` runs the whole workflow; each other command runs one "
+    "stage (what the workflow's rules call). `colourhs COMMAND --help` lists a "
+    "command's options with their units and defaults."
+)
+
 NUISANCE_SWITCHES = ("light_falloff", "vignetting", "crosstalk", "noise", "saturate")
 
 
@@ -63,9 +70,13 @@ def _tuning_options(parser, params: dict, defaults: dict | None) -> None:
             dest=name,
             type=kind,
             default=None,
-            metavar=kind.__name__.upper(),
             help=text,
         )
+
+
+def _command(sub, name: str, summary: str) -> argparse.ArgumentParser:
+    """A subcommand whose line in ``colourhs --help`` is also its own description."""
+    return sub.add_parser(name, help=summary, description=summary[0].upper() + summary[1:] + ".")
 
 
 def _frame_arguments(parser) -> None:
@@ -84,11 +95,11 @@ def build_parser(show_defaults: bool | Collection[str] = False) -> argparse.Argu
         wanted = show_defaults is True or (show_defaults is not False and command in show_defaults)
         return _defaults(command) if wanted else None
 
-    p = argparse.ArgumentParser(prog="colourhs", description=__doc__)
+    p = argparse.ArgumentParser(prog="colourhs", description=DESCRIPTION)
     p.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     sub = p.add_subparsers(dest="command", required=True)
 
-    s = sub.add_parser("synth", help="render a synthetic dataset in the capture format")
+    s = _command(sub, "synth", "render a synthetic dataset in the capture format")
     s.add_argument("out", type=Path, help="dataset folder to create")
     s.add_argument(
         "--preset",
@@ -123,12 +134,12 @@ def build_parser(show_defaults: bool | Collection[str] = False) -> argparse.Argu
     )
     s.set_defaults(func=_synth)
 
-    v = sub.add_parser("validate", help="check a dataset against the capture format")
+    v = _command(sub, "validate", "check a dataset against the capture format")
     v.add_argument("dataset", type=Path, help="dataset folder (capture format)")
     v.add_argument("--summary", type=Path, default=None, help="write a JSON summary here")
     v.set_defaults(func=_validate)
 
-    m = sub.add_parser("markers", help="board poses and calibration planes from the ArUco markers")
+    m = _command(sub, "markers", "board poses and calibration planes from the ArUco markers")
     m.add_argument("dataset", type=Path, help="dataset folder (capture format)")
     m.add_argument("out", type=Path, help="CSV to write (one row per usable board pose)")
     m.add_argument(
@@ -139,12 +150,12 @@ def build_parser(show_defaults: bool | Collection[str] = False) -> argparse.Argu
     )
     m.set_defaults(func=_markers)
 
-    nz = sub.add_parser("noise", help="sensor noise model of every camera channel (JSON)")
+    nz = _command(sub, "noise", "sensor noise model of every camera channel (JSON)")
     nz.add_argument("dataset", type=Path, help="dataset folder (capture format)")
     nz.add_argument("out", type=Path, help="noise model JSON to write")
     nz.set_defaults(func=_noise)
 
-    x = sub.add_parser("crosstalk", help="calibrate each camera's channel mixing matrix")
+    x = _command(sub, "crosstalk", "calibrate each camera's channel mixing matrix")
     x.add_argument("dataset", type=Path, help="dataset folder (capture format)")
     x.add_argument("out", type=Path, help="JSON file to write")
     x.add_argument(
@@ -156,7 +167,7 @@ def build_parser(show_defaults: bool | Collection[str] = False) -> argparse.Argu
     )
     x.set_defaults(func=_crosstalk)
 
-    ph = sub.add_parser("photometric", help="mu maps of the Helmholtz cameras (eqs. 6-8)")
+    ph = _command(sub, "photometric", "mu maps of the Helmholtz cameras (eqs. 6-8)")
     ph.add_argument("dataset", type=Path, help="dataset folder (capture format)")
     ph.add_argument("poses", type=Path, help="marker poses table (colourhs markers)")
     ph.add_argument("out", type=Path, help="photometric.h5 to write")
@@ -165,7 +176,7 @@ def build_parser(show_defaults: bool | Collection[str] = False) -> argparse.Argu
     _tuning_options(ph, PHOTOMETRIC_PARAMS, defaults_of("photometric"))
     ph.set_defaults(func=_photometric)
 
-    c = sub.add_parser("chromaticity", help="surface chromaticity maps of a chromatic object")
+    c = _command(sub, "chromaticity", "surface chromaticity maps of a chromatic object")
     c.add_argument("dataset", type=Path, help="dataset folder (capture format)")
     c.add_argument("object", help="chromatic object: a folder under chromatic/ (e.g. toy)")
     c.add_argument("out", type=Path, help="HDF5 file to write (one dataset per camera)")
@@ -178,7 +189,7 @@ def build_parser(show_defaults: bool | Collection[str] = False) -> argparse.Argu
     )
     c.set_defaults(func=_chromaticity)
 
-    rc = sub.add_parser("reconstruct", help="depth and normals of one frame (ML or Bayesian HS)")
+    rc = _command(sub, "reconstruct", "depth and normals of one frame (ML or Bayesian HS)")
     _frame_arguments(rc)
     rc.add_argument("out", type=Path, help="depth HDF5 to write")
     rc.add_argument(
@@ -206,7 +217,7 @@ def build_parser(show_defaults: bool | Collection[str] = False) -> argparse.Argu
     _tuning_options(rc, RECONSTRUCT_PARAMS, defaults_of("reconstruct"))
     rc.set_defaults(func=_reconstruct)
 
-    h = sub.add_parser("hull", help="visual hull of one frame from its silhouettes (PLY)")
+    h = _command(sub, "hull", "visual hull of one frame from its silhouettes (PLY)")
     _frame_arguments(h)
     h.add_argument("out", type=Path, help="hull mesh PLY to write")
     h.add_argument("--depth", type=Path, default=None, help="also write the vh depth HDF5")
@@ -225,7 +236,7 @@ def build_parser(show_defaults: bool | Collection[str] = False) -> argparse.Argu
     )
     h.set_defaults(func=_hull)
 
-    me = sub.add_parser("mesh", help="oriented points of a depth file -> Poisson mesh (PLY)")
+    me = _command(sub, "mesh", "oriented points of a depth file -> Poisson mesh (PLY)")
     me.add_argument("depth", type=Path, help="results-contract depth HDF5")
     me.add_argument("out", type=Path, help="mesh PLY to write")
     me.add_argument("--hull", type=Path, default=None, help="visual hull PLY to close the cloud")
@@ -239,7 +250,7 @@ def build_parser(show_defaults: bool | Collection[str] = False) -> argparse.Argu
     )
     me.set_defaults(func=_mesh)
 
-    ev = sub.add_parser("evaluate", help="Hausdorff and depth/normal errors of one frame")
+    ev = _command(sub, "evaluate", "Hausdorff and depth/normal errors of one frame")
     ev.add_argument("depth", type=Path, help="results-contract depth HDF5")
     ev.add_argument("mesh", type=Path, help="the frame's mesh PLY (colourhs mesh)")
     ev.add_argument("out", type=Path, help="metrics JSON to write")
@@ -262,12 +273,12 @@ def build_parser(show_defaults: bool | Collection[str] = False) -> argparse.Argu
     )
     ev.set_defaults(func=_evaluate)
 
-    mt = sub.add_parser("metrics", help="gather per-frame metrics JSON into metrics.csv")
+    mt = _command(sub, "metrics", "gather per-frame metrics JSON into metrics.csv")
     mt.add_argument("json", nargs="+", type=Path, help="per-frame metrics JSON (colourhs evaluate)")
     mt.add_argument("out", type=Path, help="metrics.csv to write")
     mt.set_defaults(func=_metrics)
 
-    fg = sub.add_parser("figures", help="a scene's figures (Figure 7 grid, maps, animation)")
+    fg = _command(sub, "figures", "a scene's figures (Figure 7 grid, maps, animation)")
     fg.add_argument("out", type=Path, help="folder to write")
     fg.add_argument("--depth", nargs="+", default=[], help="VARIANT=depth.h5 ...")
     fg.add_argument("--mesh", nargs="+", default=[], help="VARIANT=mesh.ply ...")
@@ -276,7 +287,7 @@ def build_parser(show_defaults: bool | Collection[str] = False) -> argparse.Argu
     fg.add_argument("--animate", nargs="*", default=[], help="FRAME=mesh.ply ... (dynamic scene)")
     fg.set_defaults(func=_figures)
 
-    rp = sub.add_parser("report", help="the evaluation report (index.html)")
+    rp = _command(sub, "report", "the evaluation report (index.html)")
     rp.add_argument("out", type=Path, help="index.html to write")
     rp.add_argument("--name", required=True, help="the dataset's results name")
     rp.add_argument("--metrics", type=Path, required=True, help="metrics.csv (colourhs metrics)")
@@ -308,12 +319,12 @@ def build_parser(show_defaults: bool | Collection[str] = False) -> argparse.Argu
     )
     rp.set_defaults(func=_report)
 
-    cf = sub.add_parser("config", help="write a run's configuration (JSON text) as YAML")
+    cf = _command(sub, "config", "write a run's configuration (JSON text) as YAML")
     cf.add_argument("json", help="the configuration as JSON text")
     cf.add_argument("out", type=Path, help="YAML file to write")
     cf.set_defaults(func=_config)
 
-    r = sub.add_parser("run", help="run the whole workflow on a dataset")
+    r = _command(sub, "run", "run the whole workflow on a dataset")
     r.add_argument("dataset", type=Path, help="dataset folder (capture format)")
     r.add_argument("--name", default=None, help="results name (default: the folder's name)")
     r.add_argument("--cores", type=int, default=2, help="cores Snakemake may use (default 2)")

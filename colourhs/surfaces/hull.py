@@ -28,8 +28,8 @@ This module holds steps 2 and 6 and re-exports steps 3 to 5, so
 ``colourhs.surfaces.hull`` is the whole visual hull's API.
 
 With a narrow-baseline rig (the synthetic one: three cameras about 20 degrees
-apart) the hull is long along the viewing direction (0.65 m deep for a 0.25 m
-statue at 0.77 m); the working volume clips it at half the working distance
+apart) the hull is long along the viewing direction (several times deeper
+than the object); the working volume clips it at half the working distance
 around the fixation point.
 """
 
@@ -226,7 +226,7 @@ def visual_hull(
         Hull mesh to write: binary PLY, world frame, metres, outward vertex normals.
     voxel_m : float, optional
         Voxel edge, metres; default :func:`default_voxel_size` (two pixel
-        footprints at the working distance: 1.2 mm on the 640 x 480 demo rig).
+        footprints at the working distance).
     threshold : float
         Silhouette threshold when the scene has no masks (:func:`threshold_silhouette`).
     reference : str, optional
@@ -265,10 +265,10 @@ def visual_hull(
     ds = open_dataset(dataset_dir, check_images=False, scenes=[scene])
     cams = list(ds.rig.cameras)
     ref = ds.rig.camera(reference) if reference else cams[0]
+    frame_dir = ds.frame_image(scene, frame, cams[0].name).parent  # an unknown frame: refused
     say = partial(stage, start=t0, enabled=progress)
     say(f"visual hull {scene}/{frame}: silhouettes of {len(cams)} views")
     sils, files, source = silhouettes_and_sources(ds, scene, frame, threshold)
-    frame_dir = ds.frame_image(scene, frame, cams[0].name).parent
     sil_list = [sils[c.name] for c in cams]
     voxel_m = default_voxel_size(cams) if voxel_m is None else float(voxel_m)
     if bounds is not None:
@@ -297,7 +297,7 @@ def visual_hull(
         )
     say("visual hull: marching cubes")
     v, t = march_surface(field, lo, voxel_m, padded=True)
-    del field  # before outward_mesh's temporaries (about 1 GB at paper scale)
+    del field  # before outward_mesh's temporaries (large at paper scale)
     say(f"visual hull: orienting {len(t)} triangles outwards")
     v, t, n = outward_mesh(v, t)
     info = {

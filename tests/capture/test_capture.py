@@ -215,7 +215,7 @@ def test_scenes_folder_is_optional(root: Path) -> None:
 
 
 def test_open_dataset_reads_only_the_named_scenes(root: Path) -> None:
-    """A stage opens the scenes it uses (issue 12: its rule declares what it reads):
+    """A stage opens the scenes it uses (its rule declares what it reads):
     another scene's files are not read, a malformed one included."""
     (root / "scenes" / "toy" / "scene.json").write_text("{not json")
     (root / "scenes" / "toy" / "frames" / "000000" / "cam1.png").unlink()
@@ -252,7 +252,7 @@ def test_error_message_and_attributes(tmp_path: Path) -> None:
 
 
 def test_every_public_name_resolves() -> None:
-    """The package loads its submodules on first use (issue 12): every name of
+    """The package loads its submodules on first use: every name of
     ``__all__`` still resolves, is listed by dir() and keeps its own module; an
     unknown name is an AttributeError."""
     import colourhs.capture as capture
@@ -261,6 +261,6 @@ def test_every_public_name_resolves() -> None:
         value = getattr(capture, name)
         module = getattr(value, "__module__", None)
         assert module is None or module.startswith("colourhs.capture."), (name, module)
-    assert set(capture.__all__) <= set(dir(capture)) and len(capture.__all__) == 23
+    assert set(capture.__all__) <= set(dir(capture)) and len(capture.__all__) == 24
     with pytest.raises(AttributeError, match="no attribute 'nosuch'"):
         capture.nosuch  # noqa: B018

@@ -45,6 +45,40 @@ def test_validate_reports_good_and_bad_datasets(tiny_dataset, tmp_path, capsys):
     assert not (tmp_path / "bad.json").exists()
 
 
+def test_validate_names_every_problem_at_once_with_near_misses(tiny_dataset, tmp_path, capsys):
+    """A rig owner fixing captures sees every problem in one run, each with its file
+    and reason, and a hint where a file is there under another name; a valid
+    dataset gets a one-line verdict before the JSON summary."""
+    assert main(["validate", str(tiny_dataset)]) == 0
+    out = capsys.readouterr().out
+    verdict, rest = out.split("\n", 1)
+    summary = json.loads(rest)
+    frames = sum(v["frames"] for v in summary["scenes"].values())
+    assert verdict == (
+        f"{tiny_dataset.resolve()}: valid: {summary['images']} images of 3 cameras, "
+        f"{len(summary['poses'])} board poses, 3 chromatic objects, 4 scenes ({frames} frames)"
+    ), verdict
+    bad = tmp_path / "bad"
+    shutil.copytree(tiny_dataset, bad)
+    pose = sorted((bad / "photometric").iterdir())[0]
+    (pose / "cam2.png").rename(pose / "cam2.PNG")  # a near miss
+    frame = bad / "scenes" / "statue" / "frames" / "000000"
+    (frame / "cam1.png").rename(frame / "cam1.tif")
+    truncated = bad / "chromatic" / "toy" / "green" / "cam3.png"
+    truncated.write_bytes(truncated.read_bytes()[:200])
+    (bad / "scenes" / "plane" / "scene.json").write_text("{")
+    assert main(["validate", str(bad)]) == 1
+    out, err = capsys.readouterr()
+    head = next(i for i, t in enumerate(err.splitlines()) if "problems:" in t)
+    assert out == "" and err.splitlines()[head].endswith(f"{bad}: 4 problems:"), err
+    lines = err.splitlines()[head + 1 :]
+    assert len(lines) == 4, err
+    assert any(f"{pose / 'cam2.png'}: missing image" in t and "found cam2.PNG" in t for t in lines)
+    assert any(f"{frame / 'cam1.png'}: missing image" in t and "found cam1.tif" in t for t in lines)
+    assert any(str(truncated) in t for t in lines)
+    assert any(str(bad / "scenes" / "plane" / "scene.json") in t for t in lines)
+
+
 def test_run_does_the_whole_job_through_snakemake(whole_job):
     """`colourhs run` on the tiny preset: every stage, the contract's files, the report.
 
@@ -83,14 +117,14 @@ def test_run_does_the_whole_job_through_snakemake(whole_job):
     print(sheet.to_dict())
     assert sheet["bayes_ph"] < 0.7
     assert 100 * sheet["bayes_ph"] < sheet["vh"]
-    # Issue 12: bayes_full against bayes_ph with the pipeline's own chromaticity maps
+    # bayes_full against bayes_ph with the pipeline's own chromaticity maps
     # (its chromaticity_map jobs). Measured Hausdorff RMS: statue 1.77 mm against
     # 7.36 mm, toy 1.87 mm against 16.5 mm.
     chromatic = metrics.set_index(["scene", "variant"])["hausdorff_rms_mm"]
     for scene in ("statue", "toy"):
         full, ph = chromatic[(scene, "bayes_full")], chromatic[(scene, "bayes_ph")]
         assert full < 2.5 and 3 * full < ph, (scene, full, ph)
-    # Issue 14: bayes_full on the scenes without a chromatic object (plane, sheet)
+    # bayes_full on the scenes without a chromatic object (plane, sheet)
     # is bayes_ph, computed once and copied; the chromatic ones are computed.
     full = metrics[metrics["variant"] == "bayes_full"].set_index(["scene", "frame"])
     copied = full["same_as"].fillna("")
@@ -132,7 +166,7 @@ def test_run_does_the_whole_job_through_snakemake(whole_job):
 
 def test_workflow_lint_is_clean(tmp_path):
     """Snakemake's linter finds nothing but the lint the project accepts: no rule
-    declares a conda environment or container (issue 12: ``--sdm conda`` is not
+    declares a conda environment or container (``--sdm conda`` is not
     supported, README), so it flags each of the 15 rules with a command."""
     snakefile = str(PROJECT_ROOT / "Snakefile")
     config = str(PROJECT_ROOT / "config.yaml")
@@ -191,6 +225,54 @@ def test_missing_dataset_stops_the_run_before_any_job(tmp_path):
     assert not (work / "results").exists()
 
 
+def test_run_refuses_a_bad_dataset_in_one_line_and_writes_nothing(tmp_path, capsys):
+    """``colourhs run`` on a malformed rig.json, a folder without one, a file and a
+    missing folder: exit 1, one line on stderr naming the file and the problem,
+    nothing on stdout (no Snakemake lines) and no ``results/NAME/run-config.yaml``."""
+    bad = tmp_path / "bad"
+    bad.mkdir()
+    (bad / "rig.json").write_text('{"format": "colourhs-capture/1", "units": "m"')
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    (tmp_path / "file").write_text("x")
+    cases = {
+        bad: "bad/rig.json: not valid JSON",
+        empty: "empty/rig.json: missing",
+        tmp_path / "file": "file: not a folder",
+        tmp_path / "nowhere": "nowhere: no such folder",
+    }
+    work = tmp_path / "work"
+    for dataset, problem in cases.items():
+        code = main(["run", str(dataset), "--name", "x", "--directory", str(work)])
+        out, err = capsys.readouterr()
+        assert code == 1 and out == "", (dataset, out)
+        assert err.count("\n") == 1 and problem in err, (dataset, err)
+    assert not work.exists()
+
+
+def test_stage_inputs_of_the_wrong_kind_are_refused_in_one_line(tiny_dataset, tmp_path, capsys):
+    """``colourhs photometric`` given a CSV that is not a poses table, or a file that is
+    not CSV at all, names the file and what it lacks (it once said "0 usable board
+    poses", then raised a KeyError); ``colourhs hull`` refuses an unknown frame before
+    any progress line. Exit 1, one line on stderr, nothing written."""
+    other = tmp_path / "other.csv"
+    other.write_text("a,b\n1,2\n")
+    binary = tmp_path / "binary.csv"
+    binary.write_bytes(b"\x00\x01\xff\xfe")
+    out = tmp_path / "out.h5"
+    for table, problem in (
+        (other, "not a board poses table (no column pose"),
+        (binary, "not a CSV"),
+    ):
+        assert main(["photometric", str(tiny_dataset), str(table), str(out)]) == 1
+        _, err = capsys.readouterr()
+        assert err.count("\n") == 1 and f"{table}: {problem}" in err, err
+    assert main(["hull", str(tiny_dataset), "statue", "000099", str(tmp_path / "h.ply")]) == 1
+    _, err = capsys.readouterr()
+    assert err.startswith("colourhs hull: unknown frame") and err.count("\n") == 1, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["binary.csv", "other.csv"]
+
+
 def test_invalid_config_names_the_key(tmp_path):
     config = yaml.safe_load((PROJECT_ROOT / "config.yaml").read_text())
     config["datasets"]["demo"]["synth"]["preset"] = "huge"
@@ -220,8 +302,10 @@ def test_invalid_config_names_the_key(tmp_path):
 
 
 def test_missing_dataset_is_a_clear_error(tmp_path, capsys):
+    """A missing folder is named as one, not as a missing rig.json inside it."""
     assert main(["run", str(tmp_path / "nowhere")]) == 1
-    assert "rig.json" in _one_line(capsys)
+    err = _one_line(capsys)
+    assert "nowhere: no such folder" in err and "rig.json" not in err
 
 
 def _one_line(capsys) -> str:
@@ -307,7 +391,7 @@ USER_ERRORS = {  # argv -> what the one line must say
         ["--config", "bad.yaml: not YAML"],
     ),
     "folder json": (["metrics", "{b}", "{o}/m.csv"], ["json", ": a folder, not a file"]),
-    # issue 12: depth files are read in full (colourhs.common.depthfile.read_depth) and maps to
+    # Depth files are read in full (colourhs.common.depthfile.read_depth) and maps to
     # their end before a stage starts, not just their signature; the error names the option
     "mesh half depth": (
         ["mesh", "{b}/half.h5", "{o}/m.ply"],
@@ -333,7 +417,7 @@ USER_ERRORS = {  # argv -> what the one line must say
         _rec("statue", "--same-as", "{b}/nonormal.h5"),
         ["reconstruct: --same-as ", "nonormal.h5: missing dataset 'normal'"],
     ),
-    # issue 12: figures' VARIANT=PATH inputs are checked like the other stages' inputs
+    # figures' VARIANT=PATH inputs are checked like the other stages' inputs
     "figures half depth": (
         ["figures", "{o}/figs", "--depth", "bayes={b}/half.h5", "--mesh", "bayes={b}/ok.ply"],
         ["figures: --depth ", "half.h5: not a readable HDF5 depth file", "truncated file"],
@@ -376,7 +460,7 @@ def bad_inputs(tmp_path_factory) -> Path:
     with h5py.File(root / "small.h5", "w") as f:
         for cam in ("cam1", "cam2", "cam3"):
             f[cam] = np.ones((4, 5, 3), np.float32)
-    # issue 12: a good depth file cut to half its bytes, and one without "normal"
+    # A good depth file cut to half its bytes, and one without "normal"
     rng = np.random.default_rng(12)
     depth = rng.uniform(0.5, 1.0, (48, 64)).astype(np.float32)
     result = DepthResult(
@@ -410,7 +494,7 @@ def _cut_to_half(src: Path, out: Path) -> None:
 def test_user_errors_are_one_line_and_write_nothing(
     case, tiny_dataset, bad_inputs, tmp_path, capsys
 ):
-    """Issue 14: every user error is one line on stderr naming what is wrong and
+    """Every user error is one line on stderr naming what is wrong and
     what exists, exit status 1, and leaves no output behind (run validates its
     options before it writes run-config.yaml; input files are checked before a
     stage starts)."""
@@ -424,7 +508,7 @@ def test_user_errors_are_one_line_and_write_nothing(
 
 
 def test_each_depth_file_is_read_once(bad_inputs, tmp_path, monkeypatch, capsys):
-    """Issue 12: mesh, evaluate and figures read their depth file once: the input
+    """Mesh, evaluate and figures read their depth file once: the input
     check's read (colourhs.cli.parser._check_inputs) is the one the stage uses (it was
     read twice: 0.2 s of a job at 1280 x 960). Measured: 1.0 s (a Poisson mesh
     at octree depth 5, a figure)."""
@@ -460,10 +544,10 @@ def test_version_and_option_help(capsys):
 
 
 def test_every_option_shows_its_default():
-    """Issue 14: every option with a default, and every tuning option, says it in --help."""
+    """Every option with a default, and every tuning option, says it in --help."""
     import argparse
 
-    from colourhs.cli.parser import build_parser
+    from colourhs.cli.parser import PHOTOMETRIC_PARAMS, RECONSTRUCT_PARAMS, build_parser
 
     parser = build_parser(show_defaults=True)
     (sub,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
@@ -472,11 +556,67 @@ def test_every_option_shows_its_default():
         for a in p._actions:
             if not a.option_strings or a.nargs == 0 or a.required:
                 continue  # positionals, flags, --help, required options
-            tuning = a.metavar in ("INT", "FLOAT", "STR")
+            tuning = a.dest in RECONSTRUCT_PARAMS or a.dest in PHOTOMETRIC_PARAMS
             if tuning or a.default not in (None, "", []):
                 checked.append(f"{command} {a.option_strings[0]}")
                 assert "default" in (a.help or ""), (command, a.option_strings, a.help)
     assert len(checked) == 37, checked  # measured: 37 options with a default (--box-px)
+
+
+def _subcommands():
+    import argparse
+
+    from colourhs.cli.parser import build_parser
+
+    parser = build_parser(show_defaults=True)
+    (sub,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    return parser, sub.choices
+
+
+def test_help_speaks_to_users_with_one_description_per_command():
+    """``colourhs --help`` says what the tool does and how to start, not the module's
+    developer docstring; every command's own --help opens with a description (its
+    line in the list); option values are named after the option (with its unit,
+    e.g. VOXEL_M), never by type, and no help names code instead of a value."""
+    import re
+
+    from colourhs.reconstruct.sides import BLUR_PX
+
+    parser, commands = _subcommands()
+    assert parser.description.startswith("Colour Helmholtz Stereopsis")
+    assert "colourhs run DATASET" in parser.description
+    assert not re.search(r":(func|mod):|``", parser.format_help())
+    assert len(commands) == 16
+    for name, p in commands.items():
+        assert p.description and p.description[0].isupper(), name
+        for a in p._actions:
+            if not a.option_strings or a.nargs == 0 or a.choices:
+                continue
+            assert a.metavar is None, (name, a.option_strings, a.metavar)  # dest, upper case
+            assert not re.search(r"\b[a-z_]+\.[A-Z_]{3,}\b", a.help or ""), (name, a.help)
+    blur = next(a for a in commands["reconstruct"]._actions if a.dest == "blur_px")
+    assert f"(default {BLUR_PX:g})" in blur.help
+
+
+def test_each_option_states_the_unit_its_name_has():
+    """An option named in metres says metres and no default in pixels (``--margin-m``
+    once said "metres (default 2 px)"); one in pixels says pixels and not metres; one
+    in mm says mm."""
+    _, commands = _subcommands()
+    units = {"_m": "metres", "_px": "pixel", "_mm": "mm"}
+    checked = 0
+    for name, p in commands.items():
+        for a in p._actions:
+            suffix = next((u for u in units if a.option_strings and a.dest.endswith(u)), None)
+            if suffix is None:
+                continue
+            checked += 1
+            text = a.help or ""
+            assert units[suffix] in text, (name, a.dest, text)
+            others = [w for u, w in units.items() if u != suffix and w != "pixel"]
+            assert not any(f" {w}" in text for w in others), (name, a.dest, text)
+            assert suffix != "_m" or " px" not in text, (name, a.dest, text)
+    assert checked == 13, checked
 
 
 def test_readme_minimal_rig_is_valid():
