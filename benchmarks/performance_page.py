@@ -60,6 +60,12 @@ def _pair(entry: dict | None, fmt: str) -> str:
     return f"{entry['median']:{fmt}} / {worst:{fmt}}" if worst is not None else "-"
 
 
+def _minutes(walls: list[float]) -> str:
+    """ "14.3 min (1 run)" or "14.3-19.4 min (2 runs)": the runs' spread."""
+    span = f"{min(walls):.1f}" if len(walls) == 1 else f"{min(walls):.1f}-{max(walls):.1f}"
+    return f"{span} min ({len(walls)} run{'s' if len(walls) > 1 else ''})"
+
+
 def pipeline_lines(runs: list[dict]) -> list[str]:
     walls = [r["wall_s"] / 60 for r in runs if r.get("rendered")]
     if not walls:
@@ -69,9 +75,8 @@ def pipeline_lines(runs: list[dict]) -> list[str]:
     lines = [
         "## The main job",
         "",
-        f"`snakemake --cores 2` from nothing (the synthetic demo rendered, then every job), "
-        f"{len(walls)} run(s) on {last.get('cpu_count')} cores: "
-        f"{min(walls):.1f}-{max(walls):.1f} minutes (`{last['file']}`"
+        f"`snakemake --cores 2` from nothing (the synthetic demo rendered, then every job) "
+        f"on {last.get('cpu_count')} cores: {_minutes(walls)} (`{last['file']}`"
         + (f", commit {last['commit']}" if last.get("commit") else "")
         + ").",
         "",
@@ -141,10 +146,7 @@ def readme_table(runs: list[dict], sets: dict[str, dict], own: dict[str, str]) -
     lines = ["| figure | measured |", "|---|---|"]
     walls = [r["wall_s"] / 60 for r in runs if r.get("rendered")]
     if walls:
-        lines.append(
-            f"| main job from nothing, 2 cores | {min(walls):.1f}-{max(walls):.1f} min "
-            f"({len(walls)} runs) |"
-        )
+        lines.append(f"| main job from nothing, 2 cores | {_minutes(walls)} |")
     random = sets.get("random")
     for scene, variant in own.items():
         m = (random or {}).get("scenes", {}).get(scene, {}).get(variant)

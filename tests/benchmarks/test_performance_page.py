@@ -59,13 +59,14 @@ def test_page_and_readme_table_state_the_files_figures(results):
     own = pp.own_variants()
     assert own["plane"] == "bayes_ph" and own["toy"] == "bayes_full"
     page = pp.page(runs, sets, own)
-    assert "1 run(s) on 2 cores: 15.0-15.0 minutes (`pipeline_demo.json`, commit abc1234)" in page
+    assert "on 2 cores: 15.0 min (1 run) (`pipeline_demo.json`, commit abc1234)" in page
     assert "| reconstruct_frame | 80 | 600.0 |" in page
     assert "| plane | bayes_ph | 0.130 / 0.250 | -0.020 / -0.250 | 0.260 / 0.490 | - | - |" in page
     assert "| bayes_ph | 0.600 | 0.900 | 0.950 |" in page
     assert "sheet" not in page  # no figure the files do not hold
     table = pp.readme_table(runs, sets, own)
-    assert "| main job from nothing, 2 cores | 15.0-15.0 min (1 runs) |" in table
+    assert "| main job from nothing, 2 cores | 15.0 min (1 run) |" in table
+    assert pp._minutes([14.3, 19.4]) == "14.3-19.4 min (2 runs)"
     assert any(
         "plane depth error" in t and "0.13 / 0.25 mm, signed -0.02 / -0.25" in t for t in table
     )
