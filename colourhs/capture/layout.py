@@ -33,12 +33,16 @@ _FRAME = re.compile(r"[0-9]{6}")
 _STATIC_FRAME = "000000"
 
 
-def _problem(problems: list | None, path: Path, text: str) -> None:
-    """Raise the problem, or, collecting every problem (``problems`` a list), note it."""
-    error = CaptureFormatError(path, text)
+def _note(problems: list | None, error: CaptureFormatError) -> None:
+    """Raise ``error``, or, collecting every problem (``problems`` a list), note it."""
     if problems is None:
         raise error
     problems.append(error)
+
+
+def _problem(problems: list | None, path: Path, text: str) -> None:
+    """:func:`_note` the problem ``text`` of ``path``."""
+    _note(problems, CaptureFormatError(path, text))
 
 
 def _near_miss(path: Path) -> str:
@@ -107,9 +111,7 @@ def open_dataset(
             try:
                 check(path, _read_png_header(path, what), rig.image)
             except CaptureFormatError as error:
-                if problems is None:
-                    raise
-                problems.append(error)
+                _note(problems, error)
     return Dataset(root, rig, poses, objects, scenes)
 
 
@@ -238,9 +240,7 @@ def _find_scene(
     try:
         meta = _read_scene_json(folder / "scene.json", objects)
     except CaptureFormatError as error:
-        if problems is None:
-            raise
-        problems.append(error)
+        _note(problems, error)
         meta = {}
     dynamic = meta.get("dynamic", frames != [_STATIC_FRAME])
     if not dynamic and frames != [_STATIC_FRAME]:
