@@ -1,7 +1,16 @@
-"""Shared fixtures: synthetic datasets rendered once per test session."""
+"""Shared fixtures (synthetic datasets rendered once per test session) and the
+opt-in markers.
+
+Markers (``pyproject.toml``): ``slow`` marks the tests that take the suite's
+time, so ``pytest -m "not slow"`` is the quick check while developing; the
+whole suite is what CI runs. ``slurm``, ``bench`` and ``mitsuba`` mark tests
+that need what a plain run lacks: they run only when ``-m`` names them
+(``pytest -m slurm``) and are skipped, with the reason, otherwise.
+"""
 
 from __future__ import annotations
 
+import re
 import shutil
 from pathlib import Path
 
@@ -9,6 +18,44 @@ import pytest
 
 from colourhs.synth.simulated_rig import Nuisances
 from colourhs.synth.synthesise import Preset, synthesise
+
+#: Markers whose tests run only when ``-m`` names them, and why they are opt-in.
+OPT_IN = {
+    "slurm": "starts a local SLURM (needs root and Debian's packages; about 4 minutes)",
+    "bench": "runs the paper benchmark at the tiny preset (about 70 s)",
+    "mitsuba": "renders with Mitsuba 3 (needs pip install mitsuba; about 1.5 min)",
+}
+
+
+#: Fixtures that render a dataset or run the workflow for tens of seconds: a test
+#: that uses one is ``slow``.
+SLOW_FIXTURES = {
+    "whole_job",
+    "plane_calibrated",
+    "clean_dataset",
+    "exact_rigs",
+    "sweep",
+    "random_tiny",
+    "clean_random_tiny",
+    "offset_random_tiny",
+    "fixed_tiny",
+    "full_datasets",
+}
+
+
+@pytest.hookimpl(tryfirst=True)  # before -m selects on the markers added here
+def pytest_collection_modifyitems(config, items):
+    """Mark ``slow`` the tests that use a :data:`SLOW_FIXTURES` fixture; skip the tests
+    of an opt-in marker unless ``-m`` asks for it (not negated)."""
+    expr = config.getoption("markexpr") or ""
+    wanted = {m for m in OPT_IN if re.search(rf"(?<!not )\b{m}\b", expr)}
+    for item in items:
+        if SLOW_FIXTURES & set(getattr(item, "fixturenames", ())):
+            item.add_marker(pytest.mark.slow)
+        for marker, why in OPT_IN.items():
+            if marker not in wanted and item.get_closest_marker(marker):
+                item.add_marker(pytest.mark.skip(reason=f"opt-in: pytest -m {marker} ({why})"))
+
 
 # 640x480 like the demo preset, with fewer board poses and sheet frames.
 CHECK_PRESET = Preset("check", 640, 480, 1250.0, 2, n_poses=3, sheet_frames=1)

@@ -4,7 +4,6 @@ projection is the per-job figures x their counts."""
 from __future__ import annotations
 
 import json
-import os
 import re
 import subprocess
 import sys
@@ -13,12 +12,9 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
-# About 65-80 s of 20 workflow jobs as processes: opt-in, so the suite stays under 15
-# minutes on 2 cores (a clean-clone .ci/run took 860 s with it).
-pytestmark = pytest.mark.skipif(
-    not os.environ.get("COLOURHS_TEST_BENCH"),
-    reason="opt-in: set COLOURHS_TEST_BENCH=1 (runs the paper benchmark at tiny, about 70 s)",
-)
+# About 65-80 s of 20 workflow jobs as processes: opt-in (pytest -m bench), so the
+# suite stays within its time on 2 cores.
+pytestmark = pytest.mark.bench
 #: Every rule of the workflow but `all` (the synthetic checkpoint is no `rule`).
 RULES = {
     m

@@ -360,6 +360,7 @@ def test_crosstalk_ratio_sigma_known_answer():
     assert crosstalk_ratio_sigma(s, [view], a, b, {}, (same, C)) == pytest.approx(0.0, abs=1e-9)
 
 
+@pytest.mark.slow
 def test_ratio_sigma_with_crosstalk_term_is_calibrated(tmp_path):
     """With every nuisance on corner-tiny rigs (seeds 0-2, cross-talk from the pipeline's
     calibration with the board's LED factor), the pairs' ratio errors against the truth

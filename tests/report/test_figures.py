@@ -136,6 +136,7 @@ def test_animation_frames(tmp_path):
     assert not (tmp_path / "b.gif").exists()
 
 
+@pytest.mark.slow
 def test_animation_streams_frames_into_the_same_gif(tmp_path):
     """A generator of frames is consumed one frame at a time, each kept as its
     palette image: NumPy never holds more than a frame or two (traced peak

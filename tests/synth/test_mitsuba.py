@@ -1,4 +1,4 @@
-"""Mitsuba 3 as a second renderer of the board captures (opt-in, needs ``pip install mitsuba``).
+"""Mitsuba 3 as a second renderer of the board captures (opt-in: ``pytest -m mitsuba``).
 
 Our renderer's image formation (eq. 4) against Mitsuba's on the Lambertian
 board, the spot profile used for Mitsuba's true mu maps against Mitsuba's own
@@ -8,16 +8,11 @@ truth.
 
 from __future__ import annotations
 
-import os
-
 import cv2
 import numpy as np
 import pytest
 
-pytestmark = pytest.mark.skipif(
-    not os.environ.get("COLOURHS_TEST_MITSUBA"),
-    reason="opt-in: set COLOURHS_TEST_MITSUBA=1 (needs pip install mitsuba; about 1.5 min)",
-)
+pytestmark = pytest.mark.mitsuba
 
 
 def _draw(seed=0, noise=False):

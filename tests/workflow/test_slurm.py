@@ -9,9 +9,8 @@ files and metrics.csv. Measured on a 2-core machine: 17 SLURM jobs, 3 min
 (the local run 37 s: each SLURM job starts a fresh Snakemake and Python),
 depth files identical to the bit.
 
-Opt-in (``COLOURHS_TEST_SLURM=1``): it needs root and Debian's packages,
-and it does not fit the suite's 15 minutes on 2 cores; skipped with the
-reason otherwise.
+Opt-in (``pytest -m slurm``): it needs root and Debian's packages, and
+minutes of a plain run's time; skipped with the reason otherwise.
 """
 
 from __future__ import annotations
@@ -34,8 +33,6 @@ SCRIPT = PROJECT_ROOT / "scripts" / "slurm-local.sh"
 
 
 def _why_not() -> str | None:
-    if os.environ.get("COLOURHS_TEST_SLURM") != "1":
-        return "opt-in: set COLOURHS_TEST_SLURM=1 (starts a local SLURM; about 4 minutes)"
     if os.geteuid() != 0:
         return "needs root to start the SLURM daemons"
     if not shutil.which("apt-get") and not shutil.which("slurmctld"):
@@ -43,7 +40,10 @@ def _why_not() -> str | None:
     return None
 
 
-pytestmark = pytest.mark.skipif(_why_not() is not None, reason=_why_not() or "")
+pytestmark = [
+    pytest.mark.slurm,
+    pytest.mark.skipif(_why_not() is not None, reason=_why_not() or ""),
+]
 
 
 def _snakemake(directory, run_yaml, *extra):
