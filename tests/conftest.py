@@ -116,7 +116,7 @@ def plane_calibrated(tmp_path_factory):
     }
 
 
-# Capture-format tests (tests/test_capture*.py, builders in tests/capture/capture_helpers.py).
+# Capture-format tests (tests/capture/test_capture*.py, builders in tests/capture_helpers.py).
 
 
 @pytest.fixture(scope="module")

@@ -138,9 +138,15 @@ def test_one_variant_table():
     assert enum == list(VARIANTS)
     # The workflow reads it through colourhs.workflow.plan (common.smk's plan).
     plan = (PACKAGE / "workflow" / "plan.py").read_text()
-    assert "from colourhs.workflow.variants import VARIANTS" in plan and "VARIANTS = {" not in plan
+    assert "from colourhs.workflow.variants import" in plan and "VARIANTS = {" not in plan
     common = (PACKAGE.parent / "workflow/rules/common.smk").read_text()
     assert "from colourhs.workflow.plan import" in common and "VARIANTS" not in common
+    # The reconstruction rule's variant wildcard is the table's HS variants, not a copy.
+    from colourhs.workflow.variants import HS_VARIANT_PATTERN
+
+    assert HS_VARIANT_PATTERN == "ml_full|bayes_nocalib|bayes_ph|bayes_full"
+    rules = (PACKAGE.parent / "workflow/rules/reconstruct.smk").read_text()
+    assert "variant=HS_VARIANT_PATTERN," in rules and "bayes_nocalib|" not in rules
 
 
 def test_each_stage_imports_only_what_it_needs(tmp_path):

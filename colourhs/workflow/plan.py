@@ -24,7 +24,7 @@ from pathlib import Path
 
 from colourhs.capture import COLOURS, CaptureFormatError, Dataset, all_images, open_dataset
 from colourhs.capture import validate as validate_dataset
-from colourhs.workflow.variants import VARIANTS, same_as
+from colourhs.workflow.variants import HS_VARIANT_PATTERN, VARIANTS, same_as  # noqa: F401 (rules)
 
 #: The folder of the synthetic datasets: SYNTH_ROOT/<name>.
 SYNTH_ROOT = "data/synthetic"

@@ -42,6 +42,9 @@ VARIANTS = {
 VARIANT_ORDER = tuple(VARIANTS)
 #: id -> the paper's name.
 VARIANT_LABELS = {k: v["label"] for k, v in VARIANTS.items()}
+#: The colour HS variants' ids as a regular expression (the workflow's ``variant``
+#: wildcard of the reconstruction rule; ``vh`` has its own rule).
+HS_VARIANT_PATTERN = "|".join(k for k, v in VARIANTS.items() if v["method"] != "vh")
 
 
 def parse_variants(text: str) -> list[str]:

@@ -1,6 +1,6 @@
 """colourhs.workflow.plan: what the Snakemake rules read, make and pass on.
 
-On the capture tests' small dataset (tests/capture/capture_helpers.py; scene toy: one frame,
+On the capture tests' small dataset (tests/capture_helpers.py; scene toy: one frame,
 masks, ground truth, the chromatic object slinky; scene wave: two frames, nothing
 else), with a config validated as the Snakefile does (the schema's defaults set).
 """

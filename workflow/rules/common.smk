@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from colourhs.workflow.plan import (
+    HS_VARIANT_PATTERN,
     MalformedDatasetError,
     WorkflowPlan,
     cli_options,

@@ -14,7 +14,7 @@ rule reconstruct_frame:
     benchmark:
         "benchmarks/snakemake/reconstruct_frame/{name}/{scene}/{variant}/{frame}.tsv"
     wildcard_constraints:
-        variant="ml_full|bayes_nocalib|bayes_ph|bayes_full",
+        variant=HS_VARIANT_PATTERN,
         frame="[0-9]{6}",
     # The longest jobs of the workflow start first (after the hulls they read),
     # so the run does not end on one reconstruction with a core idle.

@@ -1,4 +1,5 @@
-"""Builders of a small valid capture-format dataset, shared by tests/test_capture*.py."""
+"""Builders of a small valid capture-format dataset, shared by the capture tests
+(tests/capture/) and the workflow plan tests."""
 
 from __future__ import annotations
 
