@@ -71,7 +71,7 @@ def pipeline_lines(runs: list[dict]) -> list[str]:
     if not walls:
         return []
     last = [r for r in runs if r.get("rendered")][-1]
-    rules = sorted(last["rules"], key=lambda r: -float(r.get("seconds", r.get("s", 0)) or 0))
+    rules = sorted(last["rules"], key=lambda r: -float(r.get("total_s") or r.get("seconds") or 0))
     lines = [
         "## The main job",
         "",
