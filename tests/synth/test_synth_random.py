@@ -10,16 +10,19 @@ import json
 from dataclasses import replace
 
 import cv2
-import h5py
 import numpy as np
 import pytest
-from hs_constraint import constraint_residual, pair_rows, surface_points
+from hs_constraint import (
+    constraint_residual,
+    frame_images,
+    gt_points,
+    pair_rows,
+    true_calibration,
+)
 
 from colourhs.calibration.markers import to_grey8
 from colourhs.capture import load_rig, open_dataset, read_image, validate
 from colourhs.common.geometry import project
-from colourhs.common.ply import load_mesh
-from colourhs.common.sampling import sample_bilinear
 from colourhs.synth import randomrig as rr
 from colourhs.synth.brdf import Material
 from colourhs.synth.simulated_rig import COLOURS, Nuisances
@@ -381,22 +384,9 @@ def test_white_specular_breaks_separable_chromaticity():
 
 # --------------------------------------------------------------------------- HS constraint
 def _residuals(root, scene):
-    rig = load_rig(root)
-    images, saturated = {}, {}
-    for cam in rig.camera_names:
-        path = root / "scenes" / scene / "frames" / "000000" / f"{cam}.png"
-        images[cam], saturated[cam] = read_image(path, rig.image)
-    v, t, nrm = load_mesh(root / "scenes" / scene / "gt" / "000000.ply")
-    pts, nrm, _ = surface_points(
-        v, t, nrm, rig.cameras[0], rig.cameras, rig.image.width, rig.image.height
-    )
-    bad = np.zeros(len(pts), bool)
-    for cam in rig.cameras:
-        uv = project(pts, cam.K, cam.dist, cam.R, cam.t)
-        bad |= sample_bilinear(saturated[cam.name].astype(float), uv) > 0
-    pts, nrm = pts[~bad], nrm[~bad]
-    with h5py.File(root / "gt" / "photometric.h5") as f:
-        mu = {f"{c}/{k}": f[c][k][()] for c in f for k in f[c]}
+    rig, images, saturated = frame_images(root, scene)
+    pts, nrm = gt_points(root, scene, rig, saturated)
+    mu, _ = true_calibration(root, scene)
     cams = {c.name: c for c in rig.cameras}
     w = pair_rows(pts, images, cams, rig.reciprocal_pairs(), mu=mu)
     return constraint_residual(w, nrm[:, None, :]), len(pts)
