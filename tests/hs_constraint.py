@@ -1,6 +1,10 @@
-"""The colour HS constraint, equations (3) and (5), in plain NumPy: the tests'
-reference (the renderer's output satisfies it; the pipeline's compiled data term is
-checked against ``colourhs.reconstruct.reference`` and through these rows)."""
+"""The colour HS constraint, equations (3) and (5), in plain NumPy: the tests' oracle.
+
+The renderer's output satisfies it (:func:`pair_rows` at the ground truth), and
+the compiled data term is checked against :func:`numpy_data_term`, the same
+quantity written the obvious way. ``benchmarks/bench_reconstruct.py`` times the
+compiled kernel against it too.
+"""
 
 from __future__ import annotations
 
@@ -121,6 +125,66 @@ def pair_rows(
             )
         )
     return np.stack(rows, axis=1)
+
+
+def numpy_data_term(
+    rays: np.ndarray,
+    c_ref: np.ndarray,
+    depths: np.ndarray,
+    cameras,
+    prepared,
+    pairs,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The data term of every pixel and depth hypothesis in plain NumPy (the oracle of
+    :func:`colourhs.reconstruct.dataterm.data_term`: same arguments, same validity rules).
+
+    sigma_3 / sigma_2 of the 3 x 3 matrix W of the reciprocal pairs' rows
+    (:func:`constraint_vector`) at the points ``c_ref + z rays``, and W's null
+    vector as the normal: vectorised over pixels and hypotheses, the projection
+    of :func:`colourhs.common.geometry.project`, :func:`sample_bilinear` on the
+    :class:`~colourhs.reconstruct.dataterm.Prepared` images, ``numpy.linalg.eigh``
+    of W^T W in float64. No numba, no float32 arithmetic, no attempt at speed.
+    A hypothesis is valid where every sample lies inside its image and is usable
+    (positive), W has rank 2 at least, and the normal faces every light by more
+    than ``MIN_FACING_COS``.
+
+    Returns
+    -------
+    cost : (N, K) float32, ``INVALID_COST`` where invalid.
+    normal : (N, K, 3) float32 unit normals towards the reference camera, 0 where invalid.
+    """
+    from colourhs.reconstruct.dataterm import INVALID_COST, MIN_FACING_COS
+
+    pair_cams, _ = pairs
+    rays = np.asarray(rays, float)
+    z = np.asarray(depths, float)
+    X = np.asarray(c_ref, float) + rays[:, None, :] * z[None, :, None]  # (N, K, 3)
+    ns = int(prepared.slots.max()) + 1
+    samples, ok = [], np.ones(X.shape[:2], bool)
+    for cam, S in zip(cameras, prepared.S, strict=True):
+        samples.append(sample_bilinear(S, project(X, cam.K, cam.dist, cam.R, cam.t)))
+        ok &= np.all(np.isfinite(samples[-1]), axis=-1)  # NaN outside the image
+    Wm = np.zeros(X.shape[:2] + (3, 3))
+    for p, (a, b) in enumerate(pair_cams):
+        ja, jb = prepared.slots[p]
+        Ja, Jb = samples[a][..., ja], samples[b][..., jb]
+        ok &= (Ja > 0) & (Jb > 0)
+        pp = samples[a][..., ns + ja] * samples[b][..., ns + jb] if prepared.use_p else 1.0
+        Wm[..., p, :] = constraint_vector(
+            X, cameras[a].light_centre, cameras[b].light_centre, Ja, Jb, p_ba=pp, p_ab=pp
+        )
+    Wm = np.where(ok[..., None, None], Wm, 0.0)
+    lam, vec = np.linalg.eigh(np.einsum("nkpi,nkpj->nkij", Wm, Wm))
+    n = vec[..., 0]
+    n = np.where((np.sum(n * rays[:, None, :], axis=-1) > 0)[..., None], -n, n)
+    ok &= lam[..., 1] > 0
+    for cam in cameras:
+        d = np.asarray(cam.light_centre, float) - X
+        ok &= np.sum(n * d, axis=-1) > MIN_FACING_COS * np.linalg.norm(d, axis=-1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cost = np.sqrt(np.clip(lam[..., 0] / lam[..., 1], 0.0, 4.0))
+    cost = np.where(ok, cost, INVALID_COST).astype(np.float32)
+    return cost, np.where(ok[..., None], n, 0.0).astype(np.float32)
 
 
 def surface_points(

@@ -27,6 +27,7 @@ from scipy.sparse.linalg import spsolve
 from colourhs.calibration.photometric_samples import KappaSamples
 from colourhs.capture import Camera
 from colourhs.common.geometry import normalised_coordinates, pixel_grid
+from colourhs.common.sampling import bilinear_footprint, bilinear_weights
 
 
 @dataclass(frozen=True)
@@ -64,16 +65,16 @@ class Grid:
     def weights(self, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Bilinear interpolation: node indices (N, 4) and weights (N, 4) of pixels ``uv``."""
         ny, nx = self.shape
-        gx = np.clip(np.asarray(uv[:, 0], float) / self.spacing, 0, nx - 1)
-        gy = np.clip(np.asarray(uv[:, 1], float) / self.spacing, 0, ny - 1)
-        x0 = np.minimum(np.floor(gx).astype(int), nx - 2)
-        y0 = np.minimum(np.floor(gy).astype(int), ny - 2)
-        fx, fy = gx - x0, gy - y0
+        uv = np.asarray(uv, float)
+        # Beyond the grid: clamped to its border (the footprint clamps).
+        _, x0, y0, fx, fy = bilinear_footprint(
+            uv[:, 0] / self.spacing, uv[:, 1] / self.spacing, nx, ny
+        )
+        x0, y0 = x0.astype(int), y0.astype(int)
         idx = np.stack(
             [y0 * nx + x0, y0 * nx + x0 + 1, (y0 + 1) * nx + x0, (y0 + 1) * nx + x0 + 1], 1
         )
-        w = np.stack([(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy], 1)
-        return idx, w
+        return idx, np.stack(bilinear_weights(fx, fy), 1)
 
     def matrix(self, uv: np.ndarray) -> sp.csr_matrix:
         """(N, size) sparse bilinear interpolation matrix of pixels ``uv``."""

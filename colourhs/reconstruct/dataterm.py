@@ -30,6 +30,8 @@ import numpy as np
 
 from colourhs.capture import MIN_SIGNAL
 from colourhs.common.geometry import model_coefficients
+from colourhs.common.sampling import footprint_jit, weights_jit
+from colourhs.reconstruct.constraint import hs_row
 from colourhs.reconstruct.simd import LANES, bilinear4, cache_tagged
 
 INVALID_COST = 1.0
@@ -144,22 +146,6 @@ def _falloff(d0, d1, d2):
 
 
 @nb.njit(cache=True, fastmath=True, inline="always")
-def _footprint(u, v, Ww, Hh):
-    """Bilinear footprint of pixel (u, v) in a Ww x Hh image: whether (u, v)
-    is inside, the top-left texel (u0, v0) (float, exact) and the four weights
-    in float64 (then rounded by the caller: a weight that is tiny but positive
-    stays positive, so a SENTINEL under it still counts)."""
-    inside = (u >= 0.0) & (v >= 0.0) & (u <= Ww - 1) & (v <= Hh - 1)
-    u = min(max(u, 0.0), Ww - 1.0)
-    v = min(max(v, 0.0), Hh - 1.0)
-    u0 = min(np.floor(u), Ww - 2.0)
-    v0 = min(np.floor(v), Hh - 2.0)
-    a = u - u0
-    b = v - v0
-    return inside, u0, v0, (1.0 - a) * (1.0 - b), a * (1.0 - b), (1.0 - a) * b, a * b
-
-
-@nb.njit(cache=True, fastmath=True, inline="always")
 def _into_camera(depths, geo, lens, d, rational, Ww, Hh, cbase, row, nv, wts, base, fall, ok, c):
     """Every hypothesis k (z-depth ``depths[k]``) in camera c: the light
     fall-off ``fall[c, k]``, the bilinear weights ``wts[c, :, k]`` and the
@@ -186,7 +172,10 @@ def _into_camera(depths, geo, lens, d, rational, Ww, Hh, cbase, row, nv, wts, ba
             u, v = _to_pixel(x, y, fx, sk, cx, fy, cy, d)
         else:
             u, v = _to_pixel_poly(x, y, fx, sk, cx, fy, cy, d)
-        inside, u0, v0, w00, w01, w10, w11 = _footprint(u, v, Ww, Hh)
+        inside, u0, v0, a, b = footprint_jit(u, v, Ww, Hh)
+        # float64 weights rounded into wts: a tiny positive weight stays positive,
+        # so a SENTINEL under it still counts.
+        w00, w01, w10, w11 = weights_jit(a, b)
         wts[c, 0, k] = w00
         wts[c, 1, k] = w01
         wts[c, 2, k] = w10
@@ -272,7 +261,8 @@ def _kernel(
                 )
                 u = np.round(u) if abs(u - np.round(u)) < 1e-6 else u
                 v = np.round(v) if abs(v - np.round(v)) < 1e-6 else v
-                inside, u0, v0, w00, w01, w10, w11 = _footprint(u, v, Ww, Hh)
+                inside, u0, v0, a, b = footprint_jit(u, v, Ww, Hh)
+                w00, w01, w10, w11 = weights_jit(a, b)
                 at = int(ref * plane + v0 * row + u0 * nv)
                 for g in range(0, nv, LANES):
                     bilinear4(Sf, at + g, nv, row, w00, w01, w10, w11, smp, (ref * nv + g) * Kn, Kn)
@@ -370,9 +360,16 @@ def _kernel(
                     pp = smp[a, ns + ja, k] * smp[b, ns + jb, k] if use_p else 1.0
                     sa = pp * Ja * fall[a, k]
                     sb = pp * Jb * fall[b, k]
-                    w0 = sa * (la0 - z * r0) - sb * (lb0 - z * r0)
-                    w1 = sa * (la1 - z * r1) - sb * (lb1 - z * r1)
-                    w2 = sa * (la2 - z * r2) - sb * (lb2 - z * r2)
+                    w0, w1, w2 = hs_row(
+                        sa,
+                        sb,
+                        la0 - z * r0,
+                        la1 - z * r1,
+                        la2 - z * r2,
+                        lb0 - z * r0,
+                        lb1 - z * r1,
+                        lb2 - z * r2,
+                    )
                     M[0, k] += w0 * w0
                     M[1, k] += w1 * w1
                     M[2, k] += w2 * w2

@@ -26,6 +26,7 @@ import warnings
 import numba as nb
 import numpy as np
 
+from colourhs.reconstruct.constraint import hs_row, row_variance
 from colourhs.reconstruct.sides import HelmholtzSides, sample_sides, whitened_cost
 
 CANDIDATES = 4  # local minima of the per-pixel cost kept as candidate roots
@@ -156,14 +157,14 @@ def _plane_chi2(s, var, v, n, out):
         nx, ny, nz = n[i, 0], n[i, 1], n[i, 2]
         total = 0.0
         for k in range(P):
-            sa, sb = s[i, k, 0], s[i, k, 1]
-            wx = sa * v[i, k, 0, 0] - sb * v[i, k, 1, 0]
-            wy = sa * v[i, k, 0, 1] - sb * v[i, k, 1, 1]
-            wz = sa * v[i, k, 0, 2] - sb * v[i, k, 1, 2]
-            ca = v[i, k, 0, 0] * nx + v[i, k, 0, 1] * ny + v[i, k, 0, 2] * nz
-            cb = v[i, k, 1, 0] * nx + v[i, k, 1, 1] * ny + v[i, k, 1, 2] * nz
+            vax, vay, vaz = v[i, k, 0, 0], v[i, k, 0, 1], v[i, k, 0, 2]
+            vbx, vby, vbz = v[i, k, 1, 0], v[i, k, 1, 1], v[i, k, 1, 2]
+            wx, wy, wz = hs_row(s[i, k, 0], s[i, k, 1], vax, vay, vaz, vbx, vby, vbz)
+            sd2 = row_variance(
+                var[i, k, 0], var[i, k, 1], vax, vay, vaz, vbx, vby, vbz, nx, ny, nz
+            )[0]
             r = wx * nx + wy * ny + wz * nz
-            total += r * r / (var[i, k, 0] * ca * ca + var[i, k, 1] * cb * cb)
+            total += r * r / sd2
         out[i] = total
 
 

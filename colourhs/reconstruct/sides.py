@@ -26,6 +26,8 @@ from scipy.ndimage import gaussian_filter
 
 from colourhs.capture import MIN_SIGNAL
 from colourhs.common.geometry import model_coefficients
+from colourhs.common.sampling import footprint_jit, weights_jit
+from colourhs.reconstruct.constraint import hs_row, row_variance
 from colourhs.reconstruct.dataterm import to_pixel
 
 BLUR_PX = 1.0  # Gaussian blur of the images before sampling, pixels (see side_maps)
@@ -334,17 +336,12 @@ def _sample_kernel(
             noise = nan
             gu = nan
             gv = nan
+            inside, fu0, fv0, a, b = footprint_jit(u, vv, Ww, Hh)
             if order == 3:
                 J, gu, gv, noise = _cubic(maps, j, u, vv, blurred, corr)
-            elif (u >= 0.0) and (vv >= 0.0) and (u <= Ww - 1) and (vv <= Hh - 1):
-                u0 = min(int(np.floor(u)), Ww - 2)
-                v0 = min(int(np.floor(vv)), Hh - 2)
-                a = u - u0
-                b = vv - v0
-                w00 = (1.0 - a) * (1.0 - b)
-                w01 = a * (1.0 - b)
-                w10 = (1.0 - a) * b
-                w11 = a * b
+            elif inside:
+                u0, v0 = int(fu0), int(fv0)
+                w00, w01, w10, w11 = weights_jit(a, b)
                 j00, j01 = maps[j, v0, u0, 0], maps[j, v0, u0 + 1, 0]
                 j10, j11 = maps[j, v0 + 1, u0, 0], maps[j, v0 + 1, u0 + 1, 0]
                 J = w00 * j00 + w01 * j01 + w10 * j10 + w11 * j11
@@ -498,10 +495,11 @@ def _whitened_rows(s, var, v, w, ok):
     for i in nb.prange(N):
         good = True
         for k in range(P):
-            for j in range(3):
-                x = s[i, k, 0] * v[i, k, 0, j] - s[i, k, 1] * v[i, k, 1, j]
-                w[i, k, j] = x
-                good &= np.isfinite(x)
+            vax, vay, vaz = v[i, k, 0, 0], v[i, k, 0, 1], v[i, k, 0, 2]
+            vbx, vby, vbz = v[i, k, 1, 0], v[i, k, 1, 1], v[i, k, 1, 2]
+            wx, wy, wz = hs_row(s[i, k, 0], s[i, k, 1], vax, vay, vaz, vbx, vby, vbz)
+            w[i, k, 0], w[i, k, 1], w[i, k, 2] = wx, wy, wz
+            good &= np.isfinite(wx) and np.isfinite(wy) and np.isfinite(wz)
             good &= var[i, k, 0] > 0 and var[i, k, 1] > 0
         ok[i] = good
         if not good:
@@ -535,10 +533,12 @@ def _whitened_kernel(w, var, v, ok, R, passes, chi2, normal):
                 r = (w[i, k, 0] * nx + w[i, k, 1] * ny + w[i, k, 2] * nz) / scale[k]
                 lam += r * r
                 if ok[i]:
-                    ca = v[i, k, 0, 0] * nx + v[i, k, 0, 1] * ny + v[i, k, 0, 2] * nz
-                    cb = v[i, k, 1, 0] * nx + v[i, k, 1, 1] * ny + v[i, k, 1, 2] * nz
-                    sd = np.sqrt(var[i, k, 0] * ca * ca + var[i, k, 1] * cb * cb)
-                    scale[k] = max(sd, 1e-300)
+                    vax, vay, vaz = v[i, k, 0, 0], v[i, k, 0, 1], v[i, k, 0, 2]
+                    vbx, vby, vbz = v[i, k, 1, 0], v[i, k, 1, 1], v[i, k, 1, 2]
+                    sd2 = row_variance(
+                        var[i, k, 0], var[i, k, 1], vax, vay, vaz, vbx, vby, vbz, nx, ny, nz
+                    )[0]
+                    scale[k] = max(np.sqrt(sd2), 1e-300)
         if nx * R[i, 0] + ny * R[i, 1] + nz * R[i, 2] > 0:
             nx, ny, nz = -nx, -ny, -nz
         chi2[i] = lam if ok[i] else np.nan

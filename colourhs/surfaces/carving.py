@@ -31,6 +31,7 @@ import numpy as np
 from colourhs.capture import Camera
 from colourhs.common.geometry import normalised_coordinates, pixels_of
 from colourhs.common.progress import bar, stage
+from colourhs.common.sampling import bilinear_footprint
 from colourhs.surfaces.silhouettes import silhouette_distance
 
 __all__ = ["SLAB_VOXELS", "any_inside", "carve", "carve_field", "grid_shape", "in_slabs"]
@@ -149,10 +150,9 @@ def _camera_distance(Xc, cam, sdf, box):
     idx, u, v = idx[inside], u[inside], v[inside]
     ok[:] = False
     ok[idx] = True
-    u0 = np.clip(np.floor(u), 0, W - 2)
-    v0 = np.clip(np.floor(v), 0, H - 2)
-    fu = np.clip(u - u0, 0, 1).astype(np.float32)
-    fv = np.clip(v - v0, 0, 1).astype(np.float32)
+    # Within half a pixel of the border: clamped to the border texel's value.
+    _, u0, v0, fu, fv = bilinear_footprint(u, v, W, H)
+    fu, fv = fu.astype(np.float32), fv.astype(np.float32)
     flat = sdf.ravel()
     i = v0.astype(np.intp) * W + u0.astype(np.intp)
     top = flat[i] + fu * (flat[i + 1] - flat[i])

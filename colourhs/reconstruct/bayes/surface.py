@@ -48,6 +48,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
+from colourhs.reconstruct.constraint import hs_row, row_variance
 from colourhs.reconstruct.sides import HelmholtzSides, sample_sides
 
 ROBUST = 3.0  # Geman-McClure scale, in units of the predicted noise per row
@@ -172,12 +173,9 @@ def _sampson(s, var, v, p, k, nx, ny, nz):
     """(w . N) / sqrt(N' C N) of pair k at pixel p, with the pieces of its derivative."""
     vax, vay, vaz = v[p, k, 0, 0], v[p, k, 0, 1], v[p, k, 0, 2]
     vbx, vby, vbz = v[p, k, 1, 0], v[p, k, 1, 1], v[p, k, 1, 2]
-    sa, sb = s[p, k, 0], s[p, k, 1]
-    ca = vax * nx + vay * ny + vaz * nz
-    cb = vbx * nx + vby * ny + vbz * nz
-    sd2 = var[p, k, 0] * ca * ca + var[p, k, 1] * cb * cb
+    sd2, ca, cb = row_variance(var[p, k, 0], var[p, k, 1], vax, vay, vaz, vbx, vby, vbz, nx, ny, nz)
     sd = np.sqrt(sd2)
-    wx, wy, wz = sa * vax - sb * vbx, sa * vay - sb * vby, sa * vaz - sb * vbz
+    wx, wy, wz = hs_row(s[p, k, 0], s[p, k, 1], vax, vay, vaz, vbx, vby, vbz)
     r = (wx * nx + wy * ny + wz * nz) / sd
     return r, sd, sd2, ca, cb, wx, wy, wz
 
