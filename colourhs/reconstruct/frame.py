@@ -17,6 +17,7 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from functools import partial
 from time import perf_counter
 
@@ -35,10 +36,10 @@ from colourhs.common.geometry import (
     ray_directions,
 )
 from colourhs.common.progress import bar, stage
-from colourhs.reconstruct.bayes.integrate import initial_surface
+from colourhs.reconstruct.bayes.integrate import IntegrationOptions, initial_surface
 from colourhs.reconstruct.dataterm import INVALID_COST, data_term, pair_arrays, prepare_images
 from colourhs.reconstruct.drops import drop_codes, reference_unusable
-from colourhs.reconstruct.inputs import Frame, load_frame
+from colourhs.reconstruct.inputs import Frame, RayGrid, load_frame
 from colourhs.reconstruct.options import (
     MAX_SIGMA,
     WORKING_RADIUS,
@@ -48,6 +49,19 @@ from colourhs.reconstruct.options import (
 
 METHODS = ("ml", "bayes")
 CHUNK = 16384  # pixels per data-term call (bounds the float32 normals buffer)
+
+
+@dataclass(frozen=True)
+class _Search:
+    """What both methods search over: the reference camera and its ray grid, the
+    foreground pixels to reconstruct (flat indices into the grid), the depth
+    hypotheses (metres) and the reciprocal pairs (:func:`.dataterm.pair_arrays`)."""
+
+    ref: Camera
+    grid: RayGrid
+    pix: np.ndarray
+    depths: np.ndarray
+    pairs: tuple
 
 
 def reference_rays(camera: Camera, width: int, height: int) -> np.ndarray:
@@ -183,10 +197,9 @@ def reconstruct(
         "tau": opts.tau,
         "pixels": int(len(pix)),
     }
+    search = _Search(ref, RayGrid(rays, ref.centre, (H, W)), pix, depths, pairs)
     solve = _ml_reconstruction if method == "ml" else _bayes_reconstruction
-    z, nrm, ok, conf, sigma, stages = solve(
-        frame, evaluate, rays, pix, depths, ref, pairs, (H, W), opts, info, progress, say
-    )
+    z, nrm, ok, conf, sigma, stages = solve(frame, evaluate, search, opts, info, progress, say)
     limit = MAX_SIGMA * np.abs(z) if opts.max_sigma_mm is None else opts.max_sigma_mm * 1e-3
     with np.errstate(invalid="ignore"):
         uncertain = ok & (sigma > limit)  # an unknown (NaN) sigma flags nothing
@@ -220,25 +233,20 @@ def reconstruct(
     )
 
 
-def _ml_reconstruction(
-    frame, evaluate, rays, pix, depths, ref, pairs, shape, opts, info, progress, say
-):
-    """ML HS of the foreground ``pix``: the cost volume (no normals: ML HS takes its
-    normals from its own minima), then :func:`_ml_solution`. Returns (H*W,) depth,
-    (H*W, 3) normal, validity, confidence, uncertainty and the stages that
-    removed pixels (:func:`.drops.drop_codes`); ``info`` is not changed."""
+def _ml_reconstruction(frame, evaluate, search: _Search, opts, info, progress, say):
+    """ML HS of the foreground ``search.pix``: the cost volume (no normals: ML HS
+    takes its normals from its own minima), then :func:`_ml_solution`. Returns
+    (H*W,) depth, (H*W, 3) normal, validity, confidence, uncertainty and the
+    stages that removed pixels (:func:`.drops.drop_codes`); ``info`` is not changed."""
+    pix, depths = search.pix, search.depths
     cost = np.empty((len(pix), len(depths)), np.float32)
-    evaluate(rays[pix], depths, show=progress, out=(cost, None, np.arange(len(pix))))
-    z, nrm, ok, conf, sigma = _ml_solution(
-        frame, cost, depths, pix, rays, ref, pairs, shape, opts.max_cost, opts.blur_px, say
-    )
+    evaluate(search.grid.rays[pix], depths, show=progress, out=(cost, None, np.arange(len(pix))))
+    z, nrm, ok, conf, sigma = _ml_solution(frame, cost, search, opts.max_cost, opts.blur_px, say)
     return z, nrm, ok, conf, sigma, [("data_term", ok)]
 
 
-def _bayes_reconstruction(
-    frame, evaluate, rays, pix, depths, ref, pairs, shape, opts, info, progress, say
-):
-    """Bayesian HS of the foreground ``pix`` (paper section III-E, then beyond it):
+def _bayes_reconstruction(frame, evaluate, search: _Search, opts, info, progress, say):
+    """Bayesian HS of the foreground ``search.pix`` (paper section III-E, then beyond it):
     the data term written into the MRF box's volumes, the MAP labelling
     (:func:`_bayes_labelling`), the initial surface
     (:func:`colourhs.reconstruct.bayes.integrate.initial_surface`) and the consistent
@@ -247,6 +255,7 @@ def _bayes_reconstruction(
     (metres, :mod:`colourhs.reconstruct.bayes.uncertainty`; NaN without the
     refinement) and the stages that removed pixels (:func:`.drops.drop_codes`); adds
     the MRF's and the surface's figures to ``info``."""
+    rays, pix, depths, shape = search.grid.rays, search.pix, search.depths, search.grid.shape
     H, W = shape
     box, local = _mrf_box(pix, shape)
     h, w = box[1] - box[0], box[3] - box[2]
@@ -266,34 +275,18 @@ def _bayes_reconstruction(
         # Wrong labels (a few labels off or worse) must not move the surface.
         anchor = 2.0 * float(depths[1] - depths[0]) / float(np.median(depths))
         say(f"bayes: initial surface ({opts.refine_passes} passes of normal integration)")
-        z, nrm, ok = initial_surface(
-            z,
-            nrm,
-            ok,
-            rays,
-            pix,
-            shape,
-            evaluate,
+        integration = IntegrationOptions(
+            opts.refine_passes,
             opts.data_weight,
             opts.edge_m,
-            opts.refine_passes,
+            anchor,
             opts.link_m,
             min_component_px(opts.min_component, shape),
-            anchor,
-            say,
         )
+        z, nrm, ok = initial_surface(z, nrm, ok, rays, pix, shape, evaluate, integration, say)
         stages.append(("surface", ok.copy()))
         z, nrm, ok, weights, sigma, info["surface"] = _consistent_surface(
-            frame,
-            z,
-            ok,
-            rays,
-            ref,
-            pairs,
-            opts.surface_iterations,
-            opts.spline_px,
-            opts.blur_px,
-            say,
+            frame, z, ok, search, opts.surface_iterations, opts.spline_px, opts.blur_px, say
         )
         conf = np.where(ok, weights, 0.0).astype(np.float32)
         stages.append(("refinement", ok.copy()))
@@ -356,15 +349,21 @@ def data_term_evaluator(frame: Frame, ref: Camera, pairs):
     return evaluate
 
 
-def _ml_solution(
-    frame, cost, depths, pix, rays, ref, pairs, shape, max_cost, blur_px=None, say=None
-):
+def _ml_solution(frame, cost, search: _Search, max_cost, blur_px=None, say=None):
     """ML HS (:func:`colourhs.reconstruct.ml.ml_depth`) as (H*W,) depth, (H*W, 3)
     normal, validity, confidence (1 - the best hypothesis' cost) and each
     depth's 1-sigma uncertainty (:func:`ml_sigma`, metres)."""
     from colourhs.reconstruct.ml import ml_depth
     from colourhs.reconstruct.sides import helmholtz_sides
 
+    rays, pix, depths, ref, pairs = (
+        search.grid.rays,
+        search.pix,
+        search.depths,
+        search.ref,
+        search.pairs,
+    )
+    shape = search.grid.shape
     H, W = shape
     sides = helmholtz_sides(frame, frame.variance, pairs, blur_px=blur_px)
     z_ml, n_ml, good = ml_depth(cost, depths, pix, rays, ref.centre, sides, shape, max_cost, say)
@@ -465,14 +464,14 @@ def _bayes_labelling(cost, normals, local, box, rays, depths, shape, opts, info,
 
 
 def _consistent_surface(
-    frame, z, ok, rays, ref, pairs, iterations, spline_px, blur_px=None, say=None
+    frame, z, ok, search: _Search, iterations, spline_px, blur_px=None, say=None
 ):
     """The depth from the agreement of geometry and eq. (5) (see :mod:`.surface`);
     ``say(text)`` reports its steps."""
-    from colourhs.reconstruct.bayes.refine import refine_surface
+    from colourhs.reconstruct.bayes.refine import RefineOptions, refine_surface
     from colourhs.reconstruct.sides import RIM_SUPPORT, helmholtz_sides
 
-    H, W = frame.rig.image.height, frame.rig.image.width
+    ref, pairs = search.ref, search.pairs
     if say is not None:
         say("refinement: each reciprocal pair's images and noise, resampled for E")
     sides = helmholtz_sides(frame, frame.variance, pairs, blur_px=blur_px)
@@ -483,13 +482,10 @@ def _consistent_surface(
     zr, nr, sinfo = refine_surface(
         z,
         ok,
-        rays,
-        ref.centre,
-        (H, W),
+        search.grid,
         sides,
         footprint,
-        spline_px,
-        iterations,
+        RefineOptions(spacing_px=spline_px, iterations=iterations),
         fill=fill,
         clear_sides=clear,
         ratio_sigma=frame.mu_ratio_sigma,

@@ -22,6 +22,16 @@ from colourhs.common.files import note_read
 from colourhs.reconstruct.dataterm import pair_arrays
 
 
+@dataclass(frozen=True)
+class RayGrid:
+    """The reference camera's pixel rays: a hypothesis at z-depth z of pixel p is
+    the point ``centre + z rays[p]``."""
+
+    rays: np.ndarray  # (H*W, 3) world directions scaled to unit z-depth, row-major
+    centre: np.ndarray  # (3,) the rays' origin, the reference camera's centre, metres
+    shape: tuple[int, int]  # (H, W) of the reference image
+
+
 @dataclass
 class Frame:
     """Everything the data term needs of one frame (arrays in camera order)."""

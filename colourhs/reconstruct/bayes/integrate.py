@@ -11,6 +11,8 @@ surfaces stay separate (:func:`surface_components`).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import scipy.sparse as sp
 
@@ -162,46 +164,58 @@ def large_components(mask: np.ndarray, min_size: int) -> np.ndarray:
     return remove_small_objects(np.asarray(mask, bool), max_size=min_size - 1, connectivity=1)
 
 
-def initial_surface(
-    z,
-    nrm,
-    ok,
-    rays,
-    pix,
-    shape,
-    evaluate,
-    data_weight,
-    edge_m,
-    passes,
-    link_m,
-    min_px,
-    anchor_scale,
-    say=None,
-):
+@dataclass(frozen=True)
+class IntegrationOptions:
+    """How :func:`initial_surface` integrates the HS normals.
+
+    Attributes
+    ----------
+    passes : integrations, each from the HS normals re-evaluated at the last
+        one's depths.
+    data_weight, edge_m, anchor_scale : :func:`refine_depth`'s anchor weight,
+        depth-edge truncation (metres) and robust anchor scale (relative depth).
+    link_m : tangent-plane misfit that still links two neighbours into one
+        surface, metres (:func:`surface_links`).
+    min_px : the fewest pixels a surface keeps.
+    """
+
+    passes: int
+    data_weight: float
+    edge_m: float
+    anchor_scale: float | None
+    link_m: float
+    min_px: int
+
+
+def initial_surface(z, nrm, ok, rays, pix, shape, evaluate, opts: IntegrationOptions, say=None):
     """A smooth surface from the labelling: the HS normals integrated (:func:`refine_depth`).
 
-    Each pass re-evaluates the HS normals at the refined depths; pieces the
-    tangent-plane links do not join to a surface of ``min_px`` pixels are
-    left out. Its depth is still the labelling's: it only starts
-    :func:`_consistent_surface`. ``say``, if given, is called with a line of
-    text per pass and per solve (progress: a pass takes seconds at high
-    resolution).
+    Each pass re-evaluates the HS normals (``evaluate``, the data term of rays
+    at depths) at the refined depths; pieces the tangent-plane links do not
+    join to a surface of ``opts.min_px`` pixels are left out. Its depth is
+    still the labelling's: it only starts the consistent surface
+    (:func:`colourhs.reconstruct.bayes.refine.refine_surface`). ``say``, if
+    given, is called with a line of text per pass and per solve (progress: a
+    pass takes seconds at high resolution).
     """
     H, W = shape
-    ok &= large_components(ok.reshape(H, W), min_px).ravel()
+    passes = opts.passes
+    ok &= large_components(ok.reshape(H, W), opts.min_px).ravel()
     z = np.nan_to_num(z)
     solver = NearbySolver()
     for i in range(passes):
         if say is not None:
             say(f"bayes: normal integration, pass {i + 1} of {passes}")
-        z = refine_depth(z, nrm, rays, ok, (H, W), data_weight, edge_m, anchor_scale, solver, say)
+        z = refine_depth(
+            z, nrm, rays, ok, (H, W), opts.data_weight, opts.edge_m, opts.anchor_scale, solver, say
+        )
         if i == passes - 1:
             if say is not None:
                 say("bayes: the integrated depth's surfaces (links, components)")
-            links = surface_links(z, nrm, rays, ok, (H, W), link_m)
+            links = surface_links(z, nrm, rays, ok, (H, W), opts.link_m)
             labels = surface_components(links[0], links[1], ok)
             sizes = np.bincount(labels[ok])
-            labels[ok] = np.where(sizes[labels[ok]] >= min_px, labels[ok], -1)
+            labels[ok] = np.where(sizes[labels[ok]] >= opts.min_px, labels[ok], -1)
             ok &= labels >= 0
         c, n = evaluate(rays[pix] * z[pix][:, None], np.ones(1))
         good = c[:, 0] < INVALID_COST  # else keep the previous normal

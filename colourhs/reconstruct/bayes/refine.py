@@ -10,6 +10,7 @@ valley (:func:`colourhs.reconstruct.bayes.valley.depth_search`); holes are fille
 from __future__ import annotations
 
 import copy
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
@@ -28,6 +29,7 @@ from colourhs.reconstruct.bayes.surface import (
 )
 from colourhs.reconstruct.bayes.uncertainty import SIGMA_SAMPLES, depth_sigma, filled_sigma
 from colourhs.reconstruct.bayes.valley import depth_search, search_stride
+from colourhs.reconstruct.inputs import RayGrid
 from colourhs.reconstruct.sides import HelmholtzSides
 
 CURVATURE_TOL_PER_M = 100.0  # weak prior on the spline: curvature radii under 1 cm cost
@@ -290,49 +292,66 @@ def explained_surfaces(chi2, usable, surface, scale) -> np.ndarray:
     return has & (med < scale)
 
 
+@dataclass(frozen=True)
+class RefineOptions:
+    """How :func:`refine_surface` fits the consistent surface.
+
+    Attributes
+    ----------
+    spacing_px : spline control spacing, pixels (default
+        :func:`colourhs.reconstruct.bayes.spline.default_spacing`, scaled by the
+        image's width).
+    iterations : Levenberg-Marquardt steps per stage (each stage starts close
+        to its minimum, so a few steps converge whatever the rig).
+    robust : Geman-McClure scale, in units of each row's predicted noise
+        (:data:`~colourhs.reconstruct.bayes.surface.ROBUST`).
+    edge_footprints : depth jump between neighbours that separates surfaces,
+        in pixel footprints (:data:`~colourhs.reconstruct.bayes.surface.EDGE_FOOTPRINTS`).
+    search : whether :func:`.valley.depth_search` sets each surface's depth.
+    sigma_samples : draws of :func:`depth_sigma` (0: no uncertainty, all NaN).
+    """
+
+    spacing_px: float | None = None
+    iterations: int = 3
+    robust: float = ROBUST
+    edge_footprints: float = EDGE_FOOTPRINTS
+    search: bool = True
+    sigma_samples: int = SIGMA_SAMPLES
+
+
 def refine_surface(
     z0: np.ndarray,
     mask: np.ndarray,
-    rays: np.ndarray,
-    c_ref: np.ndarray,
-    shape: tuple[int, int],
+    grid: RayGrid,
     sides: HelmholtzSides,
     footprint: np.ndarray,
-    spacing_px: float | None = None,
-    iterations: int = 3,
-    robust: float = ROBUST,
-    edge_footprints: float = EDGE_FOOTPRINTS,
+    opts: RefineOptions = RefineOptions(),
     fill: np.ndarray | None = None,
-    search: bool = True,
-    sigma_samples: int = SIGMA_SAMPLES,
     clear_sides: HelmholtzSides | None = None,
     ratio_sigma: np.ndarray | None = None,
     say=None,
 ) -> tuple[np.ndarray, np.ndarray, dict]:
     """Minimise E (module docstring) over a B-spline surface, from depths ``z0``.
 
-    ``iterations`` Levenberg-Marquardt steps on a spline ``COARSE`` times
+    ``opts.iterations`` Levenberg-Marquardt steps on a spline ``COARSE`` times
     coarser, then as many on the final one, bring each surface's shape into
     agreement with the HS normals at its starting depth; :func:`.valley.depth_search`
-    then finds each surface's depth (with ``search``); ``iterations`` more
-    steps polish shape and depth together.
+    then finds each surface's depth (with ``opts.search``); ``opts.iterations``
+    more steps polish shape and depth together.
 
     Parameters
     ----------
     z0 : (H*W,) initial depths (metres; the discrete solution, refined).
     mask : (H*W,) pixels of the surface.
-    rays : (H*W, 3) rays with unit z-depth; c_ref : (3,) their origin.
-    shape : (H, W).
+    grid : the reference camera's rays (H*W of them) and their origin.
     sides : from :func:`colourhs.reconstruct.sides.helmholtz_sides`.
     footprint : (H*W,) lateral size of a pixel at its depth, metres
         (z / focal length): the unit of depth edges and of the prior.
-    spacing_px : spline control spacing (default
-        :func:`colourhs.reconstruct.bayes.spline.default_spacing`).
+    opts : the fit's settings (:class:`RefineOptions`).
     fill : (H*W,) pixels that may be filled (the object's silhouette or the
         lit foreground): the holes of each surface inside it (black markers,
         dark spots, pixels whose rows were unusable) are filled by
         :func:`fill_holes` (their weight, and so their confidence, is 0).
-    sigma_samples : draws of :func:`depth_sigma` (0: no uncertainty, all NaN).
     clear_sides : the sides with only the samples clear of every edge usable
         (:data:`colourhs.reconstruct.sides.RIM_SUPPORT`): the rim rows' pull on
         each surface's depth (:func:`.uncertainty.rim_valley_pull`) joins the depths' sigma.
@@ -354,10 +373,12 @@ def refine_surface(
         filled holes, ``energy`` after each step, ``depth_factors`` (the
         search's scale per surface), ``surfaces`` and ``control_points``.
     """
+    rays, c_ref, shape = grid.rays, grid.centre, grid.shape
     H, W = shape
+    iterations, robust = opts.iterations, opts.robust
     say = say or (lambda text: None)
-    spacing = float(spacing_px or default_spacing(W))
-    graph = SurfaceGraph(mask, shape, z0, footprint, edge_footprints)
+    spacing = float(opts.spacing_px or default_spacing(W))
+    graph = SurfaceGraph(mask, shape, z0, footprint, opts.edge_footprints)
     R = rays[graph.pix]
     fp = float(np.median(footprint[graph.pix]))
     coarse = _problem(graph, R, sides, c_ref, spacing * COARSE, fp, robust)
@@ -370,7 +391,7 @@ def refine_surface(
     energies += more
     factors = np.ones(graph.n_surfaces)
     valley = np.zeros(graph.n_surfaces)
-    if search:
+    if opts.search:
         stride = search_stride(spacing)
         say(f"refinement: depth search along E's valley (pixel stride {stride})")
         c, factors, valley = depth_search(
@@ -396,9 +417,9 @@ def refine_surface(
     weights = np.zeros(H * W)
     weights[graph.pix] = info["weights"] * info["valid"]
     sigma = np.full(H * W, np.nan)
-    if sigma_samples > 0:
+    if opts.sigma_samples > 0:
         say("refinement: each depth's uncertainty")
-        local = depth_sigma(problem, c, sigma_samples)
+        local = depth_sigma(problem, c, opts.sigma_samples)
         sigma[graph.pix] = np.hypot(local, np.abs(z) * valley[graph.surface])
     filled = np.zeros(H * W, bool)
     if fill is not None:
@@ -413,7 +434,7 @@ def refine_surface(
     if valid.any():  # the output's normals: E's, over the output's own links
         # Filled holes had no footprint: it is z / focal length, so scale it from out_z.
         per_m = float(np.median(footprint[graph.pix] / np.abs(z0[graph.pix])))
-        final = SurfaceGraph(valid, shape, out_z, np.abs(out_z) * per_m, edge_footprints)
+        final = SurfaceGraph(valid, shape, out_z, np.abs(out_z) * per_m, opts.edge_footprints)
         out_n[final.pix] = surface_normals(final, out_z[final.pix], rays, c_ref)
         valid[final.pix] = np.all(np.isfinite(out_n[final.pix]), axis=1)
     return (
