@@ -52,7 +52,7 @@ onstart:
 rule all:
     default_target: True
     input:
-        expand("results/{name}/capture/summary.json", name=DATASETS),
+        expand(CAPTURE_SUMMARY, name=DATASETS),
         [t for name in DATASETS for t in calibration_targets(name)],
         lambda w: [t for name in DATASETS for t in reconstruction_targets(name)],
         lambda w: [t for name in DATASETS for t in report_targets(name)],

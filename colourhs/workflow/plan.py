@@ -5,8 +5,8 @@
 fills in the schema's defaults) and the rules call its methods: the files a job
 reads (its inputs, so that reruns follow them; listed by
 :func:`colourhs.capture.open_dataset`, the one reader of the capture format), the
-files a stage makes, and the options of the ``colourhs`` subcommands (plain
-strings, quoted for the shell).
+files a stage makes (the templates of :mod:`colourhs.workflow.paths`, filled in),
+and the options of the ``colourhs`` subcommands (plain strings, quoted for the shell).
 
 A synthetic dataset (a ``synth`` entry) is rendered by the workflow's checkpoint
 into ``data/synthetic/<name>``: until then ``wait(name)`` raises Snakemake's
@@ -24,12 +24,25 @@ from pathlib import Path
 
 from colourhs.capture import COLOURS, CaptureFormatError, Dataset, all_images, open_dataset
 from colourhs.capture import validate as validate_dataset
+from colourhs.workflow.paths import (
+    CAPTURE_SUMMARY,
+    CHROMATICITY,
+    CHROMATICITY_PNG,
+    CONFIG,
+    CROSSTALK,
+    FIGURES,
+    FRAME_RESULTS,
+    HULL,
+    MARKER_POSES,
+    METRICS,
+    NOISE,
+    PHOTOMETRIC,
+    PHOTOMETRIC_PNG,
+    REPORT,
+    SYNTH_DATASET,
+    fill,
+)
 from colourhs.workflow.variants import HS_VARIANT_PATTERN, VARIANTS, same_as  # noqa: F401 (rules)
-
-#: The folder of the synthetic datasets: SYNTH_ROOT/<name>.
-SYNTH_ROOT = "data/synthetic"
-#: Result kind (a folder of results/NAME/SCENE/VARIANT/) -> file extension.
-RESULT_EXT = {"depth": "h5", "mesh": "ply", "eval": "json"}
 
 
 class MalformedDatasetError(ValueError):
@@ -52,11 +65,6 @@ def cli_options(values: dict) -> str:
 def same_option(input) -> str:
     """``--same-as PATH`` when the rule's ``same`` input names an equal result."""
     return f"--same-as {shlex.quote(str(input.same))}" if input.same else ""
-
-
-def hull_ply(name: str, scene: str, frame: str) -> str:
-    """A frame's visual hull mesh (rule visual_hull)."""
-    return f"results/{name}/{scene}/hull/{frame}.ply"
 
 
 def _paths(paths: Iterable[Path]) -> list[str]:
@@ -124,7 +132,7 @@ class WorkflowPlan:
     def dataset_path(self, name: str) -> str:
         """The dataset folder (a synthetic one: data/synthetic/<name>)."""
         if self.synthetic(name):
-            return f"{SYNTH_ROOT}/{name}"
+            return fill(SYNTH_DATASET, name=name)
         return self.config["datasets"][name]["path"]
 
     def synth_settings(self, name: str) -> dict:
@@ -164,7 +172,7 @@ class WorkflowPlan:
         for name in self.datasets:
             if self.synthetic(name):
                 continue  # rendered by the workflow, then validated by its rule
-            summary = Path(f"results/{name}/capture/summary.json")
+            summary = Path(fill(CAPTURE_SUMMARY, name=name))
             if not summary.exists():
                 out.append(name)
             elif any(
@@ -288,23 +296,22 @@ class WorkflowPlan:
         """Whether the dataset's images are unmixed (calibration.unmix_crosstalk)."""
         return bool(self.calibration(name)["unmix_crosstalk"])
 
-    def photometric_options(self, name: str, crosstalk) -> str:
-        """Command-line options of ``colourhs photometric`` (plain values, no arrays)."""
-        opts = [f"--crosstalk {shlex.quote(crosstalk)}"] if crosstalk else []
+    def crosstalk_file(self, name: str) -> list[str]:
+        """[the cross-talk calibration] when the dataset's images are unmixed, else []."""
+        return [fill(CROSSTALK, name=name)] if self.unmix_crosstalk(name) else []
+
+    def photometric_options(self, name: str) -> str:
+        """Command-line options of ``colourhs photometric`` (plain values, no arrays):
+        the cross-talk calibration the rule reads (:meth:`crosstalk_file`) and the
+        dataset's photometric settings."""
+        opts = [f"--crosstalk {shlex.quote(p)}" for p in self.crosstalk_file(name)]
         return " ".join(opts + [cli_options(self.calibration(name)["photometric"])])
 
     def calibration_targets(self, name: str) -> list[str]:
         """The dataset's calibration files (known before the run, synthetic or not)."""
-        out = [
-            f"results/{name}/calib/marker_poses.csv",
-            f"results/{name}/calib/photometric.h5",
-            f"results/{name}/calib/noise.json",
-        ]
-        if self.unmix_crosstalk(name):
-            out.append(f"results/{name}/calib/crosstalk.json")
-        out += [
-            f"results/{name}/calib/chromaticity/{obj}.h5" for obj in self.chromatic_objects(name)
-        ]
+        out = [fill(t, name=name) for t in (MARKER_POSES, PHOTOMETRIC, NOISE)]
+        out += self.crosstalk_file(name)
+        out += [fill(CHROMATICITY, name=name, object=o) for o in self.chromatic_objects(name)]
         return out
 
     # ---------------------------------------------------------------- reconstruction
@@ -316,14 +323,14 @@ class WorkflowPlan:
     def variant_calibration(self, name: str, scene: str, variant: str) -> dict:
         """Calibration files a variant reads (inputs, so reruns follow their changes)."""
         v = VARIANTS[variant]
-        out = {} if v["method"] == "vh" else {"noise": f"results/{name}/calib/noise.json"}
+        out = {} if v["method"] == "vh" else {"noise": fill(NOISE, name=name)}
         if v["photometric"]:
-            out["photometric"] = f"results/{name}/calib/photometric.h5"
-            if self.unmix_crosstalk(name):
-                out["crosstalk"] = f"results/{name}/calib/crosstalk.json"
+            out["photometric"] = fill(PHOTOMETRIC, name=name)
+            for path in self.crosstalk_file(name):
+                out["crosstalk"] = path
         obj = self.layout(name).scene(scene).chromatic
         if v["chromaticity"] and obj:
-            out["chromaticity"] = f"results/{name}/calib/chromaticity/{obj}.h5"
+            out["chromaticity"] = fill(CHROMATICITY, name=name, object=obj)
         return out
 
     def reconstruct_options(self, name: str, scene: str, variant: str) -> str:
@@ -337,28 +344,41 @@ class WorkflowPlan:
         """The frame's visual hull as a list when the config takes the depth range from
         it (reconstruction.depth_from_hull)."""
         if self.config["reconstruction"]["depth_from_hull"]:
-            return [hull_ply(name, scene, frame)]
+            return [fill(HULL, name=name, scene=scene, frame=frame)]
         return []
 
     def same_result(self, name: str, scene: str, variant: str, frame: str, kind: str) -> list:
         """[the equal result of another variant] (colourhs.workflow.variants.same_as), or [].
 
-        ``kind``: depth, mesh or eval (its JSON). On a scene without a chromatic object
-        bayes_full equals bayes_ph: computed once, copied.
+        ``kind``: a key of :data:`colourhs.workflow.paths.FRAME_RESULTS` (depth, mesh,
+        eval: the metrics JSON, coloured: the error-coloured mesh). On a scene without a
+        chromatic object bayes_full equals bayes_ph: computed once, copied.
         """
         other = same_as(variant, bool(self.layout(name).scene(scene).chromatic))
         if other is None:
             return []
-        return [f"results/{name}/{scene}/{other}/{kind}/{frame}.{RESULT_EXT[kind]}"]
+        return [self._frame_result(kind, name, scene, other, frame)]
 
     def mesh_uses_hull(self, variant: str) -> bool:
         """Whether a variant's meshes are closed with hull points (always for vh)."""
         return variant == "vh" or bool(self.config["surfaces"]["mesh_with_hull"])
 
+    def mesh_hull(self, name: str, scene: str, variant: str, frame: str) -> list[str]:
+        """The frame's visual hull as a list when the variant's mesh is closed with it
+        (:meth:`mesh_uses_hull`)."""
+        if self.mesh_uses_hull(variant):
+            return [fill(HULL, name=name, scene=scene, frame=frame)]
+        return []
+
+    @staticmethod
+    def _frame_result(kind: str, name: str, scene: str, variant: str, frame: str) -> str:
+        """One frame's result of one variant (``kind``: a key of FRAME_RESULTS)."""
+        return fill(FRAME_RESULTS[kind], name=name, scene=scene, variant=variant, frame=frame)
+
     def _frame_results(self, name: str, kind: str) -> list[str]:
         """One result per selected scene, variant and frame."""
         return [
-            f"results/{name}/{s}/{v}/{kind}/{f}.{RESULT_EXT[kind]}"
+            self._frame_result(kind, name, s, v, f)
             for s, scene in self.selected_scenes(name).items()
             for v in self.variants()
             for f in scene.frames
@@ -380,21 +400,27 @@ class WorkflowPlan:
 
     def figure_inputs(self, name: str, scene: str) -> dict:
         """Depth files and meshes of a scene's first frame per variant, its ground truth,
-        and the animated variant's meshes of every frame (dynamic scenes)."""
+        the animated variant's meshes of every frame (dynamic scenes) and, with ground
+        truth, the first frame's error-coloured meshes and the metrics JSON beside each
+        (``scale``: its colour scale's top)."""
         frames = self.layout(name).scene(scene).frames
         f0, variants = frames[0], self.variants()
+
+        def first(kind: str) -> list[str]:
+            return [self._frame_result(kind, name, scene, v, f0) for v in variants]
+
+        gt = self.gt_mesh(name, scene, f0)
         out = {
-            "depth": [f"results/{name}/{scene}/{v}/depth/{f0}.h5" for v in variants],
-            "mesh": [f"results/{name}/{scene}/{v}/mesh/{f0}.ply" for v in variants],
-            "gt": self.gt_mesh(name, scene, f0),
+            "depth": first("depth"),
+            "mesh": first("mesh"),
+            "gt": gt,
             "animation": [],
-            "coloured": [],
+            "coloured": first("coloured") if gt else [],
+            "scale": first("eval") if gt else [],
         }
-        if out["gt"]:
-            out["coloured"] = [f"results/{name}/{scene}/{v}/eval/{f0}.ply" for v in variants]
         if len(frames) > 1:
             a = self.animation_variant()
-            out["animation"] = [f"results/{name}/{scene}/{a}/mesh/{f}.ply" for f in frames]
+            out["animation"] = [self._frame_result("mesh", name, scene, a, f) for f in frames]
         return out
 
     def figure_options(self, name: str, scene: str) -> str:
@@ -419,23 +445,23 @@ class WorkflowPlan:
         has them) and each scene's first-frame error-coloured meshes (its 3D view,
         :mod:`colourhs.report.view3d`)."""
         objects = self.chromatic_objects(name)
-        calib = [f"results/{name}/calib/marker_poses.csv", f"results/{name}/calib/photometric.h5"]
-        if self.unmix_crosstalk(name):
-            calib.append(f"results/{name}/calib/crosstalk.json")
+        calib = [fill(MARKER_POSES, name=name), fill(PHOTOMETRIC, name=name)]
+        calib += self.crosstalk_file(name)
         truth = self.layout(name).gt_photometric
         scenes = self.selected_scenes(name)
-        views = []
-        for scene, meta in scenes.items():
-            f0 = meta.frames[0]
-            views += [f"results/{name}/{scene}/{v}/eval/{f0}.ply" for v in self.variants()]
+        views = [
+            self._frame_result("coloured", name, s, v, meta.frames[0])
+            for s, meta in scenes.items()
+            for v in self.variants()
+        ]
         return {
-            "metrics": f"reports/{name}/metrics.csv",
-            "config": f"results/{name}/config.yaml",
+            "metrics": fill(METRICS, name=name),
+            "config": fill(CONFIG, name=name),
             "calibration": [
-                f"results/{name}/calib/photometric.png",
-                *[f"results/{name}/calib/chromaticity/{o}.png" for o in objects],
+                fill(PHOTOMETRIC_PNG, name=name),
+                *[fill(CHROMATICITY_PNG, name=name, object=o) for o in objects],
             ],
-            "figures": [f"reports/{name}/figures/{s}" for s in scenes],
+            "figures": [fill(FIGURES, name=name, scene=s) for s in scenes],
             # rig.json and every scene.json: the rig and scene summaries.
             "dataset": self._dataset_files(name),
             "calib": calib + ([str(truth)] if truth else []),
@@ -454,4 +480,4 @@ class WorkflowPlan:
     def report_targets(self, name: str) -> list[str]:
         """The report, requested once the dataset's scenes are known (after synthesis)."""
         self.selected_scenes(name)
-        return [f"reports/{name}/index.html"]
+        return [fill(REPORT, name=name)]

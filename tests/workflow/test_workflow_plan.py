@@ -17,6 +17,27 @@ from capture_helpers import make_dataset
 from snakemake.utils import validate
 
 from colourhs.cli.parser import PROJECT_ROOT
+from colourhs.workflow.paths import (
+    CHROMATICITY,
+    CHROMATICITY_PNG,
+    CONFIG,
+    CROSSTALK,
+    DEPTH,
+    EVAL_JSON,
+    EVAL_PLY,
+    FIGURES,
+    FRAME_RESULTS,
+    HULL,
+    MARKER_POSES,
+    MESH,
+    METRICS,
+    NOISE,
+    PHOTOMETRIC,
+    PHOTOMETRIC_PNG,
+    REPORT,
+    SYNTH_DATASET,
+    fill,
+)
 from colourhs.workflow.plan import MalformedDatasetError, WorkflowPlan
 
 SCHEMA = str(PROJECT_ROOT / "workflow" / "schemas" / "config.schema.yaml")
@@ -78,8 +99,14 @@ def test_schema_defaults_and_the_calibration_layers(data):
         "chromaticity": {},
         "photometric": {"coupling": 0.2},
     }
-    assert plan.photometric_options("d", "") == "--coupling 0.2 --smoothness 0.001"
-    assert plan.photometric_options("s", "a b.json") == "--crosstalk 'a b.json' --coupling 0.2"
+    # The cross-talk calibration where the dataset's images are unmixed (its input).
+    assert plan.crosstalk_file("d") == [] and plan.crosstalk_file("s") == [
+        "results/s/calib/crosstalk.json"
+    ]
+    assert plan.photometric_options("d") == "--coupling 0.2 --smoothness 0.001"
+    assert plan.photometric_options("s") == (
+        "--crosstalk results/s/calib/crosstalk.json --coupling 0.2"
+    )
     assert plan.calibration_targets("d") == [
         "results/d/calib/marker_poses.csv",
         "results/d/calib/photometric.h5",
@@ -185,6 +212,67 @@ def test_variants_targets_and_options(data):
         "results/d/wave/vh/eval/000000.ply",
         "results/d/wave/bayes_full/eval/000000.ply",
     ]
+
+
+def test_the_plans_paths_are_the_layouts_templates_filled_in(data):
+    """What the plan names under results/ and reports/ is a template of
+    colourhs.workflow.paths (the rules' outputs) filled in: the same files."""
+    variants = ["vh", "bayes_ph", "bayes_full"]
+    plan = plan_of(
+        {
+            "datasets": {"d": {"path": str(data)}},
+            "reconstruction": {"variants": variants, "depth_from_hull": True},
+        }
+    )
+    frames = {"toy": ["000000"], "wave": ["000000", "000001"]}
+
+    def every(template: str) -> list[str]:
+        return [
+            fill(template, name="d", scene=s, variant=v, frame=f)
+            for s, fs in frames.items()
+            for v in variants
+            for f in fs
+        ]
+
+    def first(template: str, scene: str) -> list[str]:
+        return [fill(template, name="d", scene=scene, variant=v, frame="000000") for v in variants]
+
+    calib = [fill(t, name="d") for t in (MARKER_POSES, PHOTOMETRIC, NOISE, CROSSTALK)]
+    slinky = fill(CHROMATICITY, name="d", object="slinky")
+    assert plan.calibration_targets("d") == calib[:3] + calib[3:] + [slinky]
+    assert plan.reconstruction_targets("d") == every(DEPTH)
+    assert plan.evaluation_targets("d") == every(EVAL_JSON)
+    assert plan.report_targets("d") == [fill(REPORT, name="d")]
+    assert plan.variant_calibration("d", "toy", "bayes_full") == dict(
+        noise=calib[2], photometric=calib[1], crosstalk=calib[3], chromaticity=slinky
+    )
+    hull = fill(HULL, name="d", scene="wave", frame="000001")
+    assert plan.reconstruction_hull("d", "wave", "000001") == [hull]
+    assert plan.mesh_hull("d", "wave", "vh", "000001") == [hull]
+    assert plan.mesh_hull("d", "wave", "bayes_ph", "000001") == []
+    for kind, template in FRAME_RESULTS.items():
+        equal = fill(template, name="d", scene="wave", variant="bayes_ph", frame="000001")
+        assert plan.same_result("d", "wave", "bayes_full", "000001", kind) == [equal]
+    toy, wave = plan.figure_inputs("d", "toy"), plan.figure_inputs("d", "wave")
+    assert [toy[k] for k in ("depth", "mesh", "coloured", "scale")] == [
+        first(t, "toy") for t in (DEPTH, MESH, EVAL_PLY, EVAL_JSON)
+    ]
+    assert wave["coloured"] == wave["scale"] == []  # no ground truth
+    assert wave["animation"] == [
+        fill(MESH, name="d", scene="wave", variant="bayes_full", frame=f) for f in frames["wave"]
+    ]
+    report = plan.report_inputs("d")
+    assert report["metrics"] == fill(METRICS, name="d")
+    assert report["config"] == fill(CONFIG, name="d")
+    assert report["calibration"] == [
+        fill(PHOTOMETRIC_PNG, name="d"),
+        fill(CHROMATICITY_PNG, name="d", object="slinky"),
+    ]
+    assert report["figures"] == [fill(FIGURES, name="d", scene=s) for s in frames]
+    assert report["calib"] == [calib[0], calib[1], calib[3]]  # no true mu maps here
+    assert report["views"] == first(EVAL_PLY, "toy") + first(EVAL_PLY, "wave")
+    synthetic = plan_of({"datasets": {"s": {"synth": {"preset": "tiny"}}}})
+    assert synthetic.dataset_path("s") == fill(SYNTH_DATASET, name="s")
 
 
 def test_a_synthetic_dataset_waits_for_its_checkpoint(data, tmp_path, monkeypatch):

@@ -6,11 +6,11 @@ rule marker_poses:
     input:
         lambda w: photometric_inputs(w.name),
     output:
-        "results/{name}/calib/marker_poses.csv",
+        MARKER_POSES,
     log:
-        "logs/calib/{name}/marker_poses.log",
+        LOGS["marker_poses"],
     benchmark:
-        "benchmarks/snakemake/marker_poses/{name}.tsv"
+        BENCHMARKS["marker_poses"]
     threads: 1
     resources:
         mem_mb=2000,
@@ -24,13 +24,13 @@ rule marker_poses:
 rule crosstalk:
     input:
         images=lambda w: chromatic_inputs(w.name, "white") + photometric_inputs(w.name),
-        poses="results/{name}/calib/marker_poses.csv",
+        poses=MARKER_POSES,
     output:
-        "results/{name}/calib/crosstalk.json",
+        CROSSTALK,
     log:
-        "logs/calib/{name}/crosstalk.log",
+        LOGS["crosstalk"],
     benchmark:
-        "benchmarks/snakemake/crosstalk/{name}.tsv"
+        BENCHMARKS["crosstalk"]
     threads: 1
     # Resources cover one job at the paper preset's 1280x960 (benchmarks/bench_paper.py
     # measures every rule's memory and time).
@@ -47,11 +47,11 @@ rule noise_model:
     input:
         lambda w: photometric_inputs(w.name) + chromatic_inputs(w.name, "white"),
     output:
-        "results/{name}/calib/noise.json",
+        NOISE,
     log:
-        "logs/calib/{name}/noise.log",
+        LOGS["noise_model"],
     benchmark:
-        "benchmarks/snakemake/noise_model/{name}.tsv"
+        BENCHMARKS["noise_model"]
     threads: 1
     # Resources cover one job at the paper preset's 1280x960 (benchmarks/bench_paper.py
     # measures every rule's memory and time).
@@ -67,17 +67,15 @@ rule noise_model:
 rule photometric_maps:
     input:
         images=lambda w: photometric_inputs(w.name),
-        poses="results/{name}/calib/marker_poses.csv",
-        crosstalk=lambda w: (
-            f"results/{w.name}/calib/crosstalk.json" if unmix_crosstalk(w.name) else []
-        ),
+        poses=MARKER_POSES,
+        crosstalk=lambda w: crosstalk_file(w.name),
     output:
-        h5="results/{name}/calib/photometric.h5",
-        png="results/{name}/calib/photometric.png",
+        h5=PHOTOMETRIC,
+        png=PHOTOMETRIC_PNG,
     log:
-        "logs/calib/{name}/photometric.log",
+        LOGS["photometric_maps"],
     benchmark:
-        "benchmarks/snakemake/photometric_maps/{name}.tsv"
+        BENCHMARKS["photometric_maps"]
     threads: 1
     # Resources cover one job at the paper preset's 1280x960 (benchmarks/bench_paper.py
     # measures every rule's memory and time).
@@ -86,7 +84,7 @@ rule photometric_maps:
         runtime=20,
     params:
         dataset=lambda w: dataset_path(w.name),
-        options=lambda w, input: photometric_options(w.name, input.crosstalk),
+        options=lambda w: photometric_options(w.name),
     shell:
         '"$COLOURHS_PYTHON" -m colourhs photometric {params.dataset:q} {input.poses:q} {output.h5:q} '
         "--figure {output.png:q} {params.options} > {log:q} 2>&1"
@@ -96,12 +94,12 @@ rule chromaticity_map:
     input:
         lambda w: chromaticity_inputs(w.name, w.object),
     output:
-        h5="results/{name}/calib/chromaticity/{object}.h5",
-        png="results/{name}/calib/chromaticity/{object}.png",
+        h5=CHROMATICITY,
+        png=CHROMATICITY_PNG,
     log:
-        "logs/calib/{name}/chromaticity/{object}.log",
+        LOGS["chromaticity_map"],
     benchmark:
-        "benchmarks/snakemake/chromaticity_map/{name}/{object}.tsv"
+        BENCHMARKS["chromaticity_map"]
     wildcard_constraints:
         object="[A-Za-z0-9_-]+",
     threads: 1

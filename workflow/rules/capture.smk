@@ -5,11 +5,11 @@ rule validate_dataset:
     input:
         lambda w: capture_files(w.name),
     output:
-        "results/{name}/capture/summary.json",
+        CAPTURE_SUMMARY,
     log:
-        "logs/capture/{name}.log",
+        LOGS["validate_dataset"],
     benchmark:
-        "benchmarks/snakemake/validate_dataset/{name}.tsv"
+        BENCHMARKS["validate_dataset"]
     threads: 1
     resources:
         mem_mb=1000,

@@ -1,17 +1,44 @@
 # The rules' helpers: colourhs.workflow.plan.WorkflowPlan (dataset discovery with
 # colourhs.capture.open_dataset, targets, inputs, command-line options) bound to
-# this run's config, which the Snakefile validated with the schema's defaults set.
+# this run's config, which the Snakefile validated with the schema's defaults set;
+# every path a rule writes is a template of colourhs.workflow.paths (the results
+# layout, docs/results-layout.md), which the plan fills in for the same files.
 import json
 import shlex
 import sys
 from pathlib import Path
 
+from colourhs.workflow.paths import (
+    BENCHMARK_ROOT,
+    BENCHMARKS,
+    CALIB_DIR,
+    CAPTURE_SUMMARY,
+    CHROMATICITY,
+    CHROMATICITY_PNG,
+    CONFIG,
+    CROSSTALK,
+    DEPTH,
+    EVAL_JSON,
+    EVAL_PLY,
+    FIGURES,
+    HULL,
+    LOGS,
+    MARKER_POSES,
+    MESH,
+    METRICS,
+    NOISE,
+    PHOTOMETRIC,
+    PHOTOMETRIC_PNG,
+    REPORT,
+    RESULTS_DIR,
+    SYNTH_DATASET,
+    VH_DEPTH,
+)
 from colourhs.workflow.plan import (
     HS_VARIANT_PATTERN,
     MalformedDatasetError,
     WorkflowPlan,
     cli_options,
-    hull_ply,
     same_option,
 )
 
@@ -38,7 +65,7 @@ photometric_inputs = PLAN.photometric_inputs
 chromatic_inputs = PLAN.chromatic_inputs
 chromaticity_inputs = PLAN.chromaticity_inputs
 calibration = PLAN.calibration
-unmix_crosstalk = PLAN.unmix_crosstalk
+crosstalk_file = PLAN.crosstalk_file
 photometric_options = PLAN.photometric_options
 calibration_targets = PLAN.calibration_targets
 frame_inputs = PLAN.frame_inputs
@@ -48,7 +75,7 @@ reconstruct_options = PLAN.reconstruct_options
 same_result = PLAN.same_result
 reconstruction_targets = PLAN.reconstruction_targets
 silhouette_inputs = PLAN.silhouette_inputs
-mesh_uses_hull = PLAN.mesh_uses_hull
+mesh_hull = PLAN.mesh_hull
 gt_mesh = PLAN.gt_mesh
 evaluation_targets = PLAN.evaluation_targets
 figure_inputs = PLAN.figure_inputs

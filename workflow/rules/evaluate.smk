@@ -5,22 +5,19 @@
 
 rule evaluate_frame:
     input:
-        depth="results/{name}/{scene}/{variant}/depth/{frame}.h5",
-        mesh="results/{name}/{scene}/{variant}/mesh/{frame}.ply",
+        depth=DEPTH,
+        mesh=MESH,
         gt=lambda w: gt_mesh(w.name, w.scene, w.frame),
         same=lambda w: same_result(w.name, w.scene, w.variant, w.frame, "eval"),
         # The equal result's error-coloured mesh, copied with its metrics JSON.
-        same_ply=lambda w: [
-            str(Path(p).with_suffix(".ply"))
-            for p in same_result(w.name, w.scene, w.variant, w.frame, "eval")
-        ],
+        same_ply=lambda w: same_result(w.name, w.scene, w.variant, w.frame, "coloured"),
     output:
-        json="results/{name}/{scene}/{variant}/eval/{frame}.json",
-        ply="results/{name}/{scene}/{variant}/eval/{frame}.ply",
+        json=EVAL_JSON,
+        ply=EVAL_PLY,
     log:
-        "logs/evaluate/{name}/{scene}/{variant}/{frame}.log",
+        LOGS["evaluate_frame"],
     benchmark:
-        "benchmarks/snakemake/evaluate_frame/{name}/{scene}/{variant}/{frame}.tsv"
+        BENCHMARKS["evaluate_frame"]
     wildcard_constraints:
         frame="[0-9]{6}",
     threads: 1
@@ -44,14 +41,14 @@ rule metrics_table:
         lambda w: evaluation_targets(w.name),
     output:
         report(
-            "reports/{name}/metrics.csv",
+            METRICS,
             caption="../report/metrics.rst",
             category="Evaluation",
         ),
     log:
-        "logs/evaluate/{name}/metrics.log",
+        LOGS["metrics_table"],
     benchmark:
-        "benchmarks/snakemake/metrics_table/{name}.tsv"
+        BENCHMARKS["metrics_table"]
     threads: 1
     resources:
         mem_mb=1000,

@@ -8,11 +8,11 @@ rule reconstruct_frame:
         hull=lambda w: reconstruction_hull(w.name, w.scene, w.frame),
         same=lambda w: same_result(w.name, w.scene, w.variant, w.frame, "depth"),
     output:
-        "results/{name}/{scene}/{variant}/depth/{frame}.h5",
+        DEPTH,
     log:
-        "logs/reconstruct/{name}/{scene}/{variant}/{frame}.log",
+        LOGS["reconstruct_frame"],
     benchmark:
-        "benchmarks/snakemake/reconstruct_frame/{name}/{scene}/{variant}/{frame}.tsv"
+        BENCHMARKS["reconstruct_frame"]
     wildcard_constraints:
         variant=HS_VARIANT_PATTERN,
         frame="[0-9]{6}",

@@ -3,9 +3,9 @@
 
 rule effective_config:
     output:
-        "results/{name}/config.yaml",
+        CONFIG,
     log:
-        "logs/report/{name}/config.log",
+        LOGS["effective_config"],
     threads: 1
     resources:
         mem_mb=500,
@@ -19,23 +19,18 @@ rule effective_config:
 rule scene_figures:
     input:
         unpack(lambda w: figure_inputs(w.name, w.scene)),
-        # The metrics JSON beside each error-coloured mesh (its colour scale's top).
-        scale=lambda w: [
-            str(Path(p).with_suffix(".json"))
-            for p in figure_inputs(w.name, w.scene)["coloured"]
-        ],
     output:
         report(
-            directory("reports/{name}/figures/{scene}"),
+            directory(FIGURES),
             patterns=["{fig}.png"],
             caption="../report/scene_figures.rst",
             category="Figures",
             subcategory="{scene}",
         ),
     log:
-        "logs/report/{name}/figures/{scene}.log",
+        LOGS["scene_figures"],
     benchmark:
-        "benchmarks/snakemake/scene_figures/{name}/{scene}.tsv"
+        BENCHMARKS["scene_figures"]
     threads: 1
     # Resources cover one job at the paper preset's 1280x960 (benchmarks/bench_paper.py
     # measures every rule's memory and time).
@@ -53,12 +48,12 @@ rule report:
         unpack(lambda w: report_inputs(w.name)),
     output:
         report(
-            "reports/{name}/index.html",
+            REPORT,
             caption="../report/index.rst",
             category="Evaluation",
         ),
     log:
-        "logs/report/{name}/index.log",
+        LOGS["report"],
     threads: 1
     # Resources cover one job at the paper preset's 1280x960 (benchmarks/bench_paper.py
     # measures every rule's memory and time).
@@ -71,10 +66,13 @@ rule report:
             for d in report_inputs(w.name)["figures"]
         ),
         dataset=lambda w: dataset_path(w.name),
+        results=RESULTS_DIR,
+        calib=CALIB_DIR,
+        benchmarks=BENCHMARK_ROOT,
     shell:
         '"$COLOURHS_PYTHON" -m colourhs report {output:q} --name {wildcards.name} '
         "--metrics {input.metrics:q} --config {input.config:q} "
         "--calibration {input.calibration:q} --figures {params.figures} "
-        "--dataset {params.dataset:q} --results results/{wildcards.name} "
-        "--calib results/{wildcards.name}/calib --view "
-        "--benchmarks benchmarks/snakemake > {log:q} 2>&1"
+        "--dataset {params.dataset:q} --results {params.results:q} "
+        "--calib {params.calib:q} --view "
+        "--benchmarks {params.benchmarks:q} > {log:q} 2>&1"

@@ -7,12 +7,12 @@ rule visual_hull:
     input:
         lambda w: silhouette_inputs(w.name, w.scene, w.frame),
     output:
-        ply="results/{name}/{scene}/hull/{frame}.ply",
-        depth="results/{name}/{scene}/vh/depth/{frame}.h5",
+        ply=HULL,
+        depth=VH_DEPTH,
     log:
-        "logs/surfaces/{name}/{scene}/hull/{frame}.log",
+        LOGS["visual_hull"],
     benchmark:
-        "benchmarks/snakemake/visual_hull/{name}/{scene}/{frame}.tsv"
+        BENCHMARKS["visual_hull"]
     wildcard_constraints:
         frame="[0-9]{6}",
     # Before the reconstructions (priority 1) that read it.
@@ -33,17 +33,15 @@ rule visual_hull:
 
 rule frame_mesh:
     input:
-        depth="results/{name}/{scene}/{variant}/depth/{frame}.h5",
-        hull=lambda w: (
-            hull_ply(w.name, w.scene, w.frame) if mesh_uses_hull(w.variant) else []
-        ),
+        depth=DEPTH,
+        hull=lambda w: mesh_hull(w.name, w.scene, w.variant, w.frame),
         same=lambda w: same_result(w.name, w.scene, w.variant, w.frame, "mesh"),
     output:
-        "results/{name}/{scene}/{variant}/mesh/{frame}.ply",
+        MESH,
     log:
-        "logs/surfaces/{name}/{scene}/{variant}/mesh/{frame}.log",
+        LOGS["frame_mesh"],
     benchmark:
-        "benchmarks/snakemake/frame_mesh/{name}/{scene}/{variant}/{frame}.tsv"
+        BENCHMARKS["frame_mesh"]
     wildcard_constraints:
         frame="[0-9]{6}",
     threads: 1

@@ -3,11 +3,11 @@
 
 checkpoint synth_dataset:
     output:
-        directory("data/synthetic/{name}"),
+        directory(SYNTH_DATASET),
     log:
-        "logs/synth/{name}.log",
+        LOGS["synth_dataset"],
     benchmark:
-        "benchmarks/snakemake/synth/{name}.tsv"
+        BENCHMARKS["synth_dataset"]
     threads: 2
     resources:
         mem_mb=4000,
