@@ -449,6 +449,7 @@ def _report(args) -> int:
         tsvs,
         config,
         embed_images=args.embed_images,
+        link_outside=args.link_outside,
         dataset=dataset,
         results_dir=args.results,
         config_resolved=True,

@@ -312,6 +312,13 @@ def build_parser(show_defaults: bool | Collection[str] = False) -> argparse.Argu
     )
     rp.add_argument("--embed-images", action="store_true", help="embed images (base64)")
     rp.add_argument(
+        "--link-outside",
+        action="store_true",
+        help="link the images and result files outside the report's folder where they are "
+        "(../../results/...) instead of copying the images into its assets/ and naming the "
+        "result files: the page then works only beside results/",
+    )
+    rp.add_argument(
         "--view",
         action="store_true",
         help="embed each scene's first-frame error-coloured meshes from --results, "

@@ -4,15 +4,20 @@
 results contract, the calibration and per-scene figures, Snakemake benchmark
 files, the run's configuration, the dataset's rig and scene descriptions, the
 result files) into one page rendered from the jinja2 template
-``colourhs/report/templates/report.html`` (package data). Images are linked from
-``reports/NAME/figures/`` by relative paths (or, with ``embed_images``, embedded
-as base64 data URIs so the page stands alone); styles are inline. The page is
-built in memory and written atomically, so a failure leaves no partial HTML
-behind.
+``colourhs/report/templates/report.html`` (package data). The report folder
+stands alone: images are linked by paths relative to the page, those from
+outside the folder (``results/NAME/calib``) from copies in its ``assets/``
+(:mod:`colourhs.report.assets`), or embedded as base64 data URIs with
+``embed_images``; the result files of ``results/NAME`` are named, not linked
+(``link_outside`` links every file where it is instead). Styles are inline. The
+page is built in memory and written atomically, after the copies, so a failure
+leaves no partial HTML nor partial copy behind.
 
 The tables are computed by the small functions :func:`summarise_metrics`,
 :func:`read_benchmarks` and :func:`summarise_benchmarks` in
-:mod:`colourhs.report.tables` (re-exported here); provenance, rig summary, file
+:mod:`colourhs.report.tables` (re-exported here) and printed by its
+:func:`~colourhs.report.tables.html_table`; the summary marks each scene's best
+variant by :data:`BEST_METRIC`; provenance, rig summary, file
 links and the figures' arrangement by :mod:`colourhs.report.provenance`. This module
 holds the paper's reference numbers, the software versions and the page.
 """
@@ -36,6 +41,7 @@ import yaml
 
 from colourhs.common.files import atomic_output
 from colourhs.common.progress import stage
+from colourhs.report.assets import link_files, place_files, write_assets
 from colourhs.report.calibration import calibration_diagnostics
 from colourhs.report.provenance import (
     arrange_figures,
@@ -52,10 +58,13 @@ from colourhs.report.tables import (
     METRIC_COLUMNS,
     REQUIRED_COLUMNS,
     _aggregation_of,
+    best_rows,
+    by_variant,
     drop_table,
     expected_error_table,
     find_benchmarks,
     format_number,
+    html_table,
     read_benchmarks,
     read_metrics,
     sigma_calibration_table,
@@ -68,6 +77,7 @@ from colourhs.workflow.variants import VARIANT_LABELS, VARIANT_ORDER
 __all__ = [
     "AGGREGATION",
     "BENCHMARK_COLUMNS",
+    "BEST_METRIC",
     "METRIC_COLUMNS",
     "PAPER_REFERENCE",
     "PAPER_REFERENCE_SOURCE",
@@ -82,6 +92,7 @@ __all__ = [
     "software_versions",
     "summarise_benchmarks",
     "summarise_metrics",
+    "summary_table",
 ]
 
 #: Numbers the paper states, as ``{scene: {variant: {column: value}}}``. The paper
@@ -198,10 +209,13 @@ COLUMN_LEGEND = {
     "normal_median_deg": "median angle between reconstructed and true normals, median over frames",
     "coverage": "share of the ground truth's pixels that have a depth, mean over frames",
 }
-#: The summary table's metric columns (those present are shown).
+#: The accuracy by which the summary marks each scene's best variant (lower is
+#: better): the summary's first metric, the paper's RMS Hausdorff distance.
+BEST_METRIC = "hausdorff_rms_mm"
+#: The summary table's metric columns (those present are shown), led by :data:`BEST_METRIC`.
 SUMMARY_COLUMNS = (
     "frames",
-    "hausdorff_rms_mm",
+    BEST_METRIC,
     "depth_median_mm",
     "depth_rms_mm",
     "normal_median_deg",
@@ -225,17 +239,21 @@ def beside(table: pd.DataFrame, pairs: Mapping[str, str] = BESIDE) -> pd.DataFra
     return table[cols]
 
 
-def _image_src(path: Path, out_dir: Path, embed: bool) -> str:
-    if not embed:
-        return Path(os.path.relpath(path.resolve(), out_dir.resolve())).as_posix()
+def _data_uri(path: Path) -> str:
     mime = _MIME.get(path.suffix.lower(), "application/octet-stream")
     return f"data:{mime};base64," + base64.b64encode(path.read_bytes()).decode("ascii")
 
 
-def _figure(path: Path, out_dir: Path, embed: bool, cls: str = "") -> dict:
-    """A figure for the template: src, a link to the file (when linked), caption."""
-    src = _image_src(path, out_dir, embed)
-    href = None if embed else src
+def _figure(path: Path, where: Mapping[Path, str] | None, cls: str = "") -> dict:
+    """A figure for the template: src, a link to the file (when linked), caption.
+
+    ``where`` maps each resolved image path to its path relative to the page
+    (:func:`colourhs.report.assets.place_files`); None embeds the image instead.
+    """
+    if where is None:
+        src, href = _data_uri(path), None
+    else:
+        src = href = where[path.resolve()]
     return {"src": src, "href": href, "caption": path.stem.replace("_", " "), "cls": cls}
 
 
@@ -255,27 +273,45 @@ def _check_figures(paths: Iterable[str | Path] | str | Path, what: str) -> list[
     return out
 
 
-def _table(df: pd.DataFrame, css_class: str) -> str:
-    """``DataFrame.to_html`` with escaping, empty NaN cells and :func:`format_number`."""
-    return df.to_html(
-        classes=css_class,
-        index=False,
-        na_rep="",
-        float_format=format_number,
-        escape=True,
-        border=0,
-    )
+#: The summary's caption: what marks a scene's best variant.
+BEST_CAPTION = (
+    f"Bold and \u2605: the scene's best variant, the lowest {BEST_METRIC} "
+    "(every one that ties; none where the scene has no value)."
+)
+
+
+def summary_table(summary: pd.DataFrame) -> str:
+    """The summary as HTML: :func:`~colourhs.report.tables.html_table` of ``summary``
+    (columns ``scene``, ``variant``, metrics) with each scene's best variant by
+    :data:`BEST_METRIC` marked (:func:`~colourhs.report.tables.best_rows`): its row
+    of class ``best`` (bold), its :data:`BEST_METRIC` cell of class ``best`` (a star),
+    which :data:`BEST_CAPTION` (under the table) explains. The first row of each
+    scene but the first is of class ``scene-start`` (a rule above it)."""
+    best = best_rows(summary, BEST_METRIC).to_numpy()
+    scenes = summary["scene"].astype(str)
+    start = (scenes != scenes.shift()).to_numpy(copy=True)
+    start[:1] = False
+    rows = [
+        " ".join(name for name, on in (("scene-start", s), ("best", b)) if on)
+        for s, b in zip(start, best, strict=True)
+    ]
+    cells = pd.DataFrame("", index=summary.index, columns=summary.columns)
+    if BEST_METRIC in cells.columns:
+        cells.loc[best, BEST_METRIC] = "best"
+    return html_table(summary, "summary", row_class=rows, cell_class=cells)
+
+
+def variant_names(variants: Iterable[str]) -> str:
+    """The paper's name of each of ``variants`` that has one (:data:`VARIANT_LABELS`),
+    as one line for the summary's legend: ``"vh: VH; bayes_ph: BayesianHS_wPhCalib"``."""
+    return "; ".join(f"{v}: {VARIANT_LABELS[v]}" for v in variants if v in VARIANT_LABELS)
 
 
 def with_paper_columns(table: pd.DataFrame) -> tuple[pd.DataFrame, bool]:
-    """``table`` (columns ``scene``, ``variant``, metrics) with the paper's name of each
-    variant and, right after each metric the paper states, a column ``paper <metric>``
-    (:data:`PAPER_REFERENCE`; empty where the paper gives no number). Also returns
-    whether any such column was added."""
+    """``table`` (columns ``scene``, ``variant``, metrics) with, right after each metric
+    the paper states, a column ``paper <metric>`` (:data:`PAPER_REFERENCE`; empty
+    where the paper gives no number). Also returns whether any such column was added."""
     t = table.copy()
-    t.insert(
-        t.columns.get_loc("variant") + 1, "paper name", t["variant"].map(VARIANT_LABELS).fillna("")
-    )
     scenes = set(t["scene"]) if "scene" in t.columns else set()
     refs = {s: PAPER_REFERENCE[s] for s in scenes if s in PAPER_REFERENCE}
     ref_cols = sorted({c for r in refs.values() for per in r.values() for c in per})
@@ -292,6 +328,17 @@ def with_paper_columns(table: pd.DataFrame) -> tuple[pd.DataFrame, bool]:
             cols.insert(cols.index(c) + 1, col)
             t = t[cols]
     return t, bool(ref_cols)
+
+
+def _legend(summary: pd.DataFrame, columns: Sequence[str], has_paper: bool) -> dict[str, str]:
+    """The summary's legend: the paper's names of its variants, what each of its
+    metric ``columns`` means, and the paper's columns when it has them."""
+    names = variant_names(dict.fromkeys(summary["variant"].astype(str)))
+    return (
+        ({"variant": f"the paper's names: {names}"} if names else {})
+        | {c: COLUMN_LEGEND[c] for c in columns if c in COLUMN_LEGEND}
+        | ({"paper …": "the paper's number (see below)"} if has_paper else {})
+    )
 
 
 def _aggregation_text(summary: pd.DataFrame) -> str:
@@ -335,14 +382,20 @@ def _frames_note(metrics: pd.DataFrame, scene: str, figures: Sequence[Path]) -> 
     )
 
 
-def _file_links(results_dir, scene: str, out_dir: Path) -> dict:
+def _file_links(results_dir, scene: str, out_dir: Path, link: bool) -> dict:
+    """A scene's result files for the template, by variant and kind: each one's
+    label, its path in the variant's folder and, with ``link``, its path relative
+    to the page (else None: named, not linked, so the report folder stands alone)."""
     files = result_files(results_dir, scene)
+    every = [p for kinds in files.values() for ps in kinds.values() for p in ps]
+    hrefs = link_files(every, out_dir) if link else {}
     return {
         v: {
             k: [
                 {
-                    "href": Path(os.path.relpath(p.resolve(), out_dir.resolve())).as_posix(),
+                    "href": hrefs.get(p.resolve()),
                     "label": p.stem,
+                    "path": p.relative_to(Path(results_dir, scene, v)).as_posix(),
                 }
                 for p in ps
             ]
@@ -380,6 +433,7 @@ def build_report(
     extra: Mapping | None = None,
     *,
     embed_images: bool = False,
+    link_outside: bool = False,
     dataset=None,
     results_dir: str | Path | None = None,
     provenance: Mapping | None = None,
@@ -391,8 +445,9 @@ def build_report(
     """Write the evaluation report ``reports/NAME/index.html`` and return its path.
 
     The page (template ``colourhs/report/templates/report.html``) opens with a summary
-    table (scene x variant, key metrics beside the paper's numbers, a legend);
-    per scene: its description, every metric in a scrollable table, its
+    table (scene x variant, key metrics beside the paper's numbers, each scene's
+    best variant marked, :func:`summary_table`, a legend);
+    per scene: its description, every metric (one column per variant), its
     expected depth error (the median ``depth_sigma``, with or without ground
     truth: :func:`colourhs.report.tables.expected_error_table`) and, with ground
     truth, how well sigma predicts the error
@@ -402,6 +457,12 @@ def build_report(
     and sigma maps full width, the other figures as thumbnails, a per-frame
     plot for sequences and links to the result files;
     then timing, provenance, configuration and software versions.
+
+    The report folder (``out_html``'s) stands alone: every ``src`` and ``href`` of
+    the page resolves inside it. Images outside it are copied into its ``assets/``
+    (:func:`colourhs.report.assets.place_files`, :func:`~colourhs.report.assets.write_assets`)
+    and the result files of ``results_dir`` are named, not linked; ``link_outside``
+    links both where they are instead.
 
     Parameters
     ----------
@@ -426,14 +487,19 @@ def build_report(
     extra
         Further ``{label: value}`` lines for the page's header table.
     embed_images
-        Embed images as base64 data URIs (the page then stands alone); by
+        Embed images as base64 data URIs (one file holds the whole page); by
         default they are linked by paths relative to the page.
+    link_outside
+        Link the images and result files outside the report folder where they
+        are (``../../results/...``) instead of copying the images into
+        ``assets/`` and naming the result files: the page then works only beside
+        ``results/``, and ``assets/`` is left as it is.
     dataset
         The :class:`colourhs.capture.Dataset` (or None): its rig summary and
         the scenes' descriptions are shown.
     results_dir
         ``results/NAME`` (or None): each scene's meshes, error-coloured meshes
-        and depth files are linked.
+        and depth files are listed (linked with ``link_outside``).
     provenance
         ``{label: value}`` for the provenance table (default: the git commit of
         the colourhs code and this process's command line, see
@@ -460,6 +526,9 @@ def build_report(
         When ``metrics_csv`` is missing or lacks contract columns (naming the file
         and the columns), or a figure or benchmark file is missing. Nothing is
         written then.
+    OSError
+        When an image cannot be copied or the page cannot be written; the
+        report folder is left as it was then.
     """
     out = Path(out_html)
     out_dir = out.parent
@@ -484,7 +553,13 @@ def build_report(
     turn = dataset.rig.cameras[0].R if views and dataset is not None else None
     key = [c for c in SUMMARY_COLUMNS if c in summary.columns]
     top, has_paper = with_paper_columns(summary[["scene", "variant", *key]])
-    top = top.drop(columns="paper name")  # in each scene's table; the summary stays narrow
+    images = [*calib, *(p for ps in figs.values() for p in ps)]
+    if embed_images:
+        where = None
+    elif link_outside:
+        where = link_files(images, out_dir)
+    else:
+        where = place_files(images, out_dir)
     sections = []
     for scene in scenes:
         arranged = arrange_figures(figs.get(scene, []))
@@ -496,23 +571,26 @@ def build_report(
             "plot": frame_error_svg(metrics, scene),
             "plot_caption": "Median depth error per frame and variant (depth_median_mm, mm).",
             **{
-                k: [_figure(p, out_dir, embed_images, "wide" if k == "wide" else "") for p in ps]
+                k: [_figure(p, where, "wide" if k == "wide" else "") for p in ps]
                 for k, ps in arranged.items()
             },
         }
         rows = summary[summary["scene"] == scene]
         expected, calibration = expected_error_table(rows), sigma_calibration_table(rows)
-        s["expected"] = _table(expected, "metrics") if len(expected) else ""
-        s["sigma_calibration"] = _table(calibration, "metrics") if len(calibration) else ""
+        s["expected"] = html_table(expected, "metrics") if len(expected) else ""
+        s["sigma_calibration"] = html_table(calibration, "metrics") if len(calibration) else ""
         dropped = drop_table(metrics[metrics["scene"].astype(str) == scene])
-        s["dropped"] = _table(dropped, "metrics") if len(dropped) else ""
+        s["dropped"] = html_table(dropped, "metrics turned-heads") if len(dropped) else ""
         if len(rows):
             t, _ = with_paper_columns(beside(rows))
-            s["table"] = _table(t.drop(columns="scene"), "metrics")
-            s["n_columns"] = t.shape[1] - 1
+            turned = by_variant(t.drop(columns="scene"))
+            s["table"] = html_table(turned, "metrics")
+            s["n_metrics"] = len(turned)
             s["aggregation"] = _aggregation_text(summary)
             s["same_as"] = _same_as_note(metrics, scene)
-        s["files"] = _file_links(results_dir, scene, out_dir) if results_dir else {}
+        s["files"] = _file_links(results_dir, scene, out_dir, link_outside) if results_dir else {}
+        s["files_root"] = Path(results_dir, scene).as_posix() if results_dir else ""
+        s["files_linked"] = link_outside
         s["views"] = (
             scene_views(results_dir, scene, rotation=turn, progress=progress) if views else {}
         )
@@ -533,21 +611,23 @@ def build_report(
         header=header,
         reproduce=provenance.get("workflow command")
         or f"colourhs run DATASET_DIR --name {dataset_name}",
-        summary_table=_table(top, "summary") if len(top) else "",
+        summary_table=summary_table(top) if len(top) else "",
+        best_caption=BEST_CAPTION,
         has_paper=has_paper,
-        legend={c: COLUMN_LEGEND[c] for c in key if c in COLUMN_LEGEND}
-        | ({"paper …": "the paper's number (see below)"} if has_paper else {}),
+        legend=_legend(top, key, has_paper),
         paper_source=PAPER_REFERENCE_SOURCE,
-        calibration=[_figure(p, out_dir, embed_images) for p in calib],
-        diagnostics=[{**d, "table": _table(d["table"], "bench")} for d in diagnostics],
+        calibration=[_figure(p, where) for p in calib],
+        diagnostics=[{**d, "table": html_table(d["table"], "bench")} for d in diagnostics],
         scenes=sections,
-        timing_table=_table(bench, "bench") if not bench.empty else "",
+        timing_table=html_table(bench, "bench") if not bench.empty else "",
         provenance=provenance,
         rig=rig_summary(dataset) if dataset is not None else {},
         env=env,
         config_resolved=config_resolved,
         config_yaml=yaml.safe_dump(_plain(config), sort_keys=False, allow_unicode=True),
     )
+    if not link_outside:
+        write_assets(where or {}, out_dir)
     with atomic_output(out) as tmp:
         tmp.write_text(page, encoding="utf-8")
     return out

@@ -7,7 +7,9 @@
 variant), as :data:`AGGREGATION` says. :func:`find_benchmarks`,
 :func:`read_benchmarks` and :func:`summarise_benchmarks` do the same for the
 Snakemake ``benchmark:`` files (timing and memory per rule).
-:func:`format_number` is how the report prints every number.
+:func:`format_number` is how the report prints every number and
+:func:`html_table` every table; :func:`best_rows` picks each scene's best
+variant and :func:`by_variant` turns a scene's table to one column per variant.
 
 The HTML page that shows these tables is :mod:`colourhs.report.page`, which
 re-exports them.
@@ -17,7 +19,7 @@ from __future__ import annotations
 
 import html
 import math
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -43,10 +45,14 @@ __all__ = [
     "KEY_COLUMNS",
     "METRIC_COLUMNS",
     "REQUIRED_COLUMNS",
+    "best_rows",
+    "breakable",
+    "by_variant",
     "drop_table",
     "expected_error_table",
     "find_benchmarks",
     "format_number",
+    "html_table",
     "read_benchmarks",
     "read_metrics",
     "sigma_calibration_table",
@@ -123,6 +129,74 @@ def format_number(x) -> str:
         return f"{v:.0f}" if a < 1e6 else f"{v:.3g}"
     s = f"{v:#.3g}"
     return s[:-1] if s.endswith(".") else s
+
+
+def breakable(text) -> str:
+    """``text`` escaped for HTML, with a line-break opportunity (``<wbr>``) after each
+    underscore: a header such as ``depth_median_mm`` then wraps between its words
+    instead of widening its column or breaking inside a word."""
+    return html.escape(str(text), quote=True).replace("_", "_<wbr>")
+
+
+def _cell_text(value) -> str:
+    """A table cell's HTML: integers as they are, other numbers by
+    :func:`format_number`, text escaped, missing values empty."""
+    if value is None or (
+        not isinstance(value, str) and pd.api.types.is_scalar(value) and pd.isna(value)
+    ):
+        return ""
+    if isinstance(value, bool | np.bool_):
+        return str(bool(value))
+    if isinstance(value, int | np.integer):
+        return str(int(value))
+    if isinstance(value, float | np.floating):
+        return format_number(value)
+    return html.escape(str(value), quote=True)
+
+
+def _class_attr(name: str) -> str:
+    return f' class="{html.escape(name, quote=True)}"' if name else ""
+
+
+def html_table(
+    table: pd.DataFrame,
+    css_class: str,
+    *,
+    row_class: Sequence[str] | None = None,
+    cell_class: pd.DataFrame | None = None,
+) -> str:
+    """``table`` as an HTML ``<table>``: a header row of its column names, one row
+    per row of ``table`` (no index).
+
+    Headers wrap only at spaces and underscores (:func:`breakable`), so a narrow
+    window wraps them between words; cells are printed by :func:`_cell_text`
+    (numbers by :func:`format_number`, missing values empty, text escaped).
+
+    Parameters
+    ----------
+    table
+        The rows to show.
+    css_class
+        The table's ``class`` attribute.
+    row_class
+        A class per row of ``table`` ("" for none), or None.
+    cell_class
+        A class per cell ("" for none): a frame of ``table``'s shape, in its order,
+        or None.
+    """
+    head = "".join(f"<th>{breakable(c)}</th>" for c in table.columns)
+    classes = None if cell_class is None else cell_class.to_numpy(object)
+    rows = []
+    for i, values in enumerate(table.itertuples(index=False, name=None)):
+        cells = "".join(
+            f"<td{_class_attr(classes[i, j] if classes is not None else '')}>{_cell_text(v)}</td>"
+            for j, v in enumerate(values)
+        )
+        rows.append(f"<tr{_class_attr(row_class[i] if row_class is not None else '')}>{cells}</tr>")
+    return (
+        f"<table{_class_attr(css_class)}><thead><tr>{head}</tr></thead>"
+        f"<tbody>{''.join(rows)}</tbody></table>"
+    )
 
 
 def _rms(x: pd.Series) -> float:
@@ -246,6 +320,45 @@ def summarise_metrics(df: pd.DataFrame) -> pd.DataFrame:
     out = out.sort_values(["scene", "_o"], kind="stable").drop(columns="_o")
     out["frames"] = out["frames"].astype(int)
     return out.reset_index(drop=True)
+
+
+def best_rows(summary: pd.DataFrame, metric: str) -> pd.Series:
+    """Which rows of :func:`summarise_metrics`' table hold their scene's best ``metric``.
+
+    Parameters
+    ----------
+    summary
+        Columns ``scene`` and ``metric`` (an error: lower is better), one row per
+        (scene, variant).
+    metric
+        The column to compare.
+
+    Returns
+    -------
+    Series of bool, on ``summary``'s index: True where the row's ``metric`` is the
+    lowest of its scene, for every row that ties for it; False where it is missing
+    (NaN), so a scene without any value of ``metric`` (no ground truth) has none.
+    """
+    if metric not in summary.columns:
+        return pd.Series(False, index=summary.index)
+    values = pd.to_numeric(summary[metric], errors="coerce")
+    lowest = values.groupby(summary["scene"].astype(str)).transform("min")
+    return values.notna() & (values == lowest)
+
+
+def by_variant(table: pd.DataFrame) -> pd.DataFrame:
+    """A scene's table turned: one row per column of ``table`` but ``variant`` (column
+    ``metric``, the column's name), one column per variant, in ``table``'s order.
+
+    A table of many metrics and a few variants reads down the page this way
+    instead of growing wider than a narrow window; each value keeps its type
+    (frame counts stay integers).
+    """
+    names = [c for c in table.columns if c != "variant"]
+    out = pd.DataFrame({"metric": names})
+    for i, variant in enumerate(table["variant"].astype(str)):
+        out[variant] = pd.Series([table[c].iloc[i] for c in names], dtype=object)
+    return out
 
 
 def _has_values(table: pd.DataFrame, columns) -> pd.Series:

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import base64
+import html
 import math
 import re
+import shutil
 from pathlib import Path
 
 import cv2
@@ -15,6 +17,8 @@ from PIL import Image
 from report_html import as_dicts, page_tables
 
 from colourhs.report.page import (
+    BEST_CAPTION,
+    BEST_METRIC,
     PAPER_REFERENCE,
     REQUIRED_COLUMNS,
     build_report,
@@ -30,9 +34,12 @@ from colourhs.report.provenance import arrange_figures, git_provenance, resolve_
 from colourhs.report.tables import (
     EXPECTED_ERROR_COLUMNS,
     EXTRA_COLUMNS,
+    best_rows,
+    html_table,
     sigma_calibration_table,
 )
 
+VARIANTS_3 = ("vh", "bayes_ph", "bayes_full")
 HEADER = "s\th:m:s\tmax_rss\tmax_vms\tmax_uss\tmax_pss\tio_in\tio_out\tmean_load\tcpu_time\n"
 VARIANTS = ("bayes_ph", "vh", "bayes_nocalib")  # deliberately not in the paper's order
 
@@ -121,6 +128,13 @@ def benchmarks(tmp_path) -> list[Path]:
 
 
 # --------------------------------------------------------------------------- html parsing
+
+
+def per_variant(table: list[list[str]]) -> dict[str, dict[str, str]]:
+    """{variant: {metric: cell}} of a scene's metrics table (one column per variant)."""
+    header, *rows = table
+    assert header[0] == "metric"
+    return {v: {r[0]: r[j] for r in rows} for j, v in enumerate(header) if j}
 
 
 @pytest.fixture
@@ -248,7 +262,7 @@ def test_report_metric_tables(report, metrics_csv):
     tables = page_tables(text)
     raw = read_metrics(metrics_csv)
     (plane_table,) = tables["scene-plane"]
-    plane = as_dicts(plane_table)
+    plane = per_variant(plane_table)
     assert list(plane) == ["vh", "bayes_nocalib", "bayes_ph"]  # the paper's order
     for variant in VARIANTS:
         assert variant in text
@@ -263,9 +277,9 @@ def test_report_metric_tables(report, metrics_csv):
         assert row["coverage"] == format_number(g["coverage"].mean())
     assert plane["bayes_ph"]["depth_rms_mm"] == "3.54"  # RMS, not the mean 3.50
     assert plane["bayes_ph"]["hausdorff_max_mm"] == "77.0"
-    # the paper's numbers beside ours, right after our column
-    header = plane_table[0]
-    assert header[header.index("hausdorff_rms_mm") + 1] == "paper hausdorff_rms_mm"
+    # the paper's numbers beside ours, right after our row
+    names = [r[0] for r in plane_table[1:]]
+    assert names[names.index("hausdorff_rms_mm") + 1] == "paper hausdorff_rms_mm"
     assert plane["bayes_nocalib"]["paper hausdorff_rms_mm"] == "2.50"
     assert plane["bayes_ph"]["paper hausdorff_rms_mm"] == "2.00"
     assert plane["bayes_ph"]["hausdorff_rms_mm"] == "2.50"
@@ -274,9 +288,9 @@ def test_report_metric_tables(report, metrics_csv):
     assert PAPER_REFERENCE["plane"]["bayes_ph"]["hausdorff_rms_mm"] == 2.0
     # a scene without ground truth: variants and frame counts, empty metric cells
     (sheet_table,) = tables["scene-sheet"]
-    sheet = as_dicts(sheet_table)
+    sheet = per_variant(sheet_table)
     assert list(sheet) == ["vh", "bayes_nocalib", "bayes_ph"]
-    assert "paper hausdorff_rms_mm" not in sheet_table[0]
+    assert "paper hausdorff_rms_mm" not in [r[0] for r in sheet_table[1:]]
     for row in sheet.values():
         assert row["frames"] == "2"
         assert row["hausdorff_rms_mm"] == "" and row["depth_rms_mm"] == ""
@@ -309,20 +323,195 @@ def test_software_versions_missing_package(monkeypatch):
     assert v["numpy"] == np.__version__
 
 
-def test_report_links_instead_of_embedding(tmp_path, metrics_csv, images):
+def test_report_links_outside_on_request(tmp_path, metrics_csv, images):
+    """colourhs report copies the images from outside the report's folder into its
+    assets/; with --link-outside it links them and the result files where they are
+    instead, and leaves assets/ as it was."""
+    from colourhs.cli.parser import main
+
+    mesh = tmp_path / "results" / "demo" / "plane" / "vh" / "mesh" / "000000.ply"
+    mesh.parent.mkdir(parents=True)
+    mesh.write_text("x")
+    out = tmp_path / "reports" / "demo" / "index.html"
+    argv = ["report", str(out), "--name", "demo", "--metrics", str(metrics_csv)]
+    argv += [
+        "--benchmarks",
+        str(tmp_path / "none"),
+        "--calibration",
+        *map(str, images["calib"]),
+        "--results",
+        str(mesh.parents[3]),
+    ]
+    assert main(argv) == 0
+    text = out.read_text(encoding="utf-8")
+    assert 'src="assets/mu_maps.png"' in text and "<code>vh/mesh/000000.ply</code>" in text
+    assets = sorted(p.name for p in (out.parent / "assets").iterdir())
+    assert assets == ["chromaticity_monster.png", "mu_maps.png"]
+    assert main([*argv, "--link-outside"]) == 0
+    text = out.read_text(encoding="utf-8")
+    assert "base64" not in text and "assets/" not in text
+    assert 'src="../../results/demo/figures/mu_maps.png"' in text
+    assert '<a href="../../results/demo/plane/vh/mesh/000000.ply">mesh 000000</a>' in text
+    assert sorted(p.name for p in (out.parent / "assets").iterdir()) == assets
+    assert "No benchmark files." in text
+
+
+#: A ``src`` or ``href`` attribute's value.
+LINK = re.compile(r'\b(?:src|href)="([^"]*)"')
+
+
+def file_links(text: str) -> list[str]:
+    """Every ``src`` and ``href`` of a page but data URIs and links into the page."""
+    return [u for u in LINK.findall(text) if not u.startswith(("data:", "#"))]
+
+
+def test_report_folder_stands_alone(tmp_path, metrics_csv, images):
+    """Every src and href of the page is a path inside the report's folder: the images
+    from outside it are whole copies in its assets/, those inside linked in place, the
+    result files named; the folder moved elsewhere, without results/, still has them."""
+    results = tmp_path / "results" / "demo"
+    mesh = results / "plane" / "bayes_ph" / "mesh" / "000000.ply"
+    mesh.parent.mkdir(parents=True)
+    mesh.write_text("x")
+    inside = tmp_path / "reports" / "demo" / "figures" / "plane" / "figure7.png"
+    inside.parent.mkdir(parents=True)
+    assert cv2.imwrite(str(inside), np.zeros((4, 4, 3), np.uint8))
     out = build_report(
         tmp_path / "reports" / "demo" / "index.html",
         "demo",
         metrics_csv,
         images["calib"],
-        {"plane": images["plane"]},
+        {"plane": [*images["plane"], inside]},
         [],
         {},
+        results_dir=results,
     )
     text = out.read_text(encoding="utf-8")
-    assert "base64" not in text
-    assert 'src="../../results/demo/figures/mu_maps.png"' in text
-    assert "No benchmark files." in text
+    links = file_links(text)
+    assert len(set(links)) == 5  # the five images; the result file is named, not linked
+    for link in links:
+        assert not link.startswith("/") and ":" not in link and ".." not in link.split("/"), link
+    assert 'src="figures/plane/figure7.png"' in text
+    for source in [*images["calib"], *images["plane"]]:
+        assert (out.parent / "assets" / source.name).read_bytes() == source.read_bytes()
+    assert "<code>bayes_ph/mesh/000000.ply</code>" in text
+    mailed = Path(shutil.move(out.parent, tmp_path / "mail" / "demo"))
+    shutil.rmtree(tmp_path / "results")
+    assert all((mailed / link).is_file() for link in links)
+    assert not [p for p in mailed.rglob(".*")]  # no temporary file or folder left
+
+
+def test_report_copies_all_or_nothing(tmp_path, metrics_csv, images, monkeypatch):
+    """A copy that fails leaves the report's folder as it was (no partial assets/, no
+    temporary folder, the earlier page); a build that links fewer images drops the
+    copies it no longer links."""
+    out = tmp_path / "reports" / "demo" / "index.html"
+
+    def build(calib, plane):
+        return build_report(out, "demo", metrics_csv, calib, {"plane": plane}, [], {})
+
+    def folder() -> dict:
+        return {
+            str(p.relative_to(out.parent)): p.read_bytes()
+            for p in out.parent.rglob("*")
+            if p.is_file()
+        }
+
+    build(images["calib"][:1], [])
+    before = folder()
+    assert sorted(before) == ["assets/mu_maps.png", "index.html", "metrics.csv"]
+    copies = []
+    copy = shutil.copyfile
+
+    def failing(src, dst, *args, **kwargs):
+        copies.append(src)
+        if len(copies) == 3:
+            raise OSError("disk full")
+        return copy(src, dst, *args, **kwargs)
+
+    monkeypatch.setattr(shutil, "copyfile", failing)
+    with pytest.raises(OSError, match="disk full"):
+        build(images["calib"], images["plane"])
+    assert len(copies) == 3 and folder() == before
+    monkeypatch.undo()
+    build(images["calib"], images["plane"])
+    assert len(list((out.parent / "assets").iterdir())) == 4
+    build(images["calib"][1:], [])
+    assert [p.name for p in (out.parent / "assets").iterdir()] == ["chromaticity_monster.png"]
+    build([], [])
+    assert sorted(p.name for p in out.parent.iterdir()) == ["index.html", "metrics.csv"]
+
+
+def _summary_rows(text: str) -> list[tuple[str, list[tuple[str, str]]]]:
+    """The summary table's body rows: (the row's class, [(each cell's class, text)])."""
+    table = text[text.index('<table class="summary">') :]
+    body = table[table.index("<tbody>") : table.index("</tbody>")]
+    row = re.compile(r'<tr(?: class="([^"]*)")?>(.*?)</tr>')
+    cell = re.compile(r'<td(?: class="([^"]*)")?>(.*?)</td>')
+    return [(rc or "", [(cc or "", v) for cc, v in cell.findall(r)]) for rc, r in row.findall(body)]
+
+
+def test_html_table_headers_wrap_between_words():
+    """Headers break after underscores only (<wbr>); cells: integers as they are, other
+    numbers by format_number, text escaped, missing values empty; classes per row and
+    per cell."""
+    table = pd.DataFrame(
+        {"variant": ["vh", "<b>"], "frames": [2, 3], "depth_rms_mm": [1.5, np.nan]}
+    )
+    cells = pd.DataFrame({"variant": ["", ""], "frames": ["", ""], "depth_rms_mm": ["best", ""]})
+    assert html_table(table, "t", row_class=["best", ""], cell_class=cells) == (
+        '<table class="t"><thead><tr><th>variant</th><th>frames</th>'
+        "<th>depth_<wbr>rms_<wbr>mm</th></tr></thead><tbody>"
+        '<tr class="best"><td>vh</td><td>2</td><td class="best">1.50</td></tr>'
+        "<tr><td>&lt;b&gt;</td><td>3</td><td></td></tr></tbody></table>"
+    )
+
+
+def test_best_rows_lowest_per_scene_with_ties():
+    summary = pd.DataFrame(
+        {
+            "scene": ["a", "a", "a", "b", "b", "c"],
+            "variant": ["vh", "bayes_ph", "bayes_full", "vh", "bayes_ph", "vh"],
+            "hausdorff_rms_mm": [3.0, 1.5, 1.5, np.nan, 4.0, np.nan],
+        }
+    )
+    assert best_rows(summary, "hausdorff_rms_mm").tolist() == [
+        False,
+        True,
+        True,
+        False,
+        True,
+        False,
+    ]
+    assert not best_rows(summary, "depth_median_mm").any()  # no such column
+
+
+def test_summary_marks_each_scenes_best_variant(tmp_path):
+    """The summary's rows of each scene's lowest BEST_METRIC (both of a tie) are of
+    class best, with that cell of class best; a scene without values has none; a
+    caption says what the mark means."""
+    values = {("plane", "vh"): 3.0, ("plane", "bayes_ph"): 1.5, ("plane", "bayes_full"): 1.5}
+    values |= {("statue", "vh"): 0.5, ("statue", "bayes_ph"): 0.75}
+    rows = [
+        {"scene": s, "frame": "000000", "variant": v, BEST_METRIC: values.get((s, v), np.nan)}
+        for s, vs in {"plane": VARIANTS_3, "statue": ("vh", "bayes_ph"), "sheet": ("vh",)}.items()
+        for v in vs
+    ]
+    csv = tmp_path / "metrics.csv"
+    pd.DataFrame(rows, columns=list(REQUIRED_COLUMNS)).to_csv(csv, index=False)
+    text = build_report(tmp_path / "index.html", "demo", csv, [], {}, [], {}).read_text()
+    body = _summary_rows(text)
+    header = page_tables(text)["summary"][0][0]
+    col = header.index(BEST_METRIC)
+    marked = [(cells[0][1], cells[1][1]) for rc, cells in body if "best" in rc.split()]
+    assert marked == [("plane", "bayes_ph"), ("plane", "bayes_full"), ("statue", "vh")]
+    for rc, cells in body:
+        best = "best" in rc.split()
+        assert [c for c, _ in cells] == [
+            "best" if best and j == col else "" for j in range(len(cells))
+        ]
+    (caption,) = re.findall(r'<p class="note caption">(.*?)</p>', text)
+    assert html.unescape(caption) == BEST_CAPTION and BEST_METRIC in BEST_CAPTION
 
 
 @pytest.mark.parametrize("drop", ["depth_rms_mm", "variant"])
@@ -457,10 +646,11 @@ def test_report_layout_provenance_and_links(tmp_path, metrics_csv, images):
     assert text.index('id="summary"') < text.index('id="scene-plane"')
     assert "<dt>hausdorff_rms_mm</dt><dd>accuracy: RMS distance" in text
     # figures: Figure 7 first and wide, error maps next, then thumbnails linked to full size
-    wide = text.index('<figure class="wide"><a href="../../results/demo/figures/figure7.png">')
+    # (copied into the report's assets/: they lie outside its folder)
+    wide = text.index('<figure class="wide"><a href="assets/figure7.png">')
     assert wide < text.index("vh_depth_error.png") < text.index("vh_depth.png")
     assert text.index("vh_depth.png") < text.index("bayes_ph_depth.png")  # paper's order
-    assert '<a href="../../results/demo/figures/vh_depth.png"><img' in text
+    assert '<a href="assets/vh_depth.png"><img' in text
     # rig summary and scene.json
     rig = {r[0]: r[1] for r in tables["provenance"][1]}
     assert rig["cameras"] == "3: cam0 (red light), cam1 (green light), cam2 (blue light)"
@@ -470,15 +660,16 @@ def test_report_layout_provenance_and_links(tmp_path, metrics_csv, images):
     assert rig["lights"].startswith("at the lens centres (collocated")
     assert "held-out &lt;board&gt; pose (static; white surface; ground truth)" in text
     assert "dynamic, 4 frames; chromatic object slinky; no ground truth" in text
-    # result files, relative to the page
+    # result files, named in the run's folder (not the report's), not linked
     for rel in (
         "bayes_ph/mesh/000000.ply",
         "bayes_ph/eval/000000.ply",
         "bayes_ph/depth/000000.h5",
         "vh/mesh/000000.ply",
     ):
-        assert f'href="../../results/demo/plane/{rel}"' in text
-    assert "Result files (4)" in text
+        assert f"<code>{rel}</code>" in text
+    assert f"In <code>{results.as_posix()}/plane/</code> of the run" in text
+    assert "Result files (4)" in text and 'href="../' not in text
     # provenance: this checkout's commit
     prov = {r[0]: r[1] for r in tables["provenance"][0]}
     assert re.fullmatch(r"[0-9a-f]{40}", prov["git commit"]), prov
@@ -598,9 +789,9 @@ def test_report_expected_error_and_sigma_calibration(tmp_path, images):
         }
     }  # vh has no sigma: no row
     metrics, expected, calibration = tables["scene-plane"]
-    header = metrics[0]
-    assert header[header.index("depth_median_mm") + 1] == "depth_signed_median_mm"
-    assert as_dicts(metrics)["bayes_full"]["depth_signed_median_mm"] == "-0.500"
+    names = [r[0] for r in metrics[1:]]
+    assert names[names.index("depth_median_mm") + 1] == "depth_signed_median_mm"
+    assert per_variant(metrics)["bayes_full"]["depth_signed_median_mm"] == "-0.500"
     assert as_dicts(expected)["bayes_full"]["expected_depth_error_mm"] == "1.30"
     assert as_dicts(expected)["bayes_full"]["depth_signed_median_mm"] == "-0.500"
     assert calibration == [

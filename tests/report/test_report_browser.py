@@ -1,10 +1,11 @@
-"""The evaluation report as a browser shows it (headless Chromium at 1400 x 900).
+"""The evaluation report as a browser shows it (headless Chromium, 900 and 1400 px wide).
 
 Reports are built from synthetic inputs shaped like a real run's (five variants,
 every metric column of colourhs.evaluation.accuracy, the figures colourhs.report.figures writes
-at their real pixel sizes), loaded by ``chromium --headless --dump-dom`` with a
-small script that writes the page's measurements into the DOM on ``load``, and
-by ``--screenshot``. Skipped when no Chromium is installed (scripts/setup.sh
+at their real pixel sizes), moved away from the results they were built from (as a
+user mails the report's folder), and loaded by ``chromium --headless --dump-dom``
+with a small script that writes the page's measurements into the DOM on ``load``,
+and by ``--screenshot``. Skipped when no Chromium is installed (scripts/setup.sh
 installs Debian's ``chromium``).
 """
 
@@ -16,6 +17,8 @@ import re
 import shutil
 import subprocess
 from pathlib import Path
+from urllib.parse import urlsplit
+from urllib.request import url2pathname
 
 import cv2
 import numpy as np
@@ -25,8 +28,8 @@ import pytest
 from PIL import Image
 
 from colourhs.common.ply import write_ply
-from colourhs.report.page import REQUIRED_COLUMNS, build_report
-from colourhs.report.tables import EXTRA_COLUMNS
+from colourhs.report.page import BEST_METRIC, REQUIRED_COLUMNS, build_report
+from colourhs.report.tables import EXTRA_COLUMNS, best_rows, read_metrics, summarise_metrics
 from colourhs.workflow.variants import VARIANT_ORDER
 
 CHROMIUM = next(
@@ -35,26 +38,81 @@ CHROMIUM = next(
 pytestmark = pytest.mark.skipif(
     CHROMIUM is None, reason="no chromium on PATH (scripts/setup.sh installs Debian's chromium)"
 )
-WIDTH, HEIGHT = 1400, 900
+#: The window widths the page must read well at, and the window's height.
+WIDTHS, HEIGHT = (900, 1400), 900
+#: The page body's widest content box (72 em of 16 px; the template's max-width).
+BODY_WIDTH = 1152
 _sphere = o3d.geometry.TriangleMesh.create_sphere(0.05, resolution=12)  # 528 triangles
 SPHERE = (np.asarray(_sphere.vertices), np.asarray(_sphere.triangles))
 
-# Written into the page on load: overflow, the images' state, the page height, the
-# summary table's scroll and client widths, the displayed width of Figure 7, the pixels
-# each 3D view's canvas drew (red below 250).
-MEASURE = """<script>addEventListener("load", () => {
+# Written into the page on load. As the page opens: its width and height, the
+# elements wider than the window (outside the boxes that scroll), the images' state,
+# the displayed width of Figure 7, the pixels each 3D view's canvas drew (red below
+# 250), the summary table's height and its box's scroll and client sizes, and per
+# summary row its cells, whether it is of class best, its variant cell's font
+# weight, the content its cells show before their text (the star) and whether an
+# ancestor box clips it. Then with every <details> open, in each scene's tab: the
+# headers whose content overflows or that break inside a word (a word, a run of
+# characters but spaces and underscores, laid out on more than one line), the
+# tables whose box scrolls sideways, the page's width and the elements wider than
+# the window. Last, every src and href, resolved against the page.
+MEASURE = r"""<script>addEventListener("load", () => {
   const d = document.documentElement, imgs = [...document.images];
-  const f7 = imgs.filter(i => /figure7/.test(i.src)).map(i => i.clientWidth);
-  const wide = [...document.querySelectorAll("body *")].filter(e =>
-    !e.parentElement.closest(".scroll, pre") && e.getBoundingClientRect().right > innerWidth)
+  const unboxed = e => !e.parentElement.closest(".scroll, pre");
+  const wider = () => [...document.querySelectorAll("body *")]
+    .filter(e => unboxed(e) && e.getBoundingClientRect().right > innerWidth)
     .map(e => e.tagName + "." + e.className);
-  const summary = document.querySelector("#summary + .scroll");
-  const drawn = [...document.querySelectorAll(".viewer canvas")].map(c => c.getContext("2d")
-    .getImageData(0, 0, c.width, c.height).data.filter((x, i) => i % 4 == 0 && x < 250).length);
-  d.dataset.measure = JSON.stringify({scrollWidth: d.scrollWidth, height: d.scrollHeight,
-    summary: [summary.scrollWidth, summary.clientWidth],
+  const out = {scrollWidth: d.scrollWidth, height: d.scrollHeight, wide: wider(),
     images: imgs.length, broken: imgs.filter(i => !i.complete || i.naturalWidth === 0)
-    .map(i => i.getAttribute("src")), figure7: f7, wide: wide, drawn: drawn});
+    .map(i => i.getAttribute("src")), figure7: imgs.filter(i => /figure7/.test(i.src))
+    .map(i => i.clientWidth)};
+  out.drawn = [...document.querySelectorAll(".viewer canvas")].map(c => c.getContext("2d")
+    .getImageData(0, 0, c.width, c.height).data.filter((x, i) => i % 4 == 0 && x < 250).length);
+  const summary = document.querySelector("table.summary"), box = summary.parentElement;
+  out.summary = {height: summary.getBoundingClientRect().height,
+    box: [box.scrollWidth, box.clientWidth, box.scrollHeight, box.clientHeight]};
+  const clipped = row => {
+    const r = row.getBoundingClientRect();
+    for (let a = row.parentElement; a !== document.body; a = a.parentElement) {
+      const s = getComputedStyle(a), c = a.getBoundingClientRect();
+      const boxed = s.overflowX !== "visible" || s.overflowY !== "visible";
+      if (boxed && (r.top < c.top - 0.5 || r.bottom > c.bottom + 0.5 || r.left < c.left - 0.5 ||
+          r.right > c.right + 0.5)) return true;
+    }
+    return r.height === 0;
+  };
+  out.rows = [...summary.tBodies[0].rows].map(r => ({cells: [...r.cells].map(c => c.textContent),
+    best: r.classList.contains("best"), weight: +getComputedStyle(r.cells[1]).fontWeight,
+    before: [...r.cells].map(c => getComputedStyle(c, "::before").content)
+    .filter(c => c !== "none" && c !== "normal"), clipped: clipped(r)}));
+  document.querySelectorAll("details").forEach(e => { e.open = true; });
+  const range = document.createRange();
+  const brokenWord = th => [...th.childNodes].filter(n => n.nodeType === Node.TEXT_NODE)
+    .some(n => [...n.data.matchAll(/[^\s_]+/g)].some(m => {
+      range.setStart(n, m.index);
+      range.setEnd(n, m.index + m[0].length);
+      return range.getClientRects().length !== 1;
+    }));
+  const split = new Set(), scrolled = new Set(), openWide = new Set();
+  out.openWidth = 0;
+  for (const tab of document.querySelectorAll(".tabs > input")) {
+    tab.checked = true;
+    for (const t of document.querySelectorAll("table")) {
+      if (!t.getClientRects().length) continue;  /* in a hidden tab */
+      for (const th of t.querySelectorAll("th"))
+        if (th.scrollWidth > th.clientWidth || th.scrollHeight > th.clientHeight || brokenWord(th))
+          split.add(th.textContent);
+      const b = t.closest(".scroll");
+      if (b && b.scrollWidth > b.clientWidth)
+        scrolled.add(t.className + ": " + t.rows[0].textContent);
+    }
+    out.openWidth = Math.max(out.openWidth, d.scrollWidth);
+    wider().forEach(e => openWide.add(e));
+  }
+  Object.assign(out, {split: [...split], scrolled: [...scrolled], openWide: [...openWide]});
+  out.links = [...document.querySelectorAll("[src], [href]")].map(e =>
+    new URL(e.getAttribute("src") ?? e.getAttribute("href"), document.baseURI).href);
+  d.dataset.measure = JSON.stringify(out);
 });</script>"""
 
 
@@ -122,7 +180,17 @@ def _make_report(root: Path, n_scenes: int, n_frames: int) -> Path:
     )
 
 
-def _start(page: Path, screenshot: Path | None = None) -> subprocess.Popen:
+def _mail(page: Path, to: Path) -> Path:
+    """Move the report folder of ``page`` to ``to`` and delete what it was built from
+    (the results beside ``reports/``), as a user who mails the folder; the moved page."""
+    root = page.parents[2]
+    to.parent.mkdir(parents=True, exist_ok=True)
+    shutil.move(page.parent, to)
+    shutil.rmtree(root)
+    return to / page.name
+
+
+def _start(page: Path, width: int, screenshot: Path | None = None) -> subprocess.Popen:
     """Load ``page`` (a copy with :data:`MEASURE` added, beside it) in headless Chromium."""
     probe = page.with_name("_measure.html")
     probe.write_text(page.read_text(encoding="utf-8").replace("</body>", MEASURE + "</body>"))
@@ -132,7 +200,7 @@ def _start(page: Path, screenshot: Path | None = None) -> subprocess.Popen:
         "--no-sandbox",
         "--disable-gpu",
         "--hide-scrollbars",
-        f"--window-size={WIDTH},{HEIGHT}",
+        f"--window-size={width},{HEIGHT}",
         "--dump-dom",
         probe.as_uri(),
     ]
@@ -149,37 +217,76 @@ def _measurements(run: subprocess.Popen) -> dict:
     return json.loads(html.unescape(m.group(1)))
 
 
-def test_report_fits_1400px_and_stays_short(tmp_path):
-    """No horizontal overflow at 1400 px, every image loaded, and a height that does
-    not grow with scenes (one scene's tab at a time, the summary table scrolls past
-    36 em) nor with frames beyond the per-frame plot and the animation."""
+def _outside(links: list[str], folder: Path) -> list[str]:
+    """The links (absolute URLs) that are neither data URIs nor files inside ``folder``."""
+    bad = []
+    for link in links:
+        url = urlsplit(link)
+        if url.scheme == "data":
+            continue
+        path = Path(url2pathname(url.path)).resolve() if url.scheme == "file" else None
+        if path is None or not path.is_relative_to(folder.resolve()) or not path.is_file():
+            bad.append(link)
+    return bad
+
+
+def _best(metrics_csv: Path) -> list[list[str]]:
+    """[scene, variant] of each scene's best variants, from the metrics table itself."""
+    summary = summarise_metrics(read_metrics(metrics_csv))
+    return summary.loc[best_rows(summary, BEST_METRIC), ["scene", "variant"]].values.tolist()
+
+
+@pytest.mark.parametrize("width", WIDTHS)
+def test_report_reads_at_width_and_stands_alone(tmp_path, width):
+    """At ``width`` px: no horizontal overflow, even with every <details> open; every
+    table fits its box without scrolling sideways and no header breaks inside a word;
+    every summary row shows (no inner scroll box), each scene's best variant marked
+    (bold, a star); the report's folder, moved away from the results, has every image
+    and every link inside it; a height that grows with scenes only by the summary's
+    rows (one scene's tab at a time) and with frames only by the per-frame plot and
+    the animation."""
     sizes = {"s2f1": (2, 1), "s6f1": (6, 1), "s6f30": (6, 30)}
-    runs = {
-        k: _start(_make_report(tmp_path / k, *n), tmp_path / "report.png" if k == "s2f1" else None)
-        for k, n in sizes.items()
+    pages = {
+        k: _mail(_make_report(tmp_path / k, *n), tmp_path / "mailed" / k) for k, n in sizes.items()
     }
+    shot = tmp_path / "report.png"
+    runs = {k: _start(p, width, shot if k == "s2f1" else None) for k, p in pages.items()}
     m = {k: _measurements(r) for k, r in runs.items()}
+    content = min(width - 32, BODY_WIDTH)  # the body's content box: 1 em padding each side
     for k, (n_scenes, n_frames) in sizes.items():
-        assert m[k]["scrollWidth"] <= WIDTH, m[k]["wide"]  # measured 1400: nothing wider
-        assert not m[k]["wide"]
-        assert m[k]["broken"] == []  # every <img> loaded, those of hidden tabs too
-        assert m[k]["images"] == 2 + n_scenes * (15 + (n_frames > 1))  # + animation
-        summary = m[k]["summary"]
-        assert summary[0] <= summary[1], summary  # the summary needs no sideways scrolling
-        # one scene shown: its Figure 7 full width (the body's 72 em less padding), not
-        # a ~100 px tile; the other scenes' are in hidden tabs
-        shown = [w for w in m[k]["figure7"] if w > 0]
-        assert len(shown) == 1 and 1050 <= shown[0] <= 1160, m[k]["figure7"]
+        page = m[k]
+        assert page["scrollWidth"] <= width and not page["wide"], page["wide"]
+        assert page["openWidth"] <= width and not page["openWide"], page["openWide"]
+        assert page["scrolled"] == [], page["scrolled"]  # no table needs a sideways scroll
+        assert page["split"] == [], page["split"]  # headers wrap between words only
+        # the summary: every row shown, none clipped by a box
+        rows = page["rows"]
+        assert len(rows) == n_scenes * len(VARIANT_ORDER)
+        assert not [r["cells"][:2] for r in rows if r["clipped"]]
+        sw, cw, sh, ch = page["summary"]["box"]
+        assert sw <= cw and sh <= ch, page["summary"]
+        # each scene's best variant marked, bold with a star, and no other row
+        marked = [r for r in rows if r["best"]]
+        assert [r["cells"][:2] for r in marked] == _best(pages[k].with_name("metrics.csv"))
+        assert {r["cells"][0] for r in marked} == {r["cells"][0] for r in rows}
+        assert all(r["weight"] >= 600 and any("\u2605" in c for c in r["before"]) for r in marked)
+        assert all(r["weight"] < 600 and not r["before"] for r in rows if not r["best"])
+        # the folder stands alone: every image loaded, every link a file inside it
+        assert page["broken"] == []  # every <img> loaded, those of hidden tabs too
+        assert page["images"] == 2 + n_scenes * (15 + (n_frames > 1))  # + animation
+        assert _outside(page["links"], pages[k].parent) == []
+        assert any("/assets/" in link for link in page["links"])  # the calibration figures
+        # one scene shown: its Figure 7 full width, not a ~100 px tile; the other
+        # scenes' are in hidden tabs
+        shown = [w for w in page["figure7"] if w > 0]
+        assert len(shown) == 1 and content - 10 <= shown[0] <= content, page["figure7"]
         # every scene's 3D view drew its mesh (hidden tabs' too): a sphere of 0.1 m
-        # filling 0.9 of the 520 px canvas' height, measured 171,372 px of 468,000
-        assert len(m[k]["drawn"]) == n_scenes and min(m[k]["drawn"]) > 150_000, m[k]["drawn"]
-    shot = Image.open(tmp_path / "report.png")
-    assert shot.size == (WIDTH, HEIGHT)
-    # height, measured 7,570 px (2 scenes), 7,770 (6: the summary table's scroll box
-    # full), 8,326 (6 scenes of 30 frames: + the per-frame plot and the animation); was
-    # 8,224 and 20,460 px for 2 and 6 scenes with every scene on the page, 6,330 to
-    # 7,085 px before the depth sigma map and the expected-error and sigma tables
+        # filling 0.9 of the 520 px canvas' height
+        assert len(page["drawn"]) == n_scenes and min(page["drawn"]) > 150_000, page["drawn"]
+    assert Image.open(shot).size == (width, HEIGHT)
     h = {k: v["height"] for k, v in m.items()}
-    assert max(h.values()) < 8600, h
-    assert 0 <= h["s6f1"] - h["s2f1"] < 300, h  # scenes: only the summary box's growth
-    assert 0 < h["s6f30"] - h["s6f1"] < 800, h  # frames: the plot and the animation, once
+    rows = {k: v["summary"]["height"] for k, v in m.items()}
+    assert max(h.values()) < 9000, h
+    # scenes: the summary's rows and little else; frames: the plot and the animation, once
+    assert -2 < (h["s6f1"] - h["s2f1"]) - (rows["s6f1"] - rows["s2f1"]) < 100, (h, rows)
+    assert 0 < h["s6f30"] - h["s6f1"] < 800, h
