@@ -69,11 +69,12 @@ def errors(est: dict, truth: dict) -> dict[str, tuple[float, float]]:
 
 def run_seed(root: Path, preset: str, seed: int, workers: int) -> dict:
     from colourhs.calibration.markers import marker_poses
-    from colourhs.synth.synthesise import synthesise
+    from colourhs.synth.synthesise import RenderSelection, synthesise
 
     data = root / f"{preset}-seed{seed}"
     if not data.exists():
-        synthesise(data, preset, seed=seed, scenes=("plane",), progress=False, workers=workers)
+        plane = RenderSelection(scenes=("plane",))
+        synthesise(data, preset, seed=seed, selection=plane, progress=False, workers=workers)
     poses = root / f"{preset}-seed{seed}_poses.csv"
     if not poses.exists():
         marker_poses(data, poses)

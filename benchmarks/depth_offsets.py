@@ -88,16 +88,15 @@ def run_seed(seed: int, mode: str, preset, blurs, root: Path) -> list[dict]:
     from colourhs.common.ply import load_mesh
     from colourhs.common.raycast import render_depth_normals
     from colourhs.reconstruct.frame import load_frame, reconstruct
-    from colourhs.synth.synthesise import synthesise
+    from colourhs.synth.synthesise import DrawOverrides, RenderSelection, synthesise
 
     data = synthesise(
         root / f"{mode}{seed}",
         preset,
         seed=seed,
         nuisances=nuisances(mode),
-        exact=True,
-        scenes=SCENES,
-        parts=("photometric", "scenes"),
+        draw=DrawOverrides(exact=True),
+        selection=RenderSelection(parts=("photometric", "scenes"), scenes=SCENES),
         progress=False,
     )
     rows = []

@@ -313,7 +313,7 @@ def run_seed(
 
     from colourhs.capture import open_dataset
     from colourhs.synth.randomranges import RANGES_BY_NAME
-    from colourhs.synth.synthesise import PRESETS, synthesise
+    from colourhs.synth.synthesise import PRESETS, DrawOverrides, synthesise
 
     ranges, name = None, preset
     if light_offset_m is not None:
@@ -324,7 +324,9 @@ def run_seed(
     root = Path(tempfile.mkdtemp(prefix=f"colourhs-gen-{seed}-"))
     try:
         t0 = time.time()
-        data = synthesise(root / "data", preset, seed=seed, progress=False, ranges=ranges)
+        data = synthesise(
+            root / "data", preset, seed=seed, progress=False, draw=DrawOverrides(ranges=ranges)
+        )
         t_render = time.time() - t0
         files = calibrate(data, root / "calib")
         t_calib = time.time() - t0 - t_render

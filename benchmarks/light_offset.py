@@ -54,7 +54,7 @@ def run_offset(seed: int, preset, offset_m: float, scenes, root: Path) -> list[d
     from colourhs.reconstruct.frame import reconstruct_frame
     from colourhs.synth.randomranges import RANGES_BY_NAME
     from colourhs.synth.simulated_rig import Nuisances
-    from colourhs.synth.synthesise import synthesise
+    from colourhs.synth.synthesise import DrawOverrides, RenderSelection, synthesise
 
     ranges = replace(RANGES_BY_NAME[preset.random_ranges], light_offset_m=(offset_m, offset_m))
     data = root / f"offset-{offset_m * 1e3:g}mm"
@@ -64,10 +64,12 @@ def run_offset(seed: int, preset, offset_m: float, scenes, root: Path) -> list[d
         seed=seed,
         nuisances=Nuisances().without("crosstalk"),
         # the capture format needs board poses, a coloured scene its chromatic captures
-        parts=("photometric", "scenes", *(("chromatic",) if "statue" in scenes else ())),
-        scenes=tuple(scenes),
+        selection=RenderSelection(
+            parts=("photometric", "scenes", *(("chromatic",) if "statue" in scenes else ())),
+            scenes=tuple(scenes),
+        ),
         progress=False,
-        ranges=ranges,
+        draw=DrawOverrides(ranges=ranges),
     )
     noise = data / "noise.json"
     calibrate_noise(data, noise, progress=False)

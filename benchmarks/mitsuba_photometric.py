@@ -79,7 +79,7 @@ def half_diagonal_deg(rig) -> float:
 
 def render_ours(out: Path, preset, seed, nuis, ranges) -> Path:
     """Our renderer's photometric captures (and ground truth) of the seed."""
-    from colourhs.synth.synthesise import synthesise
+    from colourhs.synth.synthesise import DrawOverrides, RenderSelection, synthesise
 
     if not (out / "rig.json").exists():
         t = time.time()
@@ -88,8 +88,8 @@ def render_ours(out: Path, preset, seed, nuis, ranges) -> Path:
             preset,
             seed,
             nuis,
-            parts=("photometric",),
-            ranges=ranges,
+            selection=RenderSelection(parts=("photometric",)),
+            draw=DrawOverrides(ranges=ranges),
             progress=False,
             overwrite=True,
         )

@@ -50,7 +50,7 @@ def scaled_mu(gt: Path, out: Path, camera: str, factor: float) -> Path:
 def run_seed(seed: int, errors, ml_errors, root: Path) -> list[dict]:
     from colourhs.capture import load_rig
     from colourhs.synth.simulated_rig import Nuisances
-    from colourhs.synth.synthesise import PRESETS, synthesise
+    from colourhs.synth.synthesise import PRESETS, DrawOverrides, RenderSelection, synthesise
 
     preset = replace(PRESETS["random-tiny"], name="musens", width=320, height=240, sheet_frames=1)
     data = synthesise(
@@ -58,9 +58,8 @@ def run_seed(seed: int, errors, ml_errors, root: Path) -> list[dict]:
         preset,
         seed=seed,
         nuisances=Nuisances().without("noise", "crosstalk"),
-        exact=True,
-        parts=("photometric", "scenes"),
-        scenes=SCENES,
+        draw=DrawOverrides(exact=True),
+        selection=RenderSelection(parts=("photometric", "scenes"), scenes=SCENES),
         progress=False,
     )
     camera = load_rig(data).camera_names[0]

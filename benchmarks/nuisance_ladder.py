@@ -68,7 +68,7 @@ def rungs() -> list[tuple[str, object]]:
 
 def run_rung(seed: int, preset, name: str, nuisances, root: Path, variants=VARIANTS) -> list[dict]:
     """One seed x rung: render, calibrate (or take the truth), reconstruct, evaluate."""
-    from colourhs.synth.synthesise import synthesise
+    from colourhs.synth.synthesise import DrawOverrides, RenderSelection, synthesise
 
     exact = name == "exact"
     t0 = time.time()
@@ -77,8 +77,8 @@ def run_rung(seed: int, preset, name: str, nuisances, root: Path, variants=VARIA
         preset,
         seed=seed,
         nuisances=nuisances,
-        exact=exact,
-        scenes=SCENES,
+        draw=DrawOverrides(exact=exact),
+        selection=RenderSelection(scenes=SCENES),
         progress=False,
     )
     files = calibrate(data, root / name / "calib")

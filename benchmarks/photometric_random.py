@@ -83,7 +83,7 @@ def load_baseline(rev: str):
 def dataset(root: Path, preset: str, seed: int, nuisances: str, n_poses: int | None) -> Path:
     """The seed's dataset under ``root`` (rendered when absent)."""
     from colourhs.synth.simulated_rig import Nuisances
-    from colourhs.synth.synthesise import PRESETS, synthesise
+    from colourhs.synth.synthesise import PRESETS, RenderSelection, synthesise
 
     tag = f"{preset}-{nuisances}-{seed}"
     preset = PRESETS[preset]
@@ -98,10 +98,11 @@ def dataset(root: Path, preset: str, seed: int, nuisances: str, n_poses: int | N
             out,
             preset,
             seed=seed,
-            scenes=("plane",),
+            selection=RenderSelection(
+                parts=("photometric", "chromatic", "scenes"), scenes=("plane",)
+            ),
             nuisances=nuis,
             progress=False,
-            parts=("photometric", "chromatic", "scenes"),
             overwrite=True,
         )
         print(f"rendered {out} in {time.time() - t:.0f} s", flush=True)

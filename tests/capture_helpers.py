@@ -171,16 +171,15 @@ def render_exact(root, preset, seed: int, scenes, parts=("photometric", "scenes"
     """A synthetic dataset of ``scenes`` without sensor noise and cross-talk (16 bit,
     exact masks; every other nuisance on, which the true calibration undoes)."""
     from colourhs.synth.simulated_rig import Nuisances
-    from colourhs.synth.synthesise import synthesise
+    from colourhs.synth.synthesise import DrawOverrides, RenderSelection, synthesise
 
     return synthesise(
         root,
         preset,
         seed=seed,
         nuisances=Nuisances().without("noise", "crosstalk"),
-        exact=True,
-        parts=parts,
-        scenes=scenes,
+        draw=DrawOverrides(exact=True),
+        selection=RenderSelection(parts=parts, scenes=scenes),
         progress=False,
         workers=2,
     )

@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 
 from colourhs.synth.simulated_rig import Nuisances
-from colourhs.synth.synthesise import Preset, synthesise
+from colourhs.synth.synthesise import Preset, RenderSelection, synthesise
 
 #: Markers whose tests run only when ``-m`` names them, and why they are opt-in.
 OPT_IN = {
@@ -104,7 +104,8 @@ def plane_calibrated(tmp_path_factory):
     from colourhs.calibration.photometric import photometric_maps
 
     root = tmp_path_factory.mktemp("plane")
-    data = synthesise(root / "data", PLANE_PRESET, scenes=("plane",), progress=False)
+    plane = RenderSelection(scenes=("plane",))
+    data = synthesise(root / "data", PLANE_PRESET, selection=plane, progress=False)
     marker_poses(data, root / "marker_poses.csv")
     calibrate_crosstalk(data, root / "crosstalk.json")
     photometric_maps(

@@ -94,7 +94,7 @@ def frame_indices(text: str) -> tuple[int, ...]:
 
 def _synth(args) -> int:
     from colourhs.synth.simulated_rig import Nuisances
-    from colourhs.synth.synthesise import PRESETS, synthesise
+    from colourhs.synth.synthesise import PRESETS, RenderSelection, synthesise
 
     if args.preset not in PRESETS:
         raise ValueError(f"unknown preset {args.preset!r}; presets: {', '.join(PRESETS)}")
@@ -105,10 +105,9 @@ def _synth(args) -> int:
         args.preset,
         seed=args.seed,
         nuisances=nuisances,
+        selection=RenderSelection(scenes=scenes, frames=args.frames),
         overwrite=args.overwrite,
         workers=args.workers,
-        scenes=scenes,
-        frames=args.frames,
     )
     print(f"wrote {args.out}")
     return 0
@@ -346,15 +345,14 @@ def _depth_input(args, path):
 
 
 def _hull(args) -> int:
-    from colourhs.surfaces.hull import visual_hull
+    from colourhs.surfaces.hull import HullOptions, visual_hull
 
     info = visual_hull(
         args.dataset,
         args.scene,
         args.frame,
         args.out,
-        voxel_m=args.voxel_m,
-        threshold=args.threshold,
+        options=HullOptions(voxel_m=args.voxel_m, threshold=args.threshold),
         out_depth_h5=args.depth,
     )
     print(json.dumps(info, indent=2, default=str))
@@ -388,7 +386,7 @@ def _evaluate(args) -> int:
         write_json(args.out, info)
         print(f"wrote {args.out}: the same as {args.same_as}")
         return 0
-    from colourhs.evaluation.accuracy import evaluate_frame
+    from colourhs.evaluation.accuracy import EvaluationOptions, FrameKey, evaluate_frame
 
     info = evaluate_frame(
         _depth_input(args, args.depth),
@@ -396,10 +394,8 @@ def _evaluate(args) -> int:
         args.gt,
         args.out,
         out_ply=args.coloured,
-        scene=args.scene,
-        frame=args.frame,
-        variant=args.variant,
-        vmax_mm=args.vmax_mm,
+        key=FrameKey(args.scene, args.frame, args.variant),
+        options=EvaluationOptions(vmax_mm=args.vmax_mm),
     )
     print(json.dumps(info, indent=2, default=str))
     return 0

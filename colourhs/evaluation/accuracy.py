@@ -66,6 +66,7 @@ MeshLab's Hausdorff filter, found by :func:`colourhs.common.raycast.closest_poin
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
 
@@ -88,6 +89,8 @@ from colourhs.evaluation.depth_errors import depth_errors, depth_summary, uncert
 
 __all__ = [
     "CONTRACT_COLUMNS",
+    "EvaluationOptions",
+    "FrameKey",
     "depth_errors",
     "depth_summary",
     "evaluate_frame",
@@ -104,6 +107,9 @@ __all__ = [
 CONTRACT_COLUMNS = REQUIRED_COLUMNS
 #: Offset (metres) of a visibility ray's start from the vertex it tests (avoids self-hits).
 VISIBILITY_EPS_M = 1e-4
+#: Pixels by which the GT's image mask is grown to select the evaluated vertices
+#: (:func:`evaluated_vertices`): surface spilling just past the true silhouette counts.
+DILATE_PX = 2
 
 
 # --------------------------------------------------------------------------- distances
@@ -295,7 +301,7 @@ def evaluated_vertices(
     triangles: np.ndarray,
     camera,
     pixel_mask: np.ndarray,
-    dilate_px: int = 2,
+    dilate_px: int = DILATE_PX,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Reconstruction vertices inside the seen region, and those the camera sees.
 
@@ -342,18 +348,55 @@ def _empty_metrics() -> dict:
     return {k: None for k in CONTRACT_COLUMNS[3:] + EXTRA_COLUMNS}
 
 
+@dataclass(frozen=True)
+class FrameKey:
+    """Which reconstruction a frame's metrics belong to: their row in the metrics table.
+
+    Each defaults to empty, an unlabelled row: labels, which no rig constrains.
+
+    Attributes
+    ----------
+    scene : the scene's name (a folder of ``scenes/``).
+    frame : the frame's name (``000000``...).
+    variant : the reconstruction variant (``bayes_full``, ``vh``...).
+    """
+
+    scene: str = ""
+    frame: str = ""
+    variant: str = ""
+
+
+@dataclass(frozen=True)
+class EvaluationOptions:
+    """How :func:`evaluate_frame` scores a frame and colours its error mesh.
+
+    Attributes
+    ----------
+    vmax_mm : top of the coloured mesh's scale, millimetres. Default (None): the
+        95th percentile of the frame's distances, which follows the errors of
+        any rig.
+    dilate_px : pixels by which the GT's image mask is grown (selects evaluated
+        vertices, :func:`evaluated_vertices`). Default :data:`DILATE_PX`: in
+        pixels, like the silhouette edge it forgives, whatever the rig's scale.
+    completeness_samples : at most this many seen-GT samples (every k-th visible
+        pixel's hit) for completeness; a count. Part of the metric's definition,
+        so scores stay comparable, not a limit of the closest-point search, which
+        could take them all.
+    """
+
+    vmax_mm: float | None = None
+    dilate_px: int = DILATE_PX
+    completeness_samples: int = 20000
+
+
 def evaluate_frame(
     depth_h5: str | Path | DepthMap,
     mesh_ply: str | Path | None,
     gt_ply: str | Path | None,
     out_json: str | Path,
     out_ply: str | Path | None = None,
-    scene: str = "",
-    frame: str = "",
-    variant: str = "",
-    vmax_mm: float | None = None,
-    dilate_px: int = 2,
-    completeness_samples: int = 20000,
+    key: FrameKey = FrameKey(),
+    options: EvaluationOptions = EvaluationOptions(),
     progress: bool = True,
 ) -> dict:
     """Score one reconstructed frame against its ground truth (the Snakemake rule's function).
@@ -375,18 +418,12 @@ def evaluate_frame(
         module docstring for their meaning), sizes and inputs.
     out_ply : str or Path, optional
         The reconstruction mesh coloured by each vertex's accuracy distance
-        (:func:`colourhs.common.colours.value_colours`, viridis from 0 to ``vmax_mm``);
-        grey outside the seen region or without ground truth.
-    scene, frame, variant : str
-        Identify the row in the metrics table.
-    vmax_mm : float, optional
-        Top of the colour scale, mm (default: the 95th percentile of the distances).
-    dilate_px : int
-        Pixels by which the GT's image mask is grown (selects evaluated vertices).
-    completeness_samples : int
-        At most this many seen-GT samples (every k-th visible pixel's hit) for
-        completeness: part of the metric's definition, so scores stay comparable,
-        not a limit of the closest-point search, which could take them all.
+        (:func:`colourhs.common.colours.value_colours`, viridis from 0 to
+        ``options.vmax_mm``); grey outside the seen region or without ground truth.
+    key : FrameKey
+        Scene, frame and variant: identify the row in the metrics table.
+    options : EvaluationOptions
+        The colour scale's top, the mask's dilation and the completeness samples.
     progress : bool
         A line per step on stderr, with the seconds since the start
         (:mod:`colourhs.common.progress`).
@@ -402,9 +439,9 @@ def evaluate_frame(
     say = partial(stage, start=t0, enabled=progress)
     dm = as_depth_map(depth_h5)
     info = {
-        "scene": str(scene),
-        "frame": str(frame),
-        "variant": str(variant),
+        "scene": str(key.scene),
+        "frame": str(key.frame),
+        "variant": str(key.variant),
         "method": dm.method,
         "camera": dm.camera,
     }
@@ -427,12 +464,12 @@ def evaluate_frame(
             )
             if seen.any():
                 target = gt_tri[seen]
-                evaluated, visible = evaluated_vertices(v, tri, dm, pixel_mask, dilate_px)
+                evaluated, visible = evaluated_vertices(v, tri, dm, pixel_mask, options.dilate_px)
                 dist_v = np.full(len(v), np.nan)
                 info["hausdorff_samples"] = int(evaluated.sum())
                 # Seen by the reference camera but off the seen ground truth: invented surface.
                 info["outside_share"] = float(1.0 - evaluated.sum() / max(int(visible.sum()), 1))
-                step = max(1, -(-len(gt_points) // int(completeness_samples)))
+                step = max(1, -(-len(gt_points) // int(options.completeness_samples)))
                 say(
                     f"evaluate: accuracy of {int(evaluated.sum())} mesh vertices, "
                     f"completeness of {len(gt_points[::step])} ground-truth points"
@@ -460,7 +497,11 @@ def evaluate_frame(
     if out_ply is not None and mesh is not None:
         d_mm = np.full(len(mesh[0]), np.nan) if dist_v is None else dist_v * 1e3
         finite = d_mm[np.isfinite(d_mm)]
-        top = vmax_mm if vmax_mm is not None else (np.percentile(finite, 95) if finite.size else 1)
+        top = (
+            options.vmax_mm
+            if options.vmax_mm is not None
+            else (np.percentile(finite, 95) if finite.size else 1)
+        )
         info["colour_vmax_mm"] = float(top)
         write_ply(
             out_ply,
@@ -473,8 +514,8 @@ def evaluate_frame(
             "depth_h5": dm.path,
             "mesh_ply": None if mesh_ply is None else str(mesh_ply),
             "gt_ply": None if gt_ply is None else str(gt_ply),
-            "dilate_px": int(dilate_px),
-            "completeness_max_samples": int(completeness_samples),
+            "dilate_px": int(options.dilate_px),
+            "completeness_max_samples": int(options.completeness_samples),
             "units": "mm; hausdorff_* = reconstruction -> seen GT (accuracy), "
             "completeness_* = seen GT -> reconstruction; outside_share = share of the "
             "mesh vertices the reference camera sees that lie off the seen GT; "

@@ -35,6 +35,7 @@ around the fixation point.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
 from time import perf_counter
@@ -63,6 +64,7 @@ from colourhs.surfaces.hull_mesh import (
 from colourhs.surfaces.silhouettes import DEFAULT_THRESHOLD, silhouettes_and_sources
 
 __all__ = [
+    "HullOptions",
     "axes_centre",
     "carve",
     "carve_field",
@@ -196,18 +198,47 @@ def working_volume(
 # Files
 
 
+@dataclass(frozen=True)
+class HullOptions:
+    """How :func:`visual_hull` carves: voxel size, silhouettes, views and the box.
+
+    Attributes
+    ----------
+    voxel_m : voxel edge, metres. Default (None) :func:`default_voxel_size`: two
+        pixel footprints at the working distance, so it follows any rig's
+        distance and focal length.
+    threshold : silhouette threshold when the scene has no masks
+        (:func:`colourhs.surfaces.silhouettes.threshold_silhouette`), a fraction
+        of full scale on the largest channel. Default
+        :data:`colourhs.surfaces.silhouettes.DEFAULT_THRESHOLD`: the rig has no
+        ambient light, so the background is dark on any rig.
+    min_views : fewest cameras that must see a voxel (see :func:`carve_field`);
+        a count. Default 2: the fewest that bound a point in depth, on any rig.
+    margin_px : silhouettes are widened by this many pixels (:func:`carve_field`).
+        The default half pixel makes the hull conservative on any rig: masks
+        sample the outline at pixel centres, so the true outline may lie up to
+        half a pixel outside them, and every ray through a silhouette pixel's
+        centre then meets the hull (it bounds the depth of every silhouette pixel).
+    bounds : explicit working volume (lo, hi), each array_like (3,), metres.
+        Default (None) found by :func:`working_volume` around the rig's fixation
+        point, at half the working distance: relative to any rig.
+    """
+
+    voxel_m: float | None = None
+    threshold: float = DEFAULT_THRESHOLD
+    min_views: int = 2
+    margin_px: float = 0.5
+    bounds: tuple | None = None
+
+
 def visual_hull(
     dataset_dir,
     scene: str,
     frame: str | int,
     out_ply,
-    voxel_m: float | None = None,
-    threshold: float = DEFAULT_THRESHOLD,
+    options: HullOptions = HullOptions(),
     reference: str | None = None,
     out_depth_h5=None,
-    bounds=None,
-    min_views: int = 2,
-    margin_px: float = 0.5,
     progress: bool = True,
 ) -> dict:
     """Carve one frame's visual hull and write its mesh (and the ``vh`` depth map).
@@ -224,26 +255,14 @@ def visual_hull(
     frame : str or int
     out_ply : str or Path
         Hull mesh to write: binary PLY, world frame, metres, outward vertex normals.
-    voxel_m : float, optional
-        Voxel edge, metres; default :func:`default_voxel_size` (two pixel
-        footprints at the working distance).
-    threshold : float
-        Silhouette threshold when the scene has no masks (:func:`threshold_silhouette`).
+    options : HullOptions
+        Voxel edge, silhouette threshold, views, silhouette margin and working
+        volume of the carving.
     reference : str, optional
         Reference camera of the depth map; default the rig's first camera.
     out_depth_h5 : str or Path, optional
         Where to write the hull's depth map in the reference camera (results
         contract depth HDF5, via :func:`colourhs.common.depthfile.write_depth`).
-    bounds : pair of array_like (3,), optional
-        Explicit working volume (lo, hi), metres; default found automatically.
-    min_views : int
-        Fewest cameras that must see a voxel (see :func:`carve_field`).
-    margin_px : float
-        Silhouettes are widened by this many pixels (:func:`carve_field`). The
-        default half pixel makes the hull conservative: masks sample the
-        outline at pixel centres, so the true outline may lie up to half a
-        pixel outside them, and every ray through a silhouette pixel's centre
-        then meets the hull (it bounds the depth of every silhouette pixel).
     progress : bool
         One line per stage on stderr, with the seconds since the start, and a
         bar over the carving (:mod:`colourhs.common.progress`).
@@ -253,7 +272,7 @@ def visual_hull(
     dict
         ``voxel_m``, ``bounds`` ([lo, hi] metres), ``grid``, ``volume_m3``,
         ``n_vertices``, ``n_triangles``, ``silhouettes`` ("masks" or "threshold"),
-        ``reference``, ``seconds``.
+        ``min_views``, ``margin_px``, ``reference``, ``seconds``.
 
     Raises
     ------
@@ -268,11 +287,12 @@ def visual_hull(
     frame_dir = ds.frame_image(scene, frame, cams[0].name).parent  # an unknown frame: refused
     say = partial(stage, start=t0, enabled=progress)
     say(f"visual hull {scene}/{frame}: silhouettes of {len(cams)} views")
-    sils, files, source = silhouettes_and_sources(ds, scene, frame, threshold)
+    sils, files, source = silhouettes_and_sources(ds, scene, frame, options.threshold)
     sil_list = [sils[c.name] for c in cams]
-    voxel_m = default_voxel_size(cams) if voxel_m is None else float(voxel_m)
-    if bounds is not None:
-        lo, hi = working_volume(sil_list, cams, voxel_m, bounds)
+    voxel_m = default_voxel_size(cams) if options.voxel_m is None else float(options.voxel_m)
+    min_views, margin_px = options.min_views, options.margin_px
+    if options.bounds is not None:
+        lo, hi = working_volume(sil_list, cams, voxel_m, options.bounds)
     else:
         say("visual hull: working volume (coarse carve)")
         try:

@@ -6,6 +6,8 @@ randomised ones (:mod:`colourhs.synth.randomrig`).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import cv2
 import numpy as np
 
@@ -21,36 +23,85 @@ def rotation_xyz(ax: float, ay: float, az: float) -> np.ndarray:
     return Rotation.from_euler("xyz", [ax, ay, az]).as_matrix()
 
 
+@dataclass(frozen=True)
+class PoseRanges:
+    """Where :func:`board_poses` draws the board: offsets around the working
+    distance (the world origin) and turns about the board's axes.
+
+    The defaults are those of the tiny, demo and paper presets.
+
+    Attributes
+    ----------
+    depth_m : depths are stratified over +- this around the working distance,
+        metres. Fits the fixed presets' rig only: the randomised presets scale it
+        with their working distance (``pose_depth_rel`` of
+        :class:`~colourhs.synth.randomranges.RandomRanges`).
+    lateral_m : the board's centre is offset up to +- this in x and in y, metres.
+        Fits the fixed presets' rig only: the randomised presets scale it with
+        their field's half-width (``pose_offcentre`` of
+        :class:`~colourhs.synth.randomranges.RandomRanges`).
+    tilt_deg : tilt up to +- this about the x and the y axis independently, or,
+        with ``any_direction``, a slant up to this, degrees. An angle: the same
+        whatever the rig's size.
+    roll_deg : roll about the board's normal up to +- this, degrees. An angle:
+        the same whatever the rig's size.
+    any_direction : the slant's axis drawn in any direction of the board plane
+        instead of separate x and y tilts. A choice of distribution, with no scale.
+    """
+
+    depth_m: float = 0.07
+    lateral_m: float = 0.05
+    tilt_deg: float = 25.0
+    roll_deg: float = 15.0
+    any_direction: bool = False
+
+
+@dataclass(frozen=True)
+class PoseAcceptance:
+    """Which drawn poses :func:`board_poses` keeps: the board seen whole, from its
+    white side and with large enough marker cells, by every camera.
+
+    The defaults are those of the tiny, demo and paper presets.
+
+    Attributes
+    ----------
+    margin_px : the whole board must project at least this far inside every
+        image, pixels. In pixels of the image, so it does not depend on the
+        rig's size or distance.
+    max_incidence_deg : every camera must see the board's white side at less
+        than this incidence, degrees. An angle: the same whatever the rig's size.
+    min_cell_px : when > 0, every marker's cells (the shortest projected side
+        over the cell count, border included) must span at least this, pixels;
+        0 checks nothing. In pixels of the image, so it does not depend on the
+        rig's size or distance.
+    """
+
+    margin_px: float = 4.0
+    max_incidence_deg: float = 60.0
+    min_cell_px: float = 0.0
+
+
 def board_poses(
     rig: RigModel,
     board: dict,
     n: int,
     rng: np.random.Generator,
-    margin_px: float = 4.0,
-    *,
-    depth_m: float = 0.07,
-    lateral_m: float = 0.05,
-    tilt_deg: float = 25.0,
-    roll_deg: float = 15.0,
-    max_incidence_deg: float = 60.0,
-    any_direction: bool = False,
-    min_cell_px: float = 0.0,
+    ranges: PoseRanges = PoseRanges(),
+    acceptance: PoseAcceptance = PoseAcceptance(),
     tries: int = 1000,
 ) -> list[tuple[np.ndarray, np.ndarray]]:
     """Random hand-held-like board poses filling the working volume.
 
-    Depths are stratified over +-``depth_m`` around the working distance
-    (the world origin), lateral offsets of the board's centre up to
-    +-``lateral_m`` in x and y, and roll about the board's normal up to
-    +-``roll_deg``. The tilt is up to +-``tilt_deg`` about the x and the y
-    axis independently, or, with ``any_direction``, a slant of up to
-    ``tilt_deg`` about an axis in any direction of the board plane. A pose is
-    kept only if every camera sees the whole board (with ``margin_px``) from
-    its white side at less than ``max_incidence_deg`` incidence and, when
-    ``min_cell_px`` > 0, every marker's cells (the shortest projected side
-    over the cell count, border included) span at least that many pixels.
-    ``rig`` needs only ``cameras`` (K, dist, R, t) and ``width``, ``height``.
-    The defaults are those of the tiny, demo and paper presets.
+    Depths are stratified over +-``ranges.depth_m`` around the working
+    distance (the world origin), lateral offsets of the board's centre up to
+    +-``ranges.lateral_m`` in x and y, and roll about the board's normal up to
+    +-``ranges.roll_deg``. The tilt is up to +-``ranges.tilt_deg`` about the x
+    and the y axis independently, or, with ``ranges.any_direction``, a slant
+    of up to ``ranges.tilt_deg`` about an axis in any direction of the board
+    plane. A pose is kept only if it passes ``acceptance``
+    (:class:`PoseAcceptance`). ``rig`` needs only ``cameras`` (K, dist, R, t)
+    and ``width``, ``height``. ``tries`` is the number of draws per pose
+    before giving up.
 
     Returns a list of (R_b, t_b), world X = R_b X_board + t_b.
 
@@ -61,26 +112,32 @@ def board_poses(
     """
     corners = sc.board_corners(board["size"])
     centre_b = corners.mean(axis=0)
-    markers = _marker_quads(board) if min_cell_px > 0 else None
-    depths = rng.permutation(np.linspace(-depth_m, depth_m, n))
+    markers = _marker_quads(board) if acceptance.min_cell_px > 0 else None
+    depths = rng.permutation(np.linspace(-ranges.depth_m, ranges.depth_m, n))
     out = []
     for z in depths:
         for _ in range(tries):
-            if any_direction:
-                slant, azimuth, roll = rng.uniform([0, 0, -roll_deg], [tilt_deg, 360, roll_deg])
+            if ranges.any_direction:
+                slant, azimuth, roll = rng.uniform(
+                    [0, 0, -ranges.roll_deg], [ranges.tilt_deg, 360, ranges.roll_deg]
+                )
                 a = np.deg2rad(azimuth)
                 axis = [np.cos(a), np.sin(a), 0.0]
                 R = sc.axis_angle(axis, np.deg2rad(slant)) @ rotation_xyz(0, 0, np.deg2rad(roll))
             else:
-                lim = [tilt_deg, tilt_deg, roll_deg]
+                lim = [ranges.tilt_deg, ranges.tilt_deg, ranges.roll_deg]
                 R = rotation_xyz(*np.deg2rad(rng.uniform(np.negative(lim), lim)))
-            c = np.array([*rng.uniform(-lateral_m, lateral_m, 2), z])
+            c = np.array([*rng.uniform(-ranges.lateral_m, ranges.lateral_m, 2), z])
             t = c - R @ centre_b
             if not _board_visible(
-                rig, corners @ R.T + t, R @ [0, 0, -1.0], margin_px, max_incidence_deg
+                rig,
+                corners @ R.T + t,
+                R @ [0, 0, -1.0],
+                acceptance.margin_px,
+                acceptance.max_incidence_deg,
             ):
                 continue
-            if markers is not None and _min_cell_px(rig, markers, R, t) < min_cell_px:
+            if markers is not None and _min_cell_px(rig, markers, R, t) < acceptance.min_cell_px:
                 continue
             out.append((R, t))
             break

@@ -20,6 +20,8 @@ from colourhs.capture import Camera
 from colourhs.common.geometry import look_at
 from colourhs.synth import scenes as sc
 from colourhs.synth.poses import (
+    PoseAcceptance,
+    PoseRanges,
     _board_visible,
     _marker_quads,
     _min_cell_px,
@@ -240,14 +242,18 @@ def _draw_poses(rng, view, board, rg, geo, n_poses):
             board,
             n_poses + (0 if slanted else 1),
             rng,
-            rg.margin_px,
-            depth_m=rg.pose_depth_rel * geo["distance"],
-            lateral_m=rg.pose_offcentre * geo["half_width"],
-            tilt_deg=rg.pose_slant_deg,
-            roll_deg=rg.pose_roll_deg,
-            max_incidence_deg=rg.pose_incidence_deg,
-            any_direction=True,
-            min_cell_px=rg.pose_min_cell_px,
+            PoseRanges(
+                depth_m=rg.pose_depth_rel * geo["distance"],
+                lateral_m=rg.pose_offcentre * geo["half_width"],
+                tilt_deg=rg.pose_slant_deg,
+                roll_deg=rg.pose_roll_deg,
+                any_direction=True,
+            ),
+            PoseAcceptance(
+                margin_px=rg.margin_px,
+                max_incidence_deg=rg.pose_incidence_deg,
+                min_cell_px=rg.pose_min_cell_px,
+            ),
             tries=300,
         )
     except RuntimeError:

@@ -19,9 +19,11 @@ import json
 import multiprocessing
 import os
 import shutil
+from collections.abc import Iterable
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import cv2
 import h5py
@@ -41,6 +43,9 @@ from colourhs.synth.image_formation import (
 )
 from colourhs.synth.poses import board_poses
 from colourhs.synth.simulated_rig import COLOURS, Nuisances, RigModel, make_rig, sensor
+
+if TYPE_CHECKING:
+    from colourhs.synth.randomranges import RandomRanges
 
 FORMAT = "colourhs-capture/1"
 
@@ -284,25 +289,69 @@ SCENE_META = {
 }
 
 
+@dataclass(frozen=True)
+class RenderSelection:
+    """Which of a dataset's captures :func:`synthesise` renders.
+
+    A subset's files equal those of a full render: every image's noise is drawn
+    from the seed and the image's own path.
+
+    Attributes
+    ----------
+    parts : subset of :data:`PARTS` (``"photometric"``, ``"chromatic"``,
+        ``"scenes"``) to render; names. Default all three: a complete dataset in
+        the capture format, on any rig.
+    scenes : render only these of ``plane``, ``statue``, ``toy``, ``sheet`` (their
+        frames and chromatic captures); names. Default (None) all four: every
+        preset, fixed or randomised, has them.
+    frames : render only these frames of the sheet's sequence, indices in
+        ``range(preset.sheet_frames)`` (e.g. ``range(40, 60)``). Default (None)
+        all: the count is the preset's, not the rig's. A frame's shape (its phase
+        is ``i / (sheet_frames - 1)``) and noise do not depend on which other
+        frames are rendered.
+    """
+
+    parts: tuple[str, ...] = PARTS
+    scenes: tuple[str, ...] | None = None
+    frames: Iterable[int] | None = None
+
+
+@dataclass(frozen=True)
+class DrawOverrides:
+    """Changes to a randomised preset's draw; the fixed presets ignore them.
+
+    Attributes
+    ----------
+    ranges : a :class:`colourhs.synth.randomranges.RandomRanges` to draw from
+        instead of the preset's named ranges (one range moved at a time, as
+        ``benchmarks/light_offset.py`` does; a quantity with its own random
+        stream, as the light offsets, leaves the rest of the seed's draw as it
+        was). Default (None): the preset's own ranges (``Preset.random_ranges``).
+    exact : force 16-bit images and exact masks, keeping the rest of the seed's
+        draw (for consistency tests); a switch. Default off: the encoding and
+        masks the seed drew. The fixed presets are always exact.
+    """
+
+    ranges: RandomRanges | None = None
+    exact: bool = False
+
+
 def synthesise(
     out: str | Path,
     preset: str | Preset = "demo",
     seed: int = 0,
     nuisances: Nuisances | None = None,
-    parts: tuple[str, ...] = PARTS,
+    selection: RenderSelection = RenderSelection(),
     progress: bool = True,
     overwrite: bool = False,
     workers: int | None = None,
-    scenes: tuple[str, ...] | None = None,
-    exact: bool = False,
-    frames=None,
-    ranges=None,
+    draw: DrawOverrides = DrawOverrides(),
 ) -> Path:
     """Render a synthetic colour HS dataset into ``out`` (capture format v1).
 
     The dataset is written to a sibling folder and moved into place at the
     end, so an interrupted run leaves no partial dataset behind. The same
-    ``seed`` and preset give the same images, whatever ``parts`` are asked.
+    ``seed`` and preset give the same images, whatever ``selection`` asks.
 
     Parameters
     ----------
@@ -316,24 +365,13 @@ def synthesise(
         randomised preset only its switches count (and ``gain_spread``,
         ``chromatic_filter_tilt`` as magnitudes); the geometry, scenes, poses
         and encoding drawn do not depend on it.
-    parts : subset of ``("photometric", "chromatic", "scenes")`` to render.
-    scenes : render only these of ``plane``, ``statue``, ``toy``, ``sheet`` (their
-        frames and chromatic captures); default all.
+    selection : the parts, scenes and sheet frames to render (:class:`RenderSelection`;
+        default all). A frame's files equal those of a full render.
     progress : progress on stderr: the mu maps, bars over the camera rays and views.
     overwrite : replace an existing ``out``.
     workers : processes rendering views in parallel (default: CPU count).
-    exact : randomised presets: force 16-bit images and exact masks, keeping
-        the rest of the seed's draw (for consistency tests). The fixed
-        presets are always so.
-    frames : render only these frames of the sheet's sequence (indices in
-        ``range(preset.sheet_frames)``, e.g. ``range(40, 60)``); default all. A
-        frame's shape (its phase is ``i / (sheet_frames - 1)``) and noise (drawn
-        per image from ``seed`` and the image's path) do not depend on which other
-        frames are rendered: its files equal those of a full render.
-    ranges : randomised presets: a :class:`colourhs.synth.randomranges.RandomRanges`
-        to draw from instead of the preset's named ranges (one range moved at a time,
-        as ``benchmarks/light_offset.py`` does; a quantity with its own random
-        stream, as the light offsets, leaves the rest of the seed's draw as it was).
+    draw : randomised presets: other ranges, or exact encoding and masks
+        (:class:`DrawOverrides`; default the preset's own draw).
 
     Returns
     -------
@@ -342,6 +380,7 @@ def synthesise(
     out = Path(out)
     p = PRESETS[preset] if isinstance(preset, str) else preset
     nuis = Nuisances() if nuisances is None else nuisances
+    parts, scenes, frames = selection.parts, selection.scenes, selection.frames
     unknown = set(parts) - set(PARTS)
     if unknown:
         raise ValueError(f"unknown parts {sorted(unknown)}; choose from {PARTS}")
@@ -353,7 +392,7 @@ def synthesise(
     if out.exists() and not overwrite:
         raise FileExistsError(f"{out}: already exists (pass overwrite=True to replace it)")
     workers = (os.cpu_count() or 1) if workers is None else int(workers)
-    frames = _frame_selection(p, frames)
+    selection = replace(selection, frames=_frame_selection(p, frames))
     if p.randomised:
         from colourhs.synth.randomrig import RANGES_BY_NAME, describe, draw_random
 
@@ -362,11 +401,11 @@ def synthesise(
             p.width,
             p.height,
             nuis,
-            RANGES_BY_NAME[p.random_ranges] if ranges is None else ranges,
+            RANGES_BY_NAME[p.random_ranges] if draw.ranges is None else draw.ranges,
             n_poses=p.n_poses,
             sheet_frames=p.sheet_frames,
             statue_level=p.statue_level,
-            exact=exact,
+            exact=draw.exact,
         )
         rig, poses = d.rig, d.poses
         p = replace(
@@ -398,9 +437,7 @@ def synthesise(
     tmp.mkdir(parents=True)
     try:
         with _single_threaded_blas():
-            _write_dataset(
-                tmp, rig, p, poses, seed, nuis, parts, progress, workers, scenes, content, frames
-            )
+            _write_dataset(tmp, rig, p, poses, content, seed, nuis, selection, progress, workers)
         if out.exists():
             shutil.rmtree(out)
         os.replace(tmp, out)
@@ -425,9 +462,10 @@ def _frame_selection(preset: Preset, frames=None) -> tuple[int, ...] | None:
     return out
 
 
-def _write_dataset(
-    root, rig, p, poses, seed, nuis, parts, progress, workers, scenes, content, frames
-):
+def _write_dataset(root, rig, p, poses, content, seed, nuis, selection, progress, workers):
+    """Write the dataset of a drawn rig, preset, board poses and content into ``root``:
+    rig.json, the ground truth and the images ``selection`` (its frames checked) asks."""
+    parts, scenes = selection.parts, selection.scenes
     (root / "rig.json").write_text(json.dumps(rig_json(rig, p, p.board), indent=2))
     gt = root / "gt"
     gt.mkdir()
@@ -453,7 +491,7 @@ def _write_dataset(
             d = root / "scenes" / name
             d.mkdir(parents=True, exist_ok=True)
             (d / "scene.json").write_text(json.dumps(meta, indent=2))
-    jobs = _jobs(p, poses, parts, content, frames)
+    jobs = _jobs(p, poses, parts, content, selection.frames)
     if scenes is not None:
         jobs = [j for j in jobs if _scene_of(j) in (None, *scenes)]
     cams = bar(rig.cameras, f"synth {p.name}: camera rays", enabled=progress, unit="camera")

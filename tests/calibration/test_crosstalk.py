@@ -85,14 +85,13 @@ def max_rms(mixing: dict, truth: dict) -> dict[str, tuple[float, float]]:
 
 def _render(root: Path, preset: str, seed: int, poses: bool = True, **kw) -> Path:
     from colourhs.calibration.markers import marker_poses
-    from colourhs.synth.synthesise import synthesise
+    from colourhs.synth.synthesise import RenderSelection, synthesise
 
     data = synthesise(
         root / "data",
         preset,
         seed=seed,
-        parts=("photometric", "chromatic"),
-        scenes=(),
+        selection=RenderSelection(parts=("photometric", "chromatic"), scenes=()),
         progress=False,
         workers=2,
         **kw,

@@ -22,7 +22,7 @@ from colourhs.calibration.photometric import (
 from colourhs.capture import load_rig, open_dataset, read_image
 from colourhs.evaluation.photometric_errors import mu_map_errors
 from colourhs.report.figures import mu_maps_figure
-from colourhs.synth.synthesise import synthesise, true_poses_csv
+from colourhs.synth.synthesise import RenderSelection, synthesise, true_poses_csv
 
 TINY = {"grid_spacing_px": 8}
 
@@ -376,8 +376,7 @@ def test_ratio_sigma_with_crosstalk_term_is_calibrated(tmp_path):
             tmp_path / f"d{seed}",
             "corner-tiny",
             seed=seed,
-            parts=("photometric", "chromatic"),
-            scenes=(),
+            selection=RenderSelection(parts=("photometric", "chromatic"), scenes=()),
             progress=False,
         )
         poses = true_poses_csv(root, tmp_path / f"poses{seed}.csv")

@@ -23,7 +23,7 @@ from colourhs.report.figures import scene_figures
 from colourhs.report.page import build_report
 from colourhs.surfaces.hull import visual_hull
 from colourhs.surfaces.poisson import frame_mesh
-from colourhs.synth.synthesise import PRESETS, synthesise
+from colourhs.synth.synthesise import PRESETS, RenderSelection, synthesise
 
 
 def _lines(err: str) -> list[str]:
@@ -143,12 +143,13 @@ def test_synth_shows_its_steps_before_the_views(tmp_path, capsys):
     ground-truth mu maps and 21 s of camera rays (1.2-2.6 s here: the tiny preset's board
     captures of one pose)."""
     preset = replace(PRESETS["tiny"], n_poses=1)
-    synthesise(tmp_path / "a", preset, parts=("photometric",), workers=1)
+    board_only = RenderSelection(parts=("photometric",))
+    synthesise(tmp_path / "a", preset, selection=board_only, workers=1)
     err = capsys.readouterr().err
     assert err.startswith("synth tiny: ground-truth mu maps (gt/photometric.h5)\n")
     assert "synth tiny: camera rays: 100%" in err and "| 3/3 [" in err  # 3 cameras
     assert "synth tiny: 100%" in err and "| 1/1 [" in err  # one job: the board pose
-    synthesise(tmp_path / "b", preset, parts=("photometric",), workers=1, progress=False)
+    synthesise(tmp_path / "b", preset, selection=board_only, workers=1, progress=False)
     assert capsys.readouterr() == ("", "")
 
 

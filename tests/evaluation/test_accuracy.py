@@ -26,6 +26,7 @@ from colourhs.common.raycast import (
 )
 from colourhs.evaluation.accuracy import (
     CONTRACT_COLUMNS,
+    FrameKey,
     depth_errors,
     evaluate_frame,
     hausdorff,
@@ -283,9 +284,7 @@ def test_evaluate_frame_and_metrics_table(tmp_path):
         gt_ply,
         out_json,
         out_ply,
-        scene="sphere",
-        frame="000001",
-        variant="bayes_full",
+        key=FrameKey("sphere", "000001", "bayes_full"),
     )
     assert json.loads(out_json.read_text()) == pytest.approx(info)
     # Measured: mean and rms 1 mm - 4.6e-7 mm, max 1.0000059 mm (float32 PLY
@@ -308,9 +307,7 @@ def test_evaluate_frame_and_metrics_table(tmp_path):
         mesh_ply,
         None,
         tmp_path / "m" / "sphere_b.json",
-        scene="sphere",
-        frame="000001",
-        variant="bayes_nocalib",
+        key=FrameKey("sphere", "000001", "bayes_nocalib"),
     )
     assert empty["hausdorff_rms_mm"] is None and empty["depth_median_mm"] is None
     # Invented surface: the same sphere plus a small one beside it (radius 2 cm, 7
@@ -325,7 +322,7 @@ def test_evaluate_frame_and_metrics_table(tmp_path):
         np.vstack([mn, bn]),
     )
     extra = evaluate_frame(
-        h5, both, gt_ply, tmp_path / "extra.json", scene="sphere", frame="000001", variant="ml_full"
+        h5, both, gt_ply, tmp_path / "extra.json", key=FrameKey("sphere", "000001", "ml_full")
     )
     assert 0.45 < extra["outside_share"] < 0.6  # measured 0.518
     # Measured identical; bound 1e-9 mm.
@@ -335,9 +332,7 @@ def test_evaluate_frame_and_metrics_table(tmp_path):
         mesh_ply,
         gt_ply,
         tmp_path / "m" / "aaa.json",
-        scene="another",
-        frame="000000",
-        variant="ml_full",
+        key=FrameKey("another", "000000", "ml_full"),
     )
     csv = tmp_path / "reports" / "metrics.csv"
     table = metrics_table(sorted((tmp_path / "m").glob("*.json")), csv)
@@ -449,8 +444,7 @@ def test_evaluate_frame_sigma_columns(tmp_path):
     flagged = np.isfinite(gd) & (np.indices(gd.shape)[1] > 0.7 * W)
     assert compared.sum() > 1500 and 0.4 < left.sum() / compared.sum() < 0.9
     out = tmp_path / "m"
-    ids = {"scene": "s", "frame": "000000"}
-    info = evaluate_frame(h5, None, gt_ply, out / "a.json", variant="b", **ids)
+    info = evaluate_frame(h5, None, gt_ply, out / "a.json", key=FrameKey("s", "000000", "b"))
     # float32 depths at 0.8 m: 6e-8 m = 0.06 sigma at worst, far from any share's edge
     assert info["sigma_within_1"] == pytest.approx(left.sum() / compared.sum(), abs=1e-12)
     assert info["sigma_within_2"] == info["sigma_within_3"] == 1.0
@@ -469,7 +463,7 @@ def test_evaluate_frame_sigma_columns(tmp_path):
     assert info["uncertain_share"] == pytest.approx(share, abs=1e-12)
     assert 0.05 < share < 0.4
     # no ground truth: no comparison, but the reconstruction's own expected error
-    blind = evaluate_frame(h5, None, None, out / "b.json", variant="c", **ids)
+    blind = evaluate_frame(h5, None, None, out / "b.json", key=FrameKey("s", "000000", "c"))
     assert blind["sigma_within_1"] is None and blind["depth_sigma_median_mm"] is None
     assert blind["depth_signed_median_mm"] is None
     assert blind["expected_depth_error_mm"] == info["expected_depth_error_mm"]
@@ -478,7 +472,7 @@ def test_evaluate_frame_sigma_columns(tmp_path):
     assert blind["reciprocity_defect_deg"] == info["reciprocity_defect_deg"] == 0.25
     # a depth file without sigma: every sigma column empty
     plain = _depth_map(tmp_path, "plain", gd + 1e-3, gnorm, cam)
-    vh = evaluate_frame(plain, None, gt_ply, out / "c.json", variant="vh", **ids)
+    vh = evaluate_frame(plain, None, gt_ply, out / "c.json", key=FrameKey("s", "000000", "vh"))
     assert all(vh[c] is None for c in SIGMA_COLUMNS if c != "depth_signed_median_mm")
     assert vh["depth_signed_median_mm"] == pytest.approx(1.0, abs=6e-5)
     assert uncertainty_summary(read_depth(plain)) == {

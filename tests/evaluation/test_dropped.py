@@ -15,7 +15,7 @@ from colourhs.common.depthfile import DepthMap, DepthResult, write_depth
 from colourhs.common.metrics_csv import DROP_COLUMNS, DROP_REASONS, EXTRA_COLUMNS, REQUIRED_COLUMNS
 from colourhs.common.ply import load_mesh, write_ply
 from colourhs.common.raycast import render_depth_normals
-from colourhs.evaluation.accuracy import evaluate_frame, metrics_table
+from colourhs.evaluation.accuracy import FrameKey, evaluate_frame, metrics_table
 from colourhs.evaluation.depth_errors import depth_errors, depth_summary, drop_summary
 from colourhs.report.page import build_report
 from colourhs.report.tables import drop_table
@@ -147,13 +147,20 @@ def test_evaluate_frame_writes_the_dropped_columns(tmp_path):
     write_depth(with_codes, _depth_result(), CAMERA, {"method": "bayes"})
     write_depth(plain, _depth_result(None), CAMERA, {"method": "bayes"})
     out = tmp_path / "m"
-    ids = {"scene": "s", "frame": "000000", "progress": False}
-    info = evaluate_frame(with_codes, None, gt_ply, out / "a.json", variant="bayes_full", **ids)
+
+    def row(variant):
+        return FrameKey("s", "000000", variant)
+
+    info = evaluate_frame(
+        with_codes, None, gt_ply, out / "a.json", key=row("bayes_full"), progress=False
+    )
     assert {c: info[c] for c in DROP_COLUMNS} == EXPECTED
     assert info["coverage"] == 6 / 16
-    none = evaluate_frame(plain, None, gt_ply, out / "b.json", variant="bayes_ph", **ids)
+    none = evaluate_frame(plain, None, gt_ply, out / "b.json", key=row("bayes_ph"), progress=False)
     assert all(none[c] is None for c in DROP_COLUMNS) and none["coverage"] == 6 / 16
-    blind = evaluate_frame(with_codes, None, None, out / "c.json", variant="ml_full", **ids)
+    blind = evaluate_frame(
+        with_codes, None, None, out / "c.json", key=row("ml_full"), progress=False
+    )
     assert all(blind[c] is None for c in DROP_COLUMNS)
     csv = tmp_path / "metrics.csv"
     metrics_table(sorted(out.glob("*.json")), csv)

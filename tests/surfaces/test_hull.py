@@ -16,6 +16,7 @@ from colourhs.common.geometry import backproject, look_at, pixel_grid
 from colourhs.common.ply import load_mesh
 from colourhs.common.raycast import render_depth_normals
 from colourhs.surfaces.hull import (
+    HullOptions,
     axes_centre,
     carve,
     carve_field,
@@ -316,6 +317,20 @@ def test_threshold_silhouettes_match_the_masks(tiny_dataset, tmp_path):
     with pytest.raises(CaptureFormatError, match="threshold") as err:
         silhouettes(root, "statue", 0)
     assert err.value.path == frame
+
+
+def test_visual_hull_carves_with_its_options(tiny_dataset, tmp_path):
+    """HullOptions reach the carving: a given voxel edge and box are used as they
+    are, and silhouettes not widened and seen by all three cameras give a smaller hull."""
+    default = visual_hull(tiny_dataset, "statue", 0, tmp_path / "a.ply", progress=False)
+    assert (default["min_views"], default["margin_px"]) == (2, 0.5)
+    options = HullOptions(
+        voxel_m=default["voxel_m"], bounds=default["bounds"], min_views=3, margin_px=0.0
+    )
+    tight = visual_hull(tiny_dataset, "statue", 0, tmp_path / "b.ply", options, progress=False)
+    assert tight["voxel_m"] == default["voxel_m"] and tight["bounds"] == default["bounds"]
+    assert (tight["min_views"], tight["margin_px"]) == (3, 0.0)
+    assert tight["volume_m3"] < default["volume_m3"]
 
 
 def test_threshold_silhouette_cleanup():

@@ -33,7 +33,7 @@ def test_mitsuba_renders_the_board_as_our_renderer(tmp_path):
     pytest.importorskip("mitsuba")
     from colourhs.capture import load_rig, read_image
     from colourhs.synth.mitsuba import BoardRender, camera_signal, render_board
-    from colourhs.synth.synthesise import synthesise
+    from colourhs.synth.synthesise import DrawOverrides, RenderSelection, synthesise
 
     p, ranges, nuis, d = _draw()
     data = synthesise(
@@ -41,9 +41,8 @@ def test_mitsuba_renders_the_board_as_our_renderer(tmp_path):
         p,
         0,
         nuis,
-        parts=("photometric",),
-        ranges=ranges,
-        exact=True,
+        selection=RenderSelection(parts=("photometric",)),
+        draw=DrawOverrides(ranges=ranges, exact=True),
         progress=False,
     )
     spec = load_rig(data / "rig.json").image
@@ -113,11 +112,22 @@ def test_calibration_on_mitsuba_renders_and_its_model_check(tmp_path):
     from colourhs.calibration.photometric import calibrate, load_views, read_mu_maps
     from colourhs.evaluation.photometric_errors import mu_map_errors
     from colourhs.synth.mitsuba import BoardRender, photometric_dataset
-    from colourhs.synth.synthesise import synthesise, true_poses_csv
+    from colourhs.synth.synthesise import (
+        DrawOverrides,
+        RenderSelection,
+        synthesise,
+        true_poses_csv,
+    )
 
     p, ranges, nuis, d = _draw(noise=True)
     ours = synthesise(
-        tmp_path / "ours", p, 0, nuis, parts=("photometric",), ranges=ranges, progress=False
+        tmp_path / "ours",
+        p,
+        0,
+        nuis,
+        selection=RenderSelection(parts=("photometric",)),
+        draw=DrawOverrides(ranges=ranges),
+        progress=False,
     )
     distance = float(np.mean([np.linalg.norm(c.centre) for c in d.rig.cameras]))
     renders = {

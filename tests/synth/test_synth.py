@@ -24,7 +24,7 @@ from colourhs.common.geometry import project
 from colourhs.common.sampling import sample_bilinear
 from colourhs.synth import synthesise as synth_dataset
 from colourhs.synth.simulated_rig import Nuisances, sensor
-from colourhs.synth.synthesise import PRESETS, synthesise
+from colourhs.synth.synthesise import PRESETS, RenderSelection, synthesise
 
 
 def _residuals(root, scene, offset_m=0.0, rotate_deg=0.0, **kw):
@@ -232,9 +232,10 @@ def test_saturation_is_flagged(tiny_dataset):
 
 
 def test_deterministic_for_a_seed(tmp_path):
-    a = synthesise(tmp_path / "a", "tiny", parts=("chromatic",), progress=False, workers=1)
-    b = synthesise(tmp_path / "b", "tiny", parts=("chromatic",), progress=False, workers=2)
-    c = synthesise(tmp_path / "c", "tiny", seed=1, parts=("chromatic",), progress=False)
+    chromatic = RenderSelection(parts=("chromatic",))
+    a = synthesise(tmp_path / "a", "tiny", selection=chromatic, progress=False, workers=1)
+    b = synthesise(tmp_path / "b", "tiny", selection=chromatic, progress=False, workers=2)
+    c = synthesise(tmp_path / "c", "tiny", seed=1, selection=chromatic, progress=False)
     rel = "chromatic/toy/red/cam2.png"
     assert (a / rel).read_bytes() == (b / rel).read_bytes()
     assert (a / rel).read_bytes() != (c / rel).read_bytes()
@@ -249,7 +250,8 @@ def test_a_slice_of_the_sequence_equals_the_full_render(tiny_dataset, tmp_path):
     seed and preset; PNG, PLY, JSON and HDF5 bytes), and only frame 000000's
     images, masks and mesh are missing. The slice, whose frames start at 000001,
     is a valid dataset."""
-    part = synthesise(tmp_path / "slice", "tiny", frames=range(1, 3), progress=False)
+    frames_1_2 = RenderSelection(frames=range(1, 3))
+    part = synthesise(tmp_path / "slice", "tiny", selection=frames_1_2, progress=False)
     full, sliced = _files(tiny_dataset), _files(part)
     missing = {f"scenes/sheet/{k}/000000{e}" for k, e in (("frames", ""), ("masks", ""))}
     missing = {f"{m}/{c}.png" for m in missing for c in ("cam1", "cam2", "cam3")}
@@ -262,9 +264,10 @@ def test_a_slice_of_the_sequence_equals_the_full_render(tiny_dataset, tmp_path):
     assert open_dataset(part).scenes["sheet"].frames == ("000001", "000002")
     assert summary["scenes"]["sheet"]["frames"] == 2
     with pytest.raises(ValueError, match="frames \\[3\\]: the tiny preset's sheet has frames 0-2"):
-        synthesise(tmp_path / "x", "tiny", frames=[2, 3], progress=False)
+        synthesise(tmp_path / "x", "tiny", selection=RenderSelection(frames=[2, 3]), progress=False)
     with pytest.raises(ValueError, match="the sheet, which is not rendered"):
-        synthesise(tmp_path / "x", "tiny", frames=[2], scenes=("plane",), progress=False)
+        plane_only = RenderSelection(scenes=("plane",), frames=[2])
+        synthesise(tmp_path / "x", "tiny", selection=plane_only, progress=False)
 
 
 def test_frame_indices_of_the_command_line():

@@ -26,7 +26,15 @@ from colourhs.common.geometry import project
 from colourhs.synth import randomrig as rr
 from colourhs.synth.brdf import Material
 from colourhs.synth.simulated_rig import COLOURS, Nuisances
-from colourhs.synth.synthesise import PRESETS, SCENE_META, _mask, rig_json, synthesise
+from colourhs.synth.synthesise import (
+    PRESETS,
+    SCENE_META,
+    DrawOverrides,
+    RenderSelection,
+    _mask,
+    rig_json,
+    synthesise,
+)
 
 TINY = PRESETS["random-tiny"]
 CLEAN = Nuisances().without("noise", "crosstalk")
@@ -147,7 +155,7 @@ def test_mask_modes(full_datasets):
 
 def test_same_seed_same_bytes_and_nuisances_do_not_move_geometry(tmp_path):
     seed = 5
-    kw = dict(parts=("chromatic",), scenes=(), progress=False)
+    kw = dict(selection=RenderSelection(parts=("chromatic",), scenes=()), progress=False)
     a = synthesise(tmp_path / "a", "random-tiny", seed=seed, workers=1, **kw)
     b = synthesise(tmp_path / "b", "random-tiny", seed=seed, workers=2, **kw)
     c = synthesise(tmp_path / "c", "random-tiny", seed=seed, nuisances=CLEAN, **kw)
@@ -412,9 +420,8 @@ def test_hs_constraint_holds_at_ground_truth(tmp_path, seed):
         CHECK,
         seed=seed,
         nuisances=CLEAN,
-        exact=True,
-        parts=("scenes",),
-        scenes=("plane", "sheet"),
+        draw=DrawOverrides(exact=True),
+        selection=RenderSelection(parts=("scenes",), scenes=("plane", "sheet")),
         progress=False,
         workers=2,
     )
@@ -557,8 +564,7 @@ def test_corner_12_bit_dataset_validates(tmp_path):
         tmp_path / "d",
         "corner-tiny",
         seed=seed,
-        parts=("photometric", "scenes"),
-        scenes=("plane",),
+        selection=RenderSelection(parts=("photometric", "scenes"), scenes=("plane",)),
         progress=False,
         workers=2,
     )
