@@ -1,6 +1,6 @@
 """Per-job seconds and peak memory of the paper preset on a slice of its 201-frame sequence.
 
-Issue 13. Renders the paper preset's calibration captures, the statue (whose
+Renders the paper preset's calibration captures, the statue (whose
 chromatic captures give the chromaticity stage something to do) and ``--frames``
 consecutive frames of the sheet (default 20, from ``--first``, default the middle
 of the sequence), or takes them from ``--data DIR``; then runs every job of
@@ -20,15 +20,14 @@ seconds, max peak RSS; the whole sequence's projected time on 2 cores and on
 192 labels <= 10 s on 2 threads and <= 3 GB; no job over 4 GB); the stages of more
 than 5 s whose log stayed silent for more than 5 s (no progress shown).
 
-Run (full scale: frames 90-109; rendering them took about 13 minutes and each
-frame's 14 jobs are estimated at about 5 minutes on 2 shared cores, so about 2-3
-hours in all; it writes some GB under data/bench/paper_slice)::
+Run (full scale: frames 90-109, hours on 2 cores; it writes some GB under
+data/bench/paper_slice)::
 
     PYTHONPATH=$PWD .venv/bin/python benchmarks/bench_paper.py
 
-``--frames-only 5`` runs the jobs of 5 of the 20 rendered frames (about an hour);
+``--frames-only 5`` runs the jobs of 5 of the 20 rendered frames;
 ``--data DIR`` reuses a rendered dataset (a sheet with those frames); ``--preset
-tiny --frames 2`` runs the same in about two minutes (tests/benchmarks/test_bench_paper.py
+tiny --frames 2`` runs the same at 160 x 120 (tests/benchmarks/test_bench_paper.py
 runs one frame's jobs).
 """
 

@@ -7,7 +7,7 @@ everything after the synthetic rendering reruns; the rendered dataset is kept
 if present; ``--render`` also removes it, so the run is the README's main job
 on a fresh machine) and writes ``benchmarks/results/pipeline_demo.json``: the wall
 time and, per rule, the jobs and seconds from the rules' benchmark files.
-Target (issue 6): the whole demo pipeline within 15 minutes on 2 cores.
+Target: the whole demo pipeline within 15 minutes on 2 cores.
 """
 
 from __future__ import annotations

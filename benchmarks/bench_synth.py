@@ -3,7 +3,7 @@
 Run: ``.venv/bin/python benchmarks/bench_synth.py [--preset demo] [--workers 2]``.
 Writes ``benchmarks/results/synth_<preset>.json``: wall time, CPU time, peak
 resident memory of the whole process tree (sampled every 0.1 s), the number
-of images and the dataset size. Target (issue 2): demo preset at most 2
+of images and the dataset size. Target: demo preset at most 2
 minutes and 4 GB on 2 cores.
 """
 

@@ -1,4 +1,4 @@
-"""Where a smooth surface's Bayesian depth offset comes from (issue 11, items 2-3).
+"""Where a smooth surface's Bayesian depth offset comes from.
 
 Run: ``.venv/bin/python benchmarks/depth_offsets.py [--seeds 1-4] [--modes exact,noise]
 [--blur 1,0,1c,0c]``.

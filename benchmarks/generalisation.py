@@ -43,8 +43,8 @@ Writes to ``benchmarks/results/`` (``--tag`` suffixes each name):
 ``--summarise CSV [CSV ...]`` summarises existing per-seed tables again
 (concatenated: e.g. a random and a corner run), rendering nothing.
 
-One 640x480 seed takes about 10 minutes on 2 cores with ``--sheet-frames 1``
-(rendering about 1; measured: seeds 0-7 in 83 minutes).
+Each seed renders a 640x480 dataset and runs every stage on it: minutes per seed
+on 2 cores (``--sheet-frames 1`` the least).
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""How far a known mu error moves ML and Bayesian HS (issue 11: the ablation's
+"""How far a known mu error moves ML and Bayesian HS (the ablation's
 ``ml_full > bayes_nocalib`` link).
 
 Run: ``.venv/bin/python benchmarks/mu_sensitivity.py [--seeds 1-3]

@@ -1,4 +1,4 @@
-"""Exact data, then each nuisance alone, then all of them (issue 11, item 2).
+"""Exact data, then each nuisance alone, then all of them.
 
 Run: ``.venv/bin/python benchmarks/nuisance_ladder.py [--seeds 1-3] [--size 320x240]``.
 

@@ -20,12 +20,7 @@ and score each against ``gt/photometric.h5``:
 and calibrates with the first k of them (the capture order), for the
 error-against-poses figure.
 
-Measured (seeds 0-2, every nuisance, marker poses, ``--n-poses 7 --subsets
-3,4,5,7``): worst map's RMS log error, median / worst seed, 0.35 / 0.49 % with
-3 poses, 0.33 / 0.36 % with 4, 0.32 / 0.33 % with 5, 0.32 / 0.32 % with 7.
-
-Run from the project root, e.g. (about 1.5 min of rendering per seed on two
-cores, then ~30 s per seed)::
+Run from the project root, e.g.::
 
     .venv/bin/python benchmarks/photometric_random.py --seeds 0-7
     .venv/bin/python benchmarks/photometric_random.py --seeds 0-7 --nuisances all
