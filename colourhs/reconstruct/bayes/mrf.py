@@ -250,8 +250,8 @@ def _sweep_horizontal(cost, normals, rays, dks, off, alpha, w, wtau, S, labels, 
     """Left-to-right and right-to-left paths, rows in parallel; then ``argmin S``.
 
     The two senses are interleaved (step ``t`` visits column ``t`` of the
-    left-to-right and column ``W - 1 - t`` of the right-to-left path) so that
-    their sequential distance transforms overlap. Path buffers: ``4 * K``
+    left-to-right and column ``W - 1 - t`` of the right-to-left path), so one
+    pass over a row's cost and normals serves both. Path buffers: ``4 * K``
     floats per row in flight.
     """
     H, W, K = cost.shape
@@ -327,22 +327,8 @@ def _sweep_horizontal(cost, normals, rays, dks, off, alpha, w, wtau, S, labels, 
                     S[i, jb, k] += lb
             mprev[0] = mnew[0]
             mprev[1] = mnew[1]
-            # _distance_transform_l1 of both, interleaved (two independent
-            # dependency chains: the CPU overlaps them)
-            for k in range(1, K):
-                va = La[k - 1] + w
-                if va < La[k]:
-                    La[k] = va
-                vb = Lb[k - 1] + w
-                if vb < Lb[k]:
-                    Lb[k] = vb
-            for k in range(K - 2, -1, -1):
-                va = La[k + 1] + w
-                if va < La[k]:
-                    La[k] = va
-                vb = Lb[k + 1] + w
-                if vb < Lb[k]:
-                    Lb[k] = vb
+            _distance_transform_l1(La, w)
+            _distance_transform_l1(Lb, w)
         for j in range(W):
             best = 0
             bv = S[i, j, 0]
