@@ -63,7 +63,7 @@ def main() -> None:
         thread = threading.Thread(target=sample, daemon=True)
         thread.start()
         t0, c0 = time.perf_counter(), os.times()
-        out = synthesise(Path(tmp) / "ds", args.preset, workers=args.workers, progress=False)
+        out = synthesise(Path(tmp) / "ds", args.preset, workers=args.workers)
         wall = time.perf_counter() - t0
         c1 = os.times()
         done.set()

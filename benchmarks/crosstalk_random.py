@@ -30,6 +30,7 @@ import numpy as np
 
 from colourhs.calibration.crosstalk import MixingField, calibrate_crosstalk, load_crosstalk
 from colourhs.common.geometry import normalised_coordinates, pixel_grid
+from colourhs.common.progress import show_progress
 
 OFF = ~np.eye(3, dtype=bool)
 
@@ -74,7 +75,7 @@ def run_seed(root: Path, preset: str, seed: int, workers: int) -> dict:
     data = root / f"{preset}-seed{seed}"
     if not data.exists():
         plane = RenderSelection(scenes=("plane",))
-        synthesise(data, preset, seed=seed, selection=plane, progress=False, workers=workers)
+        synthesise(data, preset, seed=seed, selection=plane, workers=workers)
     poses = root / f"{preset}-seed{seed}_poses.csv"
     if not poses.exists():
         marker_poses(data, poses)
@@ -103,6 +104,7 @@ def main(argv=None) -> int:
     ap.add_argument("--seeds", type=int, nargs="+", default=list(range(8)))
     ap.add_argument("--workers", type=int, default=2)
     args = ap.parse_args(argv)
+    show_progress()  # the calibration stages' progress on stderr, as the CLI shows it
     args.root.mkdir(parents=True, exist_ok=True)
     results = []
     for s in args.seeds:

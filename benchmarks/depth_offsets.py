@@ -97,7 +97,6 @@ def run_seed(seed: int, mode: str, preset, blurs, root: Path) -> list[dict]:
         nuisances=nuisances(mode),
         draw=DrawOverrides(exact=True),
         selection=RenderSelection(parts=("photometric", "scenes"), scenes=SCENES),
-        progress=False,
     )
     rows = []
     for scene in SCENES:

@@ -61,6 +61,7 @@ import pandas as pd
 
 from colourhs.cli.commands import frame_indices
 from colourhs.common.metrics_csv import DROP_COLUMNS, GAUSSIAN_WITHIN, SIGMA_MULTIPLES
+from colourhs.common.progress import show_progress
 from colourhs.workflow.variants import VARIANTS
 
 HERE = Path(__file__).parent
@@ -324,9 +325,7 @@ def run_seed(
     root = Path(tempfile.mkdtemp(prefix=f"colourhs-gen-{seed}-"))
     try:
         t0 = time.time()
-        data = synthesise(
-            root / "data", preset, seed=seed, progress=False, draw=DrawOverrides(ranges=ranges)
-        )
+        data = synthesise(root / "data", preset, seed=seed, draw=DrawOverrides(ranges=ranges))
         t_render = time.time() - t0
         files = calibrate(data, root / "calib")
         t_calib = time.time() - t0 - t_render
@@ -738,6 +737,7 @@ def main(argv=None) -> dict:
         "e.g. a random and a corner run), rendering nothing",
     )
     args = p.parse_args(argv)
+    show_progress()  # the calibration stages' progress on stderr, as the CLI shows it
     if args.summarise is None:
         from colourhs.synth.synthesise import PRESETS
 

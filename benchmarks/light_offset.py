@@ -36,6 +36,7 @@ import pandas as pd
 from generalisation import seeds_in_temp
 
 from colourhs.cli.commands import frame_indices
+from colourhs.common.progress import show_progress
 
 HERE = Path(__file__).parent
 #: Scene -> the Bayesian variant a rig owner runs on it (white: bayes_ph; coloured:
@@ -68,11 +69,10 @@ def run_offset(seed: int, preset, offset_m: float, scenes, root: Path) -> list[d
             parts=("photometric", "scenes", *(("chromatic",) if "statue" in scenes else ())),
             scenes=tuple(scenes),
         ),
-        progress=False,
         draw=DrawOverrides(ranges=ranges),
     )
     noise = data / "noise.json"
-    calibrate_noise(data, noise, progress=False)
+    calibrate_noise(data, noise)
     rig = load_rig(data)
     at_fixation = float(np.degrees(rig.reciprocity_defect(rig.fixation_point()).max()))
     rows = []
@@ -136,6 +136,7 @@ def main(argv=None) -> pd.DataFrame:
     p.add_argument("--offsets-mm", default="0,2,5,10,20,40", help="light offsets, mm")
     p.add_argument("--scenes", default="sheet,statue,plane", help="of plane, sheet, statue")
     args = p.parse_args(argv)
+    show_progress()  # the calibration stages' progress on stderr, as the CLI shows it
     preset = replace(PRESETS[args.preset], sheet_frames=1)
     offsets = [float(v) * 1e-3 for v in args.offsets_mm.split(",")]
     scenes = args.scenes.split(",")

@@ -90,7 +90,6 @@ def render_ours(out: Path, preset, seed, nuis, ranges) -> Path:
             nuis,
             selection=RenderSelection(parts=("photometric",)),
             draw=DrawOverrides(ranges=ranges),
-            progress=False,
             overwrite=True,
         )
         print(f"rendered {out.name} in {time.time() - t:.0f} s", flush=True)

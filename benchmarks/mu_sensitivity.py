@@ -60,7 +60,6 @@ def run_seed(seed: int, errors, ml_errors, root: Path) -> list[dict]:
         nuisances=Nuisances().without("noise", "crosstalk"),
         draw=DrawOverrides(exact=True),
         selection=RenderSelection(parts=("photometric", "scenes"), scenes=SCENES),
-        progress=False,
     )
     camera = load_rig(data).camera_names[0]
     rows = []

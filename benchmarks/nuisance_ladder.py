@@ -79,7 +79,6 @@ def run_rung(seed: int, preset, name: str, nuisances, root: Path, variants=VARIA
         nuisances=nuisances,
         draw=DrawOverrides(exact=exact),
         selection=RenderSelection(scenes=SCENES),
-        progress=False,
     )
     files = calibrate(data, root / name / "calib")
     cal = calibration_errors(data, files)

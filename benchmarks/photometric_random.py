@@ -50,6 +50,7 @@ import pandas as pd
 
 from colourhs.calibration import photometric as ph
 from colourhs.cli.commands import frame_indices
+from colourhs.common.progress import show_progress
 from colourhs.evaluation import photometric_errors as pe
 
 HERE = Path(__file__).parent
@@ -97,7 +98,6 @@ def dataset(root: Path, preset: str, seed: int, nuisances: str, n_poses: int | N
                 parts=("photometric", "chromatic", "scenes"), scenes=("plane",)
             ),
             nuisances=nuis,
-            progress=False,
             overwrite=True,
         )
         print(f"rendered {out} in {time.time() - t:.0f} s", flush=True)
@@ -220,6 +220,7 @@ def main(argv=None) -> pd.DataFrame:
     ap.add_argument("--root", type=Path, default=ROOT / "data" / "photometric_random")
     ap.add_argument("--tag", default=None)
     args = ap.parse_args(argv)
+    show_progress()  # the calibration stages' progress on stderr, as the CLI shows it
     df = run(args)
     tag = args.tag or "_".join(
         [args.preset, args.nuisances] + ([f"n{args.n_poses}"] if args.n_poses else [])

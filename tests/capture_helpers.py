@@ -180,6 +180,5 @@ def render_exact(root, preset, seed: int, scenes, parts=("photometric", "scenes"
         nuisances=Nuisances().without("noise", "crosstalk"),
         draw=DrawOverrides(exact=True),
         selection=RenderSelection(parts=parts, scenes=scenes),
-        progress=False,
         workers=2,
     )

@@ -15,6 +15,7 @@ import shutil
 from pathlib import Path
 
 import pytest
+from logging_helpers import kept_logging
 
 from colourhs.synth.simulated_rig import Nuisances
 from colourhs.synth.synthesise import Preset, RenderSelection, synthesise
@@ -57,6 +58,14 @@ def pytest_collection_modifyitems(config, items):
                 item.add_marker(pytest.mark.skip(reason=f"opt-in: pytest -m {marker} ({why})"))
 
 
+@pytest.fixture(autouse=True)
+def _logging_kept():
+    """Every test leaves the ``colourhs`` loggers as it found them: ``main()`` shows
+    progress for the rest of the process, and other tests assert silence."""
+    with kept_logging():
+        yield
+
+
 # 640x480 like the demo preset, with fewer board poses and sheet frames.
 CHECK_PRESET = Preset("check", 640, 480, 1250.0, 2, n_poses=3, sheet_frames=1)
 
@@ -64,7 +73,7 @@ CHECK_PRESET = Preset("check", 640, 480, 1250.0, 2, n_poses=3, sheet_frames=1)
 @pytest.fixture(scope="session")
 def tiny_dataset(tmp_path_factory):
     """The tiny preset with every nuisance on (seed 0)."""
-    return synthesise(tmp_path_factory.mktemp("tiny") / "tiny", "tiny", progress=False)
+    return synthesise(tmp_path_factory.mktemp("tiny") / "tiny", "tiny")
 
 
 @pytest.fixture(scope="session")
@@ -83,7 +92,6 @@ def clean_dataset(tmp_path_factory):
         tmp_path_factory.mktemp("clean") / "clean",
         CHECK_PRESET,
         nuisances=Nuisances().without("noise", "crosstalk"),
-        progress=False,
     )
 
 
@@ -105,7 +113,7 @@ def plane_calibrated(tmp_path_factory):
 
     root = tmp_path_factory.mktemp("plane")
     plane = RenderSelection(scenes=("plane",))
-    data = synthesise(root / "data", PLANE_PRESET, selection=plane, progress=False)
+    data = synthesise(root / "data", PLANE_PRESET, selection=plane)
     marker_poses(data, root / "marker_poses.csv")
     calibrate_crosstalk(data, root / "crosstalk.json")
     photometric_maps(

@@ -50,6 +50,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import logging
 import os
 from pathlib import Path
 from typing import NamedTuple
@@ -68,6 +69,8 @@ from colourhs.capture import (
     read_mask,
 )
 from colourhs.common.progress import bar, stage
+
+log = logging.getLogger(__name__)
 
 __all__ = [
     "MIN_SIGNAL",
@@ -412,7 +415,6 @@ def chromaticity_maps(
     out_h5: str | Path,
     min_signal: float = MIN_SIGNAL,
     object_threshold: float = OBJECT_THRESHOLD,
-    progress: bool = False,
 ) -> ObjectChromaticity:
     """Chromaticity maps of ``obj`` for every camera, written to HDF5.
 
@@ -424,7 +426,8 @@ def chromaticity_maps(
     ``inputs_sha256`` (sha256 of the sorted ``"path sha256"`` lines). Written to a temporary
     name and renamed at the end: nothing is left behind on error. The figure (the paper's
     Figure 6, :func:`colourhs.report.figures.chromaticity_figure`) is the command's to draw, from
-    what this returns: calibration modules do not import the figures.
+    what this returns: calibration modules do not import the figures. Shows a bar over the
+    cameras and logs a line at INFO before the writing (:mod:`colourhs.common.progress`).
 
     Parameters
     ----------
@@ -436,9 +439,6 @@ def chromaticity_maps(
         HDF5 file to write.
     min_signal, object_threshold : float
         See :func:`chromaticity_map`.
-    progress : bool
-        A bar over the cameras and a line before the writing, on stderr
-        (:mod:`colourhs.common.progress`).
 
     Returns
     -------
@@ -454,7 +454,7 @@ def chromaticity_maps(
     )
     _check_object(dataset, obj)
     maps, infos = {}, {}
-    cams = bar(dataset.rig.camera_names, f"chromaticity {obj}", enabled=progress, unit="camera")
+    cams = bar(dataset.rig.camera_names, f"chromaticity {obj}", unit="camera")
     for camera in cams:
         maps[camera], infos[camera] = _chromaticity_map(
             dataset, obj, camera, min_signal, object_threshold
@@ -466,7 +466,7 @@ def chromaticity_maps(
     }
     lines = "".join(f"{k} {v}\n" for k, v in sorted(inputs.items()))
     out_h5 = Path(out_h5)
-    stage(f"chromaticity {obj}: writing {out_h5.name}", enabled=progress)
+    stage(log, f"chromaticity {obj}: writing {out_h5.name}")
     out_h5.parent.mkdir(parents=True, exist_ok=True)
     tmp_h5 = out_h5.with_name(f".{out_h5.name}.{os.getpid()}.tmp")
     try:

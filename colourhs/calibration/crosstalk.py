@@ -162,7 +162,6 @@ def calibrate_crosstalk(
     poses_csv: str | Path | None = None,
     spatial: bool | None = None,
     degree: int = 3,
-    progress: bool = True,
     **led_params,
 ) -> dict:
     """Mixing per camera from ``chromatic/white/<colour>/<camera>.png`` (and the board).
@@ -188,9 +187,9 @@ def calibrate_crosstalk(
     "led_mixing_cov" (the full covariance of M_LED's off-diagonals, which the
     fit correlates between cameras) at the top level.
 
-    ``progress``: a bar over the filter fields' fits (camera and light
-    colour), the board captures read and the board poses, and a line per
-    stage of the LED factor (stderr, :mod:`colourhs.common.progress`).
+    Shows bars over the filter fields' fits (camera and light colour), the
+    board captures read and the board poses, and logs a line at INFO per stage
+    of the LED factor (:mod:`colourhs.common.progress`).
     """
     ds = open_dataset(dataset_dir, check_images=False, scenes=())
     if "white" not in ds.chromatic_objects:
@@ -200,7 +199,7 @@ def calibrate_crosstalk(
     fields = {}
     label = "cross-talk: filter mixing field"
     cams = ds.rig.camera_names
-    with bar(desc=label, total=3 * len(cams), enabled=progress and spatial, unit="fit") as shown:
+    with bar(desc=label, total=3 * len(cams), disable=not spatial, unit="fit") as shown:
         for cam in cams:
             imgs, sats = {}, {}
             for colour in COLOURS:
@@ -227,7 +226,7 @@ def calibrate_crosstalk(
             f"per-pixel I_c / I_b under light b alone (white reference), Legendre degree {degree}"
         )
     if poses_csv is not None:
-        result = led_factor_from_dataset(ds, poses_csv, fields, progress, **led_params)
+        result = led_factor_from_dataset(ds, poses_csv, fields, **led_params)
         for cam, F in result["factor"].items():
             field = fields[cam].scaled(F)
             out["cameras"][cam] |= {

@@ -22,6 +22,7 @@ constraints from eq. (1) on the flat white Lambertian board ((a) own channel,
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 
 import numpy as np
@@ -29,6 +30,8 @@ import numpy as np
 from colourhs.calibration.crosstalk_filter import legendre_basis
 from colourhs.capture import read_image
 from colourhs.common.progress import bar, stage
+
+log = logging.getLogger(__name__)
 
 OFF_DIAGONAL = tuple((c, b) for c in range(3) for b in range(3) if c != b)
 
@@ -162,14 +165,14 @@ class _LedProblem:
         return out
 
 
-def _box_images(rig, shots, k: int, K: int, margin_m: float, progress=False) -> list[dict]:
+def _box_images(rig, shots, k: int, K: int, margin_m: float) -> list[dict]:
     """Per shot and camera: k x k box means, ring means, and where both are usable.
 
     A pixel is valid when its centre sees the board's white surface at least
     ``margin_m`` (and 1.5 pixels) from markers and edges and is not saturated. The box mean
     needs every pixel of its box valid; the ring (the K x K box less the
-    k x k one) averages its valid pixels and needs a third of them. ``progress``:
-    a bar over the shots (stderr).
+    k x k one) averages its valid pixels and needs a third of them. A bar over
+    the shots (:func:`colourhs.common.progress.bar`).
     """
     import cv2
 
@@ -183,7 +186,7 @@ def _box_images(rig, shots, k: int, K: int, margin_m: float, progress=False) -> 
         return cv2.boxFilter(a, -1, (size, size), normalize=False, borderType=cv2.BORDER_CONSTANT)
 
     out = []
-    for shot in bar(shots, "cross-talk: board poses", enabled=progress, unit="pose"):
+    for shot in bar(shots, "cross-talk: board poses", unit="pose"):
         per = {}
         for cam in rig.cameras:
             name = cam.name
@@ -240,7 +243,7 @@ def _pose_derivatives(shot, board, origin, d, cam) -> np.ndarray:
     return np.nan_to_num(out)
 
 
-def _build_led_problem(rig, shots, fields, opts, progress=False) -> _LedProblem:
+def _build_led_problem(rig, shots, fields, opts) -> _LedProblem:
     from colourhs.common.geometry import backproject, project, ray_plane_intersection
     from colourhs.common.sampling import sample_bilinear
 
@@ -261,7 +264,7 @@ def _build_led_problem(rig, shots, fields, opts, progress=False) -> _LedProblem:
     uv = np.stack([gu.ravel(), gv.ravel()], axis=1)
     npx = len(uv)
     iu, iv = uv[:, 0].astype(int), uv[:, 1].astype(int)
-    boxes = _box_images(rig, shots, k, K, opts["margin_m"], progress)
+    boxes = _box_images(rig, shots, k, K, opts["margin_m"])
     parts = []
     for a, A in enumerate(cams):
         origin, d = backproject(uv, A.K, A.dist, A.R, A.t)
@@ -499,9 +502,7 @@ def shrink_towards_filter(theta, cov) -> tuple[np.ndarray, np.ndarray, float]:
     return 1.0 + gain @ d, tau2 * eye - tau2 * gain, float(np.sqrt(tau2))
 
 
-def led_factor(
-    rig, shots: list[BoardShot], fields: dict, *, progress: bool = False, **params
-) -> dict:
+def led_factor(rig, shots: list[BoardShot], fields: dict, **params) -> dict:
     """The constant LED factor F per camera, ``M_LED(u) = M_filter(u) * F``, from the board.
 
     Constraints (:mod:`colourhs.calibration.crosstalk` docstring; eq. 1 with a Lambertian board),
@@ -543,12 +544,14 @@ def led_factor(
     18 numbers, from their fit and its sandwich covariance): LEDs that match
     the filters, or a fit too noisy to tell, give F = 1, i.e. the filter field.
 
+    Shows a bar over the board poses and logs a line at INFO before the fit
+    (:mod:`colourhs.common.progress`).
+
     Parameters
     ----------
     rig : the dataset's :class:`~colourhs.capture.Rig`.
     shots : board poses with their raw images.
     fields : camera name -> filter :class:`MixingField` (chromatic captures).
-    progress : a bar over the board poses and a line before the fit (stderr).
 
     Returns
     -------
@@ -561,11 +564,11 @@ def led_factor(
     """
     opts = LED_DEFAULTS | {k: v for k, v in params.items() if v is not None}
     opts["step_px"] = int(opts["step_px"] or max(1, round(rig.image.width / 160)))
-    prob = _build_led_problem(rig, shots, fields, opts, progress)
+    prob = _build_led_problem(rig, shots, fields, opts)
     theta0 = np.ones(prob.nth) if opts.get("initial") is None else np.asarray(opts["initial"])
     if opts.get("return_problem"):
         return prob
-    stage(f"cross-talk: fitting F to {prob.N} board samples", enabled=progress)
+    stage(log, f"cross-talk: fitting F to {prob.N} board samples")
     theta, cov, diag = _solve_led_problem(prob, theta0, opts["iterations"], opts["huber"])
     fit_sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     if opts["shrink"]:
@@ -595,15 +598,15 @@ def led_factor(
     return {"factor": factor, "sd": sds, "cov": cov, "order": order, "diagnostics": diag}
 
 
-def read_board_shots(ds, poses_csv, progress: bool = False) -> list[BoardShot]:
-    """The board poses of a marker poses table with their raw images
-    (``progress``: a bar over the poses read, on stderr)."""
+def read_board_shots(ds, poses_csv) -> list[BoardShot]:
+    """The board poses of a marker poses table with their raw images (a bar over
+    the poses read, :func:`colourhs.common.progress.bar`)."""
     import pandas as pd
 
     table = pd.read_csv(poses_csv, dtype={"pose": str}, keep_default_na=False)
     shots = []
     label = "cross-talk: reading the board captures"
-    rows = bar(table.iterrows(), label, len(table), progress, unit="pose")
+    rows = bar(table.iterrows(), label, len(table), unit="pose")
     for _, row in rows:
         pose = str(row["pose"])
         R = np.array([[float(row[f"R{i}{j}"]) for j in range(3)] for i in range(3)])
@@ -617,7 +620,7 @@ def read_board_shots(ds, poses_csv, progress: bool = False) -> list[BoardShot]:
     return shots
 
 
-def led_factor_from_dataset(ds, poses_csv, fields: dict, progress: bool = False, **params) -> dict:
+def led_factor_from_dataset(ds, poses_csv, fields: dict, **params) -> dict:
     """:func:`led_factor` on a dataset's board captures and a marker poses table."""
-    shots = read_board_shots(ds, poses_csv, progress)
-    return led_factor(ds.rig, shots, fields, progress=progress, **params)
+    shots = read_board_shots(ds, poses_csv)
+    return led_factor(ds.rig, shots, fields, **params)

@@ -490,9 +490,11 @@ def csv_columns(cameras: tuple[str, ...] | list[str]) -> list[str]:
 
 
 def marker_poses(
-    dataset_dir: str | Path, out_csv: str | Path, min_markers: int = 3, progress: bool = True
+    dataset_dir: str | Path, out_csv: str | Path, min_markers: int = 3
 ) -> pd.DataFrame:
     """Board pose and calibration plane of every photometric shot of a dataset.
+
+    Shows a bar over the board poses (:func:`colourhs.common.progress.bar`).
 
     Parameters
     ----------
@@ -504,8 +506,6 @@ def marker_poses(
         renamed, so an error leaves no partial output.
     min_markers : int
         Fewest triangulated markers (each seen by two or more cameras) a pose needs.
-    progress : bool
-        A bar over the board poses on stderr (:mod:`colourhs.common.progress`).
 
     Returns
     -------
@@ -536,7 +536,7 @@ def marker_poses(
     ds = open_dataset(dataset_dir, check_images=False, scenes=())
     rig = ds.rig
     rows = []
-    for pose in bar(ds.poses, "markers: board poses", enabled=progress, unit="pose"):
+    for pose in bar(ds.poses, "markers: board poses", unit="pose"):
         detections = {}
         for cam in rig.cameras:
             image, _ = read_image(ds.photometric_image(pose, cam.name), rig.image)

@@ -146,13 +146,13 @@ def estimate_noise(images: list[np.ndarray], floor: float = 0.0) -> tuple[np.nda
     return gain, offset
 
 
-def calibrate_noise(dataset_dir, out_json=None, progress: bool = True) -> NoiseModel:
+def calibrate_noise(dataset_dir, out_json=None) -> NoiseModel:
     """Noise model of every camera from the board poses and chromatic white captures.
 
     Writes ``{"cameras": {name: {"gain": [3], "offset": [3]}}, ...}``
     atomically when ``out_json`` is given. The raw images are used (before
-    cross-talk unmixing, which changes the variance by well under 1 %).
-    ``progress``: a bar over the images read on stderr (:mod:`colourhs.common.progress`).
+    cross-talk unmixing, which changes the variance by well under 1 %). Shows a
+    bar over the images read (:func:`colourhs.common.progress.bar`).
     """
     ds = open_dataset(dataset_dir, check_images=False, scenes=())
     gains, offsets, out = {}, {}, {"cameras": {}, "units": "full scale; var = gain * i + offset"}
@@ -166,7 +166,7 @@ def calibrate_noise(dataset_dir, out_json=None, progress: bool = True) -> NoiseM
         for cam in ds.rig.camera_names
     }
     total = sum(map(len, paths.values()))
-    with bar(desc="noise model", total=total, enabled=progress, unit="image") as shown:
+    with bar(desc="noise model", total=total, unit="image") as shown:
         for cam in ds.rig.camera_names:
             images = []
             for path in paths[cam]:

@@ -74,6 +74,7 @@ names of the others.
 from __future__ import annotations
 
 import json
+import logging
 import warnings
 from pathlib import Path
 from time import perf_counter
@@ -103,6 +104,8 @@ from colourhs.calibration.photometric_solve import (
 from colourhs.capture import COLOURS, Rig, open_dataset, read_image
 from colourhs.common.files import atomic_output, note_read, sha256_files
 from colourhs.common.progress import bar, stage
+
+log = logging.getLogger(__name__)
 
 __all__ = [
     "DEFAULTS",
@@ -240,17 +243,15 @@ def read_poses_table(poses_csv):
     return table
 
 
-def load_views(
-    dataset_dir, poses_csv, crosstalk_json=None, progress: bool = False
-) -> tuple[Rig, list[PoseView]]:
+def load_views(dataset_dir, poses_csv, crosstalk_json=None) -> tuple[Rig, list[PoseView]]:
     """Read every usable board pose (from the marker poses table) and its images
-    (``progress``: a bar over the poses on stderr)."""
+    (a bar over the poses, :func:`colourhs.common.progress.bar`)."""
     ds = open_dataset(dataset_dir, check_images=False, scenes=())
     table = read_poses_table(poses_csv)
     mixing = load_crosstalk(crosstalk_json) if crosstalk_json else {}
     views = []
     label = "photometric: reading" + (" and unmixing" if mixing else "") + " the board poses"
-    rows = bar(table.iterrows(), label, total=len(table), enabled=progress, unit="pose")
+    rows = bar(table.iterrows(), label, total=len(table), unit="pose")
     for _, row in rows:
         pose = str(row["pose"])
         R = np.array([[row[f"R{i}{j}"] for j in range(3)] for i in range(3)], float)
@@ -293,7 +294,6 @@ def calibrate(
     *,
     mixing_sd: dict[str, np.ndarray] | None = None,
     mixing_cov: tuple[list, np.ndarray] | None = None,
-    progress: bool = False,
     **params,
 ) -> dict:
     """Photometric calibration of every Helmholtz camera (eqs. 6-8, module docstring).
@@ -310,8 +310,8 @@ def calibrate(
     errors of the cross-talk mixing the views were unmixed with
     (:func:`colourhs.calibration.crosstalk.load_mixing_sd`), and ``mixing_cov`` their full
     covariance (:func:`colourhs.calibration.crosstalk.load_mixing_cov`), for the ratios'
-    cross-talk term. ``progress``: a bar over the reciprocal pairs'
-    samples and a line per later step, on stderr (:mod:`colourhs.common.progress`).
+    cross-talk term. Shows a bar over the reciprocal pairs' samples and logs a
+    line at INFO per later step (:mod:`colourhs.common.progress`).
 
     Returns a dict with ``maps`` ("<camera>/<colour>" -> (H, W) float32 mu),
     ``grids`` (same keys -> (ny, nx) log mu control points), ``calibrated``
@@ -335,7 +335,7 @@ def calibrate(
     grid = Grid(W, H, opts["grid_spacing_px"])
     pairs, own = [], {}
     rig_pairs = rig.reciprocal_pairs()
-    for pr in bar(rig_pairs, "photometric: eq. (6) samples", enabled=progress, unit="pair"):
+    for pr in bar(rig_pairs, "photometric: eq. (6) samples", unit="pair"):
         ka, kb = (pr.cam_a, pr.channel_a), (pr.cam_b, pr.channel_b)
         s_ab = kappa_samples(views, rig, pr.cam_a, pr.cam_b, opts)  # on b's pixels: map a
         s_ba = kappa_samples(views, rig, pr.cam_b, pr.cam_a, opts)  # on a's pixels: map b
@@ -352,7 +352,7 @@ def calibrate(
         c.name: shading_basis(shading_coordinates(c, grid.nodes, W, H), order) for c in rig.cameras
     }
     ny, nx = grid.shape
-    stage(f"photometric: solving for {2 * len(pairs)} maps of {ny} x {nx} nodes", enabled=progress)
+    stage(log, f"photometric: solving for {2 * len(pairs)} maps of {ny} x {nx} nodes")
 
     def solve(samples):
         return solve_mu_grids(
@@ -360,9 +360,9 @@ def calibrate(
         )
 
     grids, shading, offs = solve(pairs)
-    stage("photometric: the pair ratios' uncertainty (jackknife over poses)", enabled=progress)
+    stage(log, "photometric: the pair ratios' uncertainty (jackknife over poses)")
     ratio_sigma = pair_ratio_sigma(pairs, grid, lambda samples: solve(samples)[0])
-    stage("photometric: dense maps, calibrated regions, eq. (7) residuals", enabled=progress)
+    stage(log, "photometric: dense maps, calibrated regions, eq. (7) residuals")
     out = {
         "maps": {},
         "grids": {},
@@ -448,7 +448,6 @@ def photometric_maps(
     poses_csv,
     out_h5,
     crosstalk_json=None,
-    progress: bool = True,
     **params,
 ) -> dict:
     """Calibrate and write ``photometric.h5`` (results contract).
@@ -461,24 +460,22 @@ def photometric_maps(
     unknown; ``pair_log_ratio_sigma_parts``: its jackknife and cross-talk
     terms; the cross-talk calibration's ``led_mixing_sd`` feeds the second),
     the fitted colour shading per camera and a hash of the inputs. Written
-    atomically: no partial file on error. ``progress``: bars over the board
-    poses and the pairs and a line per step on stderr
-    (:mod:`colourhs.common.progress`). Returns :func:`calibrate`'s result, whose
+    atomically: no partial file on error. Shows bars over the board poses and
+    the pairs and logs a line per step at INFO (:mod:`colourhs.common.progress`).
+    Returns :func:`calibrate`'s result, whose
     ``maps`` and ``calibrated`` the command draws as the paper's Figure 3
     (:func:`colourhs.report.figures.mu_maps_figure`): calibration modules do not
     import the figures.
     """
     t0 = perf_counter()
-    rig, views = load_views(dataset_dir, poses_csv, crosstalk_json, progress)
+    rig, views = load_views(dataset_dir, poses_csv, crosstalk_json)
     mixing_sd = load_mixing_sd(crosstalk_json) if crosstalk_json else None
     mixing_cov = load_mixing_cov(crosstalk_json) if crosstalk_json else None
-    result = calibrate(
-        rig, views, mixing_sd=mixing_sd, mixing_cov=mixing_cov, progress=progress, **params
-    )
+    result = calibrate(rig, views, mixing_sd=mixing_sd, mixing_cov=mixing_cov, **params)
     ds = open_dataset(dataset_dir, check_images=False, scenes=())
     inputs = [ds.photometric_image(v.name, c) for v in views for c in rig.camera_names]
     inputs += [Path(poses_csv)] + ([Path(crosstalk_json)] if crosstalk_json else [])
-    stage(f"photometric: writing {Path(out_h5).name}", t0, progress)
+    stage(log, f"photometric: writing {Path(out_h5).name}", t0)
     with atomic_output(out_h5) as tmp, h5py.File(tmp, "w") as f:
         for key, mu in result["maps"].items():
             f.create_dataset(key, data=mu, compression="gzip")

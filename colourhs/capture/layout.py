@@ -330,17 +330,16 @@ def all_images(ds: Dataset) -> list[Path]:
     return paths
 
 
-def validate(
-    dataset: str | Path, summary_json: str | Path | None = None, progress: bool = False
-) -> dict:
+def validate(dataset: str | Path, summary_json: str | Path | None = None) -> dict:
     """Validate a whole dataset, decoding every image, and summarise it.
+
+    Shows a bar over the images decoded (:func:`colourhs.common.progress.bar`).
 
     Parameters
     ----------
     dataset : the dataset folder (capture format, version 1).
     summary_json : optional path of a JSON summary to write (written only
         when the dataset is valid, atomically).
-    progress : a bar over the images decoded, on stderr (:mod:`colourhs.common.progress`).
 
     Returns
     -------
@@ -371,7 +370,7 @@ def validate(
     n_pixels = n_saturated = 0
     paths = all_images(ds)
     paths = [p for p in paths if p.is_file() and p not in headers_bad]
-    for path in bar(paths, "validating images", enabled=progress, unit="image"):
+    for path in bar(paths, "validating images", unit="image"):
         try:
             if path in masks:
                 read_mask(path, ds.rig.image)

@@ -116,7 +116,7 @@ def _synth(args) -> int:
 def _validate(args) -> int:
     from colourhs.capture import validate
 
-    summary = validate(args.dataset, args.summary, progress=True)  # stderr: the log
+    summary = validate(args.dataset, args.summary)
     for warning in summary["warnings"]:
         print(f"warning: {warning}", file=sys.stderr)
     scenes = summary["scenes"]
@@ -248,9 +248,7 @@ def _chromaticity(args) -> int:
 
     from colourhs.calibration.chromaticity import chromaticity_maps
 
-    result = chromaticity_maps(
-        args.dataset, args.object, args.out, min_signal=args.min_signal, progress=True
-    )
+    result = chromaticity_maps(args.dataset, args.object, args.out, min_signal=args.min_signal)
     if args.figure:
         from colourhs.report.figures import chromaticity_figure
 
@@ -295,7 +293,6 @@ def _reconstruct(args) -> int:
 
     params = {k: v for k, v in vars(args).items() if k in RECONSTRUCT_PARAMS and v is not None}
     check_reconstruct_params(params)
-    params["progress"] = True  # on stderr: at a terminal, and in a rule's log
     result = reconstruct_frame(
         args.dataset,
         args.scene,

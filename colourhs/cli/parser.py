@@ -8,6 +8,7 @@ call these subcommands. This module holds the parser, the input checks and
 from __future__ import annotations
 
 import argparse
+import logging
 import os
 import sys
 from collections.abc import Collection
@@ -39,7 +40,7 @@ from colourhs.cli.commands import (  # noqa: F401 (imported from here by users)
     _validate,
     frame_indices,
 )
-from colourhs.common.progress import line_buffered
+from colourhs.common.progress import line_buffered, show_progress
 
 DESCRIPTION = (
     "Colour Helmholtz Stereopsis, from raw captures to evaluated meshes. "
@@ -97,6 +98,13 @@ def build_parser(show_defaults: bool | Collection[str] = False) -> argparse.Argu
 
     p = argparse.ArgumentParser(prog="colourhs", description=DESCRIPTION)
     p.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
+    p.add_argument(
+        "-q",
+        "--quiet",
+        action="store_true",
+        help="hide the progress lines and bars on stderr (warnings and errors still "
+        "show); give it before the command",
+    )
     sub = p.add_subparsers(dest="command", required=True)
 
     s = _command(sub, "synth", "render a synthetic dataset in the capture format")
@@ -579,6 +587,8 @@ def main(argv: list[str] | None = None) -> int:
     asks_help = bool({"-h", "--help"} & set(argv))
     args = build_parser(show_defaults=set(argv) if asks_help else False).parse_args(argv)
     args.snakemake_args, args.command_line = extra, command_line
+    # Every stage's progress lines and bars on stderr: at a terminal, and in a rule's log.
+    show_progress(level=logging.WARNING if args.quiet else logging.INFO)
     try:
         args.depth_maps = _check_inputs(args)  # read once: the stage is given them
         return args.func(args)

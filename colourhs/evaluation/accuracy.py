@@ -65,6 +65,7 @@ MeshLab's Hausdorff filter, found by :func:`colourhs.common.raycast.closest_poin
 
 from __future__ import annotations
 
+import logging
 import time
 from dataclasses import dataclass
 from functools import partial
@@ -86,6 +87,8 @@ from colourhs.common.ply import load_mesh, write_ply
 from colourhs.common.progress import stage
 from colourhs.common.raycast import PixelHits, cast_pixels, depth_normal_maps, raycasting_scene
 from colourhs.evaluation.depth_errors import depth_errors, depth_summary, uncertainty_summary
+
+log = logging.getLogger(__name__)
 
 __all__ = [
     "CONTRACT_COLUMNS",
@@ -397,9 +400,11 @@ def evaluate_frame(
     out_ply: str | Path | None = None,
     key: FrameKey = FrameKey(),
     options: EvaluationOptions = EvaluationOptions(),
-    progress: bool = True,
 ) -> dict:
     """Score one reconstructed frame against its ground truth (the Snakemake rule's function).
+
+    Logs a line per step at INFO, with the seconds since the start
+    (:mod:`colourhs.common.progress`).
 
     Parameters
     ----------
@@ -424,9 +429,6 @@ def evaluate_frame(
         Scene, frame and variant: identify the row in the metrics table.
     options : EvaluationOptions
         The colour scale's top, the mask's dilation and the completeness samples.
-    progress : bool
-        A line per step on stderr, with the seconds since the start
-        (:mod:`colourhs.common.progress`).
 
     Returns
     -------
@@ -436,7 +438,7 @@ def evaluate_frame(
     from colourhs.common.colours import value_colours
 
     t0 = time.perf_counter()
-    say = partial(stage, start=t0, enabled=progress)
+    say = partial(stage, log, start=t0)
     dm = as_depth_map(depth_h5)
     info = {
         "scene": str(key.scene),

@@ -17,6 +17,7 @@
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 from functools import partial
 from time import perf_counter
@@ -46,6 +47,8 @@ from colourhs.reconstruct.options import (
     ReconstructOptions,
     min_component_px,
 )
+
+log = logging.getLogger(__name__)
 
 METHODS = ("ml", "bayes")
 CHUNK = 16384  # pixels per data-term call (bounds the float32 normals buffer)
@@ -142,7 +145,6 @@ def reconstruct(
     method: str = "bayes",
     reference: str | None = None,
     depth_range: tuple[float, float] | None = None,
-    progress: bool = False,
     **options,
 ) -> DepthResult:
     """Reconstruct one frame with ML or Bayesian colour HS.
@@ -154,14 +156,14 @@ def reconstruct(
     reference : reference camera name (default: the first camera).
     depth_range : (near, far) z-depth range in metres; default the working
         depth zc (where the optical axes meet) +- ``working_radius`` zc.
-    progress : one line per step on stderr, with the seconds since the start,
-        and a bar over the data term's chunks of pixels
-        (:mod:`colourhs.common.progress`).
     **options : the tuning options, :class:`ReconstructOptions` (a TypeError
         names any other keyword).
 
     Notes
     -----
+    Logs one line per step at INFO, with the seconds since the start, and shows
+    a bar over the data term's chunks of pixels (:mod:`colourhs.common.progress`).
+
     ML: the best hypothesis per pixel, then :func:`refine_ml` (continuous),
     :func:`_ml_reconstruction`. Bayesian: the MAP labelling of the MRF, a smooth
     initial surface from the HS normals
@@ -172,7 +174,7 @@ def reconstruct(
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     opts = ReconstructOptions(**options)
-    say = partial(stage, start=perf_counter(), enabled=progress)
+    say = partial(stage, log, start=perf_counter())
     rig = frame.rig
     names = list(rig.camera_names)
     ref_i = names.index(rig.camera(reference).name) if reference else 0
@@ -199,7 +201,7 @@ def reconstruct(
     }
     search = _Search(ref, RayGrid(rays, ref.centre, (H, W)), pix, depths, pairs)
     solve = _ml_reconstruction if method == "ml" else _bayes_reconstruction
-    z, nrm, ok, conf, sigma, stages = solve(frame, evaluate, search, opts, info, progress, say)
+    z, nrm, ok, conf, sigma, stages = solve(frame, evaluate, search, opts, info, say)
     limit = MAX_SIGMA * np.abs(z) if opts.max_sigma_mm is None else opts.max_sigma_mm * 1e-3
     with np.errstate(invalid="ignore"):
         uncertain = ok & (sigma > limit)  # an unknown (NaN) sigma flags nothing
@@ -233,19 +235,19 @@ def reconstruct(
     )
 
 
-def _ml_reconstruction(frame, evaluate, search: _Search, opts, info, progress, say):
+def _ml_reconstruction(frame, evaluate, search: _Search, opts, info, say):
     """ML HS of the foreground ``search.pix``: the cost volume (no normals: ML HS
     takes its normals from its own minima), then :func:`_ml_solution`. Returns
     (H*W,) depth, (H*W, 3) normal, validity, confidence, uncertainty and the
     stages that removed pixels (:func:`.drops.drop_codes`); ``info`` is not changed."""
     pix, depths = search.pix, search.depths
     cost = np.empty((len(pix), len(depths)), np.float32)
-    evaluate(search.grid.rays[pix], depths, show=progress, out=(cost, None, np.arange(len(pix))))
+    evaluate(search.grid.rays[pix], depths, show=True, out=(cost, None, np.arange(len(pix))))
     z, nrm, ok, conf, sigma = _ml_solution(frame, cost, search, opts.max_cost, opts.blur_px, say)
     return z, nrm, ok, conf, sigma, [("data_term", ok)]
 
 
-def _bayes_reconstruction(frame, evaluate, search: _Search, opts, info, progress, say):
+def _bayes_reconstruction(frame, evaluate, search: _Search, opts, info, say):
     """Bayesian HS of the foreground ``search.pix`` (paper section III-E, then beyond it):
     the data term written into the MRF box's volumes, the MAP labelling
     (:func:`_bayes_labelling`), the initial surface
@@ -262,7 +264,7 @@ def _bayes_reconstruction(frame, evaluate, search: _Search, opts, info, progress
     # The volumes over the MRF's box, the data term written into them directly.
     cost = np.full((h * w, len(depths)), INVALID_COST, np.float32)
     normals = np.zeros((h * w, len(depths), 3), np.float16)
-    evaluate(rays[pix], depths, np.float16, progress, out=(cost, normals, local))
+    evaluate(rays[pix], depths, np.float16, show=True, out=(cost, normals, local))
     say(f"bayes: MRF labelling over {h} x {w} pixels")
     labels, frac = _bayes_labelling(cost, normals, local, box, rays, depths, shape, opts, info, say)
     z, nrm, ok, conf = _labelled_surface(
@@ -321,7 +323,8 @@ def data_term_evaluator(frame: Frame, ref: Camera, pairs):
     the eq. (5) data term (:func:`colourhs.reconstruct.dataterm.data_term`)
     of rays from ``ref``'s centre at each hypothesised depth, in chunks of
     ``CHUNK`` pixels (bounds the float32 normals buffer; ``show``: a progress
-    bar over them); returns the (N, L) cost and (N, L, 3) normals, or with
+    bar over them, for the whole frame's call rather than the initial surface's
+    one-depth calls); returns the (N, L) cost and (N, L, 3) normals, or with
     ``out = (cost, normals, rows)`` writes ray i's into row ``rows[i]`` of
     those arrays (``normals`` None: not kept) and returns them."""
     prepared = prepare_images(
@@ -337,7 +340,7 @@ def data_term_evaluator(frame: Frame, ref: Camera, pairs):
         else:
             cost, normals, rows = out
         chunks = range(0, len(pixel_rays), CHUNK)
-        for s in bar(chunks, "data term", enabled=show, unit="chunk"):
+        for s in bar(chunks, "data term", disable=not show, unit="chunk"):
             c, n = data_term(
                 pixel_rays[s : s + CHUNK], ref.centre, hypotheses, cameras, prepared, pairs
             )

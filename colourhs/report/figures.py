@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import os
 from collections.abc import Mapping
 from pathlib import Path
@@ -17,6 +18,8 @@ from colourhs.common.colours import value_colours  # noqa: E402
 from colourhs.common.progress import bar, stage  # noqa: E402
 from colourhs.report.animation import write_animation  # noqa: E402
 from colourhs.report.shaded import BACKGROUND, shaded_render  # noqa: E402
+
+log = logging.getLogger(__name__)
 
 __all__ = [
     "chromaticity_figure",
@@ -446,7 +449,6 @@ def scene_figures(
     animation: Mapping[str, str | Path] | None = None,
     fps: float = 8,
     coloured: Mapping[str, str | Path] | None = None,
-    progress: bool = True,
 ) -> list[Path]:
     """A scene's figures, variants side by side (the Snakemake rule's function).
 
@@ -469,6 +471,9 @@ def scene_figures(
     :func:`shared_scale_images`; distances recovered from the colours by
     :func:`colourhs.common.colours.colour_values`) with its colour bar.
 
+    Shows bars over the variants' maps, the renders and the animation's frames, and
+    logs a line at INFO before each error or sigma figure (:mod:`colourhs.common.progress`).
+
     Parameters
     ----------
     out_dir : folder to write (created).
@@ -479,8 +484,6 @@ def scene_figures(
     animation : frame -> mesh PLY, in frame order, or None.
     fps : frames per second of the animation.
     coloured : variant -> error-coloured mesh PLY, or None.
-    progress : bars over the variants' maps, the renders and the animation's frames
-        on stderr (:mod:`colourhs.common.progress`).
 
     Returns
     -------
@@ -497,7 +500,7 @@ def scene_figures(
     gt = load_mesh(gt_ply) if gt_ply is not None else None
     cam = None
     label = "figures: depth and normal maps" + (", depth errors" if gt is not None else "")
-    for variant, path in bar(depths.items(), label, len(depths), progress, unit="variant"):
+    for variant, path in bar(depths.items(), label, len(depths), unit="variant"):
         dm = as_depth_map(path)
         cam = cam or dm
         written.append(depth_map_figure(dm.depth, out / f"{variant}_depth.png", variant))
@@ -511,7 +514,7 @@ def scene_figures(
                 dz_mm[variant], dn_deg[variant] = np.abs(dz) * 1e3, dn
     top_mm = None  # the depth-error map's scale, which the sigma map shares
     if dz_mm:
-        stage("figures: depth and normal error maps", enabled=progress)
+        stage(log, "figures: depth and normal error maps")
         top_mm = _median_p95(dz_mm.values())
         title = "|depth error|"
         written.append(error_maps_figure(dz_mm, out / "depth_error.png", title, vmax=top_mm))
@@ -519,7 +522,7 @@ def scene_figures(
             error_maps_figure(dn_deg, out / "normal_error.png", "normal error", unit="deg")
         )
     if sigma_mm:
-        stage("figures: depth sigma map", enabled=progress)
+        stage(log, "figures: depth sigma map")
         written.append(sigma_maps_figure(sigma_mm, out / "depth_sigma.png", top_mm))
 
     def render(ply):
@@ -529,7 +532,7 @@ def scene_figures(
     if cam is None:
         raise ValueError("scene_figures: no depth files given")
     plys = ({"ground truth": gt_ply} if gt is not None else {}) | dict(meshes)
-    for name, ply in bar(plys.items(), "figures: shaded renders", len(plys), progress, unit="mesh"):
+    for name, ply in bar(plys.items(), "figures: shaded renders", len(plys), unit="mesh"):
         renders[name] = render(ply)
     written.append(render_grid_figure(renders, out / "figure7.png", "shaded reconstructions"))
     if coloured:
@@ -553,9 +556,7 @@ def scene_figures(
                 d = np.full(len(v), np.nan)
             meshes_mm[variant] = (v, t, d)
         top = _median_p95([d for _, _, d in meshes_mm.values()])
-        items = bar(
-            list(meshes_mm.items()), "figures: Hausdorff renders", None, progress, unit="mesh"
-        )
+        items = bar(list(meshes_mm.items()), "figures: Hausdorff renders", unit="mesh")
         tiles = {
             variant: shaded_render(
                 v,
@@ -581,7 +582,7 @@ def scene_figures(
             f"{Path(p).parent.parent.name}  frame {f} ({i + 1}/{n})"
             for i, (f, p) in enumerate(animation.items())
         ]
-        plys = bar(animation.values(), "figures: animation", n, progress, unit="frame")
+        plys = bar(animation.values(), "figures: animation", n, unit="frame")
         frames = (render(ply) for ply in plys)  # one at a time: a long sequence at full size
         written.append(write_animation(frames, out / "animation.gif", fps=fps, labels=labels))
     return written

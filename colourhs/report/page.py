@@ -28,6 +28,7 @@ import base64
 import html
 import importlib.metadata
 import importlib.util
+import logging
 import os
 import platform
 import sys
@@ -73,6 +74,8 @@ from colourhs.report.tables import (
 )
 from colourhs.report.view3d import scene_views
 from colourhs.workflow.variants import VARIANT_LABELS, VARIANT_ORDER
+
+log = logging.getLogger(__name__)
 
 __all__ = [
     "AGGREGATION",
@@ -440,7 +443,6 @@ def build_report(
     config_resolved: bool = False,
     calibration_dir: str | Path | None = None,
     views: bool = False,
-    progress: bool = True,
 ) -> Path:
     """Write the evaluation report ``reports/NAME/index.html`` and return its path.
 
@@ -463,6 +465,9 @@ def build_report(
     (:func:`colourhs.report.assets.place_files`, :func:`~colourhs.report.assets.write_assets`)
     and the result files of ``results_dir`` are named, not linked; ``link_outside``
     links both where they are instead.
+
+    Logs a line at INFO before the calibration's diagnostics and shows a bar over
+    each scene's 3D views (:mod:`colourhs.common.progress`).
 
     Parameters
     ----------
@@ -516,9 +521,6 @@ def build_report(
         Embed each scene's first-frame error-coloured meshes (``results_dir``),
         simplified, in an offline 3D viewer (:func:`colourhs.report.view3d.scene_views`),
         seen first from the dataset's first camera.
-    progress
-        A line before the calibration's diagnostics and a bar over each scene's
-        3D views on stderr (:mod:`colourhs.common.progress`).
 
     Raises
     ------
@@ -546,7 +548,7 @@ def build_report(
         provenance = {**git_provenance(Path(__file__).parent), **run_command()}
     descriptions = scene_descriptions(dataset) if dataset is not None else {}
     if calibration_dir:
-        stage(f"report: calibration diagnostics of {calibration_dir}", enabled=progress)
+        stage(log, f"report: calibration diagnostics of {calibration_dir}")
     diagnostics = calibration_diagnostics(calibration_dir, dataset) if calibration_dir else []
 
     scenes = list(dict.fromkeys([*sorted(summary["scene"].unique()), *figs]))
@@ -591,9 +593,7 @@ def build_report(
         s["files"] = _file_links(results_dir, scene, out_dir, link_outside) if results_dir else {}
         s["files_root"] = Path(results_dir, scene).as_posix() if results_dir else ""
         s["files_linked"] = link_outside
-        s["views"] = (
-            scene_views(results_dir, scene, rotation=turn, progress=progress) if views else {}
-        )
+        s["views"] = scene_views(results_dir, scene, rotation=turn) if views else {}
         s["n_files"] = sum(len(ls) for k in s["files"].values() for ls in k.values())
         sections.append(s)
 

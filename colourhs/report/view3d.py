@@ -134,15 +134,14 @@ def scene_views(
     scene: str,
     max_triangles: int = MAX_TRIANGLES,
     rotation: np.ndarray | None = None,
-    progress: bool = False,
 ) -> dict[str, dict]:
     """Variant -> :func:`mesh_payload` of its first frame's error-coloured mesh
     (``<variant>/eval/<frame>.ply``), variants in the paper's order; {} when none.
-    ``progress``: a bar over the meshes on stderr."""
+    A bar over the meshes (:func:`colourhs.common.progress.bar`)."""
     files = result_files(results_dir, scene)
     plys = {v: k["error-coloured mesh"][0] for v, k in files.items() if k["error-coloured mesh"]}
     label = f"report: 3D views of {scene}"
     return {
         v: mesh_payload(ply, max_triangles, rotation)
-        for v, ply in bar(plys.items(), label, len(plys), progress, unit="mesh")
+        for v, ply in bar(plys.items(), label, len(plys), unit="mesh")
     }

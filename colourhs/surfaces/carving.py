@@ -26,6 +26,8 @@ Snakemake rule's function) is :mod:`colourhs.surfaces.hull`, which re-exports th
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 
 from colourhs.capture import Camera
@@ -33,6 +35,8 @@ from colourhs.common.geometry import normalised_coordinates, pixels_of
 from colourhs.common.progress import bar, stage
 from colourhs.common.sampling import bilinear_footprint
 from colourhs.surfaces.silhouettes import silhouette_distance
+
+log = logging.getLogger(__name__)
 
 __all__ = ["SLAB_VOXELS", "any_inside", "carve", "carve_field", "grid_shape", "in_slabs"]
 
@@ -244,7 +248,6 @@ def carve_field(
     margin_px: float = 0.0,
     block: int = 4,
     pad: int = 0,
-    progress: bool = False,
 ) -> np.ndarray:
     """Distance of every voxel centre outside the visual hull (the carving's field).
 
@@ -290,8 +293,6 @@ def carve_field(
         is then element ``(i + pad, j + pad, k + pad)``. With ``pad=1``,
         :func:`~colourhs.surfaces.hull_mesh.hull_surface` (``padded=True``) meshes the
         field in place instead of a padded copy.
-    progress : bool
-        A progress bar (stderr) over the voxel-by-voxel batches.
 
     Returns
     -------
@@ -304,6 +305,8 @@ def carve_field(
     Vectorised in batches of :data:`SLAB_VOXELS` voxels (bounded memory):
     besides the field itself (4 bytes a voxel), the carving holds about
     30 bytes per ``block**3`` voxels and a few hundred MB of temporaries.
+    Logs a line at INFO per pass and shows bars over the cameras and the
+    voxel-by-voxel batches (:mod:`colourhs.common.progress`).
     """
     if len(silhouettes) != len(cameras):
         raise ValueError(f"{len(silhouettes)} silhouettes for {len(cameras)} cameras")
@@ -316,14 +319,12 @@ def carve_field(
         views = _views(silhouettes, cameras, lo, voxel_m, margin_px)
         return _field_grid(_empty_field(shape, pad), shape, views, min_views, pad)
     nb = tuple(-(-n // B) for n in shape)
-    stage(f"carving: coarse pass over {' x '.join(map(str, nb))} blocks", enabled=progress)
+    stage(log, f"carving: coarse pass over {' x '.join(map(str, nb))} blocks")
     # Per camera, at the block centres: the camera's field and whether it sees the centre.
     centre = np.indices(nb, np.float32).reshape(3, -1)
     d, seen = [], []
     coarse_views = _views(silhouettes, cameras, lo, B * voxel_m, margin_px)
-    for cam, sdf, box, base, step in bar(
-        coarse_views, "carving: block centres", enabled=progress, unit="camera"
-    ):
+    for cam, sdf, box, base, step in bar(coarse_views, "carving: block centres", unit="camera"):
         dc, sc = _camera_distance(base[:, None] + step @ centre, cam, sdf, box)
         d.append(dc)
         seen.append(sc)
@@ -347,9 +348,7 @@ def carve_field(
                 *_image_boxes(c, sil.shape[1], sil.shape[0]),
             )
             <= radius
-            for sil, c in bar(
-                list(zip(silhouettes, cameras, strict=True)), label, enabled=progress, unit="camera"
-            )
+            for sil, c in bar(list(zip(silhouettes, cameras, strict=True)), label, unit="camera")
         ]
     )
     whole = seen & ~crossing  # cameras seeing the whole block
@@ -362,9 +361,9 @@ def carve_field(
     near = ~(outside | inside).reshape(nb)
     del d, seen, crossing, whole, outside, inside, points, centre
     stage(
+        log,
         f"carving: {int(near.sum())} of {near.size} blocks near the outline; "
         f"the field's {int(np.prod(shape))} voxels",
-        enabled=progress,
     )
     field = _empty_field(shape, pad)  # after the coarse pass's temporaries are gone
     _upsample_into(field, coarse.reshape(nb), B, shape, pad)
@@ -373,7 +372,7 @@ def carve_field(
     blocks = np.argwhere(near)
     batch = max(1, SLAB_VOXELS // B**3)
     starts = range(0, len(blocks), batch)
-    for b0 in bar(starts, "carving near the outline", enabled=progress, unit="batch"):
+    for b0 in bar(starts, "carving near the outline", unit="batch"):
         idx = (blocks[b0 : b0 + batch, None, :] * B + offsets[None]).reshape(-1, 3)
         idx = idx[np.all(idx < np.asarray(shape), axis=1)]
         values = _field_at(idx.T.astype(np.float32), views, min_views)

@@ -35,6 +35,7 @@ around the fixation point.
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
@@ -62,6 +63,8 @@ from colourhs.surfaces.hull_mesh import (
     outward_mesh,
 )
 from colourhs.surfaces.silhouettes import DEFAULT_THRESHOLD, silhouettes_and_sources
+
+log = logging.getLogger(__name__)
 
 __all__ = [
     "HullOptions",
@@ -239,14 +242,15 @@ def visual_hull(
     options: HullOptions = HullOptions(),
     reference: str | None = None,
     out_depth_h5=None,
-    progress: bool = True,
 ) -> dict:
     """Carve one frame's visual hull and write its mesh (and the ``vh`` depth map).
 
     The Snakemake rule's function. Silhouettes by :func:`silhouettes`, box by
     :func:`working_volume`, field by :func:`carve_field`, mesh of its zero
     level by :func:`hull_surface`. Nothing is written unless everything
-    succeeds; each file appears whole or not at all.
+    succeeds; each file appears whole or not at all. Logs one line per stage at
+    INFO, with the seconds since the start, and shows bars over the carving
+    (:mod:`colourhs.common.progress`).
 
     Parameters
     ----------
@@ -263,9 +267,6 @@ def visual_hull(
     out_depth_h5 : str or Path, optional
         Where to write the hull's depth map in the reference camera (results
         contract depth HDF5, via :func:`colourhs.common.depthfile.write_depth`).
-    progress : bool
-        One line per stage on stderr, with the seconds since the start, and a
-        bar over the carving (:mod:`colourhs.common.progress`).
 
     Returns
     -------
@@ -285,7 +286,7 @@ def visual_hull(
     cams = list(ds.rig.cameras)
     ref = ds.rig.camera(reference) if reference else cams[0]
     frame_dir = ds.frame_image(scene, frame, cams[0].name).parent  # an unknown frame: refused
-    say = partial(stage, start=t0, enabled=progress)
+    say = partial(stage, log, start=t0)
     say(f"visual hull {scene}/{frame}: silhouettes of {len(cams)} views")
     sils, files, source = silhouettes_and_sources(ds, scene, frame, options.threshold)
     sil_list = [sils[c.name] for c in cams]
@@ -306,9 +307,7 @@ def visual_hull(
         f"{voxel_m * 1e3:.2f} mm from {len(cams)} views of {w} x {h}"
     )
     # One voxel of padding: hull_surface meshes the field in place (no copy of the grid).
-    field = carve_field(
-        sil_list, cams, lo, hi, voxel_m, min_views, margin_px, pad=1, progress=progress
-    )
+    field = carve_field(sil_list, cams, lo, hi, voxel_m, min_views, margin_px, pad=1)
     if not any_inside(field):
         raise CaptureFormatError(
             frame_dir,

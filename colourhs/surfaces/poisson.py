@@ -22,6 +22,7 @@ normals). Lengths are metres throughout.
 
 from __future__ import annotations
 
+import logging
 import time
 from functools import partial
 from pathlib import Path
@@ -35,6 +36,8 @@ from colourhs.common.depthfile import DepthMap, as_depth_map
 from colourhs.common.geometry import axial_cosine, backproject, pixel_grid
 from colourhs.common.ply import load_mesh, write_ply
 from colourhs.common.progress import stage
+
+log = logging.getLogger(__name__)
 
 __all__ = [
     "TriMesh",
@@ -283,12 +286,13 @@ def frame_mesh(
     crop_dist_m: float | None = None,
     hull_margin: float = HULL_MARGIN,
     n_threads: int = 1,
-    progress: bool = True,
 ) -> dict:
     """Mesh one reconstructed frame: depth file -> oriented points (+ hull) -> Poisson PLY.
 
     The Snakemake rule's function (``results/NAME/<scene>/<variant>/mesh/<frame>.ply``).
     Works for any results-contract depth file, the visual hull's included.
+    Logs a line per step at INFO, with the seconds since the start
+    (:mod:`colourhs.common.progress`; Poisson itself takes most of the time).
 
     Parameters
     ----------
@@ -316,9 +320,6 @@ def frame_mesh(
         fraction of its largest extent on every side (default 0.5).
     n_threads : int
         Threads for Poisson.
-    progress : bool
-        A line per step on stderr, with the seconds since the start
-        (:mod:`colourhs.common.progress`; Poisson itself takes most of the time).
 
     Returns
     -------
@@ -333,7 +334,7 @@ def frame_mesh(
         after cropping; ``out_ply`` is then not written.
     """
     t0 = time.perf_counter()
-    say = partial(stage, start=t0, enabled=progress)
+    say = partial(stage, log, start=t0)
     dm = as_depth_map(depth_h5)
     say(f"mesh: oriented points of {Path(dm.path).name}")
     points, normals = oriented_points(dm)

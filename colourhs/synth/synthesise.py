@@ -16,6 +16,7 @@ import contextlib
 import ctypes
 import hashlib
 import json
+import logging
 import multiprocessing
 import os
 import shutil
@@ -43,6 +44,8 @@ from colourhs.synth.image_formation import (
 )
 from colourhs.synth.poses import board_poses
 from colourhs.synth.simulated_rig import COLOURS, Nuisances, RigModel, make_rig, sensor
+
+log = logging.getLogger(__name__)
 
 if TYPE_CHECKING:
     from colourhs.synth.randomranges import RandomRanges
@@ -342,7 +345,6 @@ def synthesise(
     seed: int = 0,
     nuisances: Nuisances | None = None,
     selection: RenderSelection = RenderSelection(),
-    progress: bool = True,
     overwrite: bool = False,
     workers: int | None = None,
     draw: DrawOverrides = DrawOverrides(),
@@ -352,6 +354,8 @@ def synthesise(
     The dataset is written to a sibling folder and moved into place at the
     end, so an interrupted run leaves no partial dataset behind. The same
     ``seed`` and preset give the same images, whatever ``selection`` asks.
+    Logs a line at INFO before the ground-truth mu maps and shows bars over the
+    camera rays and the views (:mod:`colourhs.common.progress`).
 
     Parameters
     ----------
@@ -367,7 +371,6 @@ def synthesise(
         and encoding drawn do not depend on it.
     selection : the parts, scenes and sheet frames to render (:class:`RenderSelection`;
         default all). A frame's files equal those of a full render.
-    progress : progress on stderr: the mu maps, bars over the camera rays and views.
     overwrite : replace an existing ``out``.
     workers : processes rendering views in parallel (default: CPU count).
     draw : randomised presets: other ranges, or exact encoding and masks
@@ -437,7 +440,7 @@ def synthesise(
     tmp.mkdir(parents=True)
     try:
         with _single_threaded_blas():
-            _write_dataset(tmp, rig, p, poses, content, seed, nuis, selection, progress, workers)
+            _write_dataset(tmp, rig, p, poses, content, seed, nuis, selection, workers)
         if out.exists():
             shutil.rmtree(out)
         os.replace(tmp, out)
@@ -462,7 +465,7 @@ def _frame_selection(preset: Preset, frames=None) -> tuple[int, ...] | None:
     return out
 
 
-def _write_dataset(root, rig, p, poses, content, seed, nuis, selection, progress, workers):
+def _write_dataset(root, rig, p, poses, content, seed, nuis, selection, workers):
     """Write the dataset of a drawn rig, preset, board poses and content into ``root``:
     rig.json, the ground truth and the images ``selection`` (its frames checked) asks."""
     parts, scenes = selection.parts, selection.scenes
@@ -479,7 +482,7 @@ def _write_dataset(root, rig, p, poses, content, seed, nuis, selection, progress
             {n: {"R": R.tolist(), "t": t.tolist()} for n, (R, t) in zip(names, poses, strict=True)}
         )
     )
-    stage(f"synth {p.name}: ground-truth mu maps (gt/photometric.h5)", enabled=progress)
+    stage(log, f"synth {p.name}: ground-truth mu maps (gt/photometric.h5)")
     with h5py.File(gt / "photometric.h5", "w") as f:
         f.attrs["note"] = "mu = rho / sigma (eq. 2) on pixel centres; one scale per pair is free"
         for key, mu in true_mu_maps(rig).items():
@@ -494,10 +497,10 @@ def _write_dataset(root, rig, p, poses, content, seed, nuis, selection, progress
     jobs = _jobs(p, poses, parts, content, selection.frames)
     if scenes is not None:
         jobs = [j for j in jobs if _scene_of(j) in (None, *scenes)]
-    cams = bar(rig.cameras, f"synth {p.name}: camera rays", enabled=progress, unit="camera")
+    cams = bar(rig.cameras, f"synth {p.name}: camera rays", unit="camera")
     rays = [camera_rays(c, p.width, p.height, p.supersample) for c in cams]
     args = [(root, rig, rays, p, job, seed, nuis, content.mask_mode) for job in jobs]
-    views = bar(None, f"synth {p.name}", len(jobs), progress, unit="view")
+    views = bar(None, f"synth {p.name}", len(jobs), unit="view")
     _render_all(args, workers, views)
     views.close()
 

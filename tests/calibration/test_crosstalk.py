@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from logging_helpers import kept_logging
 
 from colourhs.calibration.crosstalk import (
     MixingField,
@@ -25,6 +26,7 @@ from colourhs.calibration.crosstalk import (
     unmix,
 )
 from colourhs.capture import COLOURS
+from colourhs.common.progress import show_progress
 
 OFF = ~np.eye(3, dtype=bool)
 
@@ -92,7 +94,6 @@ def _render(root: Path, preset: str, seed: int, poses: bool = True, **kw) -> Pat
         preset,
         seed=seed,
         selection=RenderSelection(parts=("photometric", "chromatic"), scenes=()),
-        progress=False,
         workers=2,
         **kw,
     )
@@ -204,7 +205,8 @@ def random_tiny(tmp_path_factory):
     root = tmp_path_factory.mktemp("xt-random")
     data = _render(root, "random-tiny", 0)
     today = calibrate_crosstalk(data, root / "today.json")
-    with open(root / "new.stderr", "w") as err, contextlib.redirect_stderr(err):
+    with open(root / "new.stderr", "w") as err, contextlib.redirect_stderr(err), kept_logging():
+        show_progress()  # as the command line does
         new = calibrate_crosstalk(data, root / "new.json", poses_csv=root / "marker_poses.csv")
     return data, root, today, new
 
@@ -430,15 +432,16 @@ def test_calibration_reports_progress_on_stderr(random_tiny, capsys):
     """The paper-scale cross-talk rule (60 s) printed nothing until it ended.
     Bars over the filter fields' fits (3 cameras x 3 light colours: 2.4-5.2 s apart at
     1280 x 960, where a bar over the cameras was 14 s apart), the board captures read
-    and the board poses, a line per LED stage (the fixture's calibration wrote its
-    stderr to new.stderr)."""
+    and the board poses, a line per LED stage (the fixture's calibration, shown as
+    the command line shows it, wrote its stderr to new.stderr); a library call prints
+    nothing."""
     data, root, _, _ = random_tiny
     err = (root / "new.stderr").read_text()
     assert "cross-talk: filter mixing field: 100%" in err and "| 9/9 " in err
     assert "cross-talk: board poses: 100%" in err
     assert "cross-talk: reading the board captures: 100%" in err
     assert "cross-talk: fitting F to " in err
-    calibrate_crosstalk(data, spatial=True, progress=False)
+    calibrate_crosstalk(data, spatial=True)
     assert capsys.readouterr() == ("", "")
 
 

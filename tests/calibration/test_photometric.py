@@ -238,7 +238,7 @@ def tiny_noxt(tmp_path_factory):
     from colourhs.synth.simulated_rig import Nuisances
 
     tmp = tmp_path_factory.mktemp("noxt")
-    root = synthesise(tmp / "d", "tiny", nuisances=Nuisances().without("crosstalk"), progress=False)
+    root = synthesise(tmp / "d", "tiny", nuisances=Nuisances().without("crosstalk"))
     rig, views = load_views(root, true_poses_csv(root, tmp / "poses.csv"), None)
     return rig, views, read_mu_maps(root / "gt" / "photometric.h5")
 
@@ -377,11 +377,10 @@ def test_ratio_sigma_with_crosstalk_term_is_calibrated(tmp_path):
             "corner-tiny",
             seed=seed,
             selection=RenderSelection(parts=("photometric", "chromatic"), scenes=()),
-            progress=False,
         )
         poses = true_poses_csv(root, tmp_path / f"poses{seed}.csv")
         xt = tmp_path / f"xt{seed}.json"
-        calibrate_crosstalk(root, xt, poses_csv=poses, progress=False)
+        calibrate_crosstalk(root, xt, poses_csv=poses)
         rig, views = load_views(root, poses, xt)
         order, C = load_mixing_cov(xt)
         assert len(order) == 18 and C.shape == (18, 18) and np.allclose(C, C.T)

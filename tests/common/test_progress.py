@@ -1,23 +1,27 @@
 """Every stage that runs more than a few seconds at the paper preset's scale
 (1280 x 960) shows its progress on stderr (which the Snakemake rules send to the job's
-log), through the stage commands; with ``progress=False`` the functions print nothing.
+log) through the stage commands, which call :func:`show_progress`; a library call
+prints nothing unless its caller shows progress or configures :mod:`logging`.
 
-All on the tiny preset (160 x 120): the tests take 13-18 s (measured 6.1-6.7, 5.2-8.9
-and 1.2-2.6 s on the shared 2 cores), plus 6-12 s to render the session's tiny dataset
-when no other test has.
+All on the tiny preset (160 x 120), most on the session's tiny dataset.
 """
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
+import logging
 from dataclasses import replace
 
 import pytest
+from logging_helpers import kept_logging
 
 from colourhs.calibration.markers import marker_poses
 from colourhs.calibration.noise import calibrate_noise
 from colourhs.calibration.photometric import photometric_maps
 from colourhs.cli.parser import main
+from colourhs.common.progress import BARS, LOGGER, bar, show_progress, stage
 from colourhs.evaluation.accuracy import evaluate_frame
 from colourhs.report.figures import scene_figures
 from colourhs.report.page import build_report
@@ -37,18 +41,25 @@ def _run(argv, capsys) -> str:
 
 
 def _run_out(argv, capsys) -> tuple[str, str]:
-    """stdout and stderr of ``colourhs ARGV``, which must succeed."""
-    assert main([str(a) for a in argv]) == 0
+    """stdout and stderr of ``colourhs ARGV``, which must succeed; the ``colourhs``
+    loggers are left as they were (a command is a process of its own)."""
+    with kept_logging():
+        assert main([str(a) for a in argv]) == 0
     return capsys.readouterr()
+
+
+def _records(caplog) -> list[str]:
+    """The messages the package logged."""
+    return [r.getMessage() for r in caplog.records if r.name.startswith(f"{LOGGER}.")]
 
 
 # The photometric run here does not unmix the tiny rig's cross-talk, which its model
 # check rightly warns about.
 @pytest.mark.filterwarnings("ignore:photometric. the board poses disagree")
-def test_calibration_stages_show_progress(tiny_dataset, tmp_path, capsys):
+def test_calibration_stages_show_progress(tiny_dataset, tmp_path, capsys, caplog):
     """validate (10 s at paper scale), markers (7 s), noise (16 s), photometric (21 s) and
     chromaticity (7 s): bars over the images, poses, images, pairs and cameras, a line
-    per later step (6.1-6.7 s here)."""
+    per later step. The same functions called from Python print nothing."""
     poses = tmp_path / "poses.csv"
     err = _run(["markers", tiny_dataset, poses], capsys)
     assert "markers: board poses: 100%" in err and "| 7/7 [" in err  # 7 poses
@@ -72,27 +83,37 @@ def test_calibration_stages_show_progress(tiny_dataset, tmp_path, capsys):
     assert "chromaticity toy: 100%" in err and "| 3/3 [" in err  # 3 cameras
     assert "chromaticity toy: writing toy.h5" in err
     assert "pixels with a chromaticity" in out and "wrote" in out
-    marker_poses(tiny_dataset, tmp_path / "p2.csv", progress=False)
-    calibrate_noise(tiny_dataset, progress=False)
-    photometric_maps(tiny_dataset, poses, tmp_path / "p2.h5", progress=False)
+    caplog.clear()
+    marker_poses(tiny_dataset, tmp_path / "p2.csv")
+    calibrate_noise(tiny_dataset)
+    photometric_maps(tiny_dataset, poses, tmp_path / "p2.h5")
     assert capsys.readouterr() == ("", "")
+    assert _records(caplog) == []
+
+
+def test_quiet_hides_the_progress(tiny_dataset, capsys):
+    """``colourhs --quiet``: the command's own output, no progress lines or bars."""
+    out, err = _run_out(["--quiet", "validate", tiny_dataset], capsys)
+    assert ": valid: " in out and "validating images" not in err
 
 
 @pytest.fixture
 def frame_results(tiny_dataset, tmp_path):
-    """The tiny statue's visual hull (results/t/statue/...), without progress."""
+    """The tiny statue's visual hull (results/t/statue/...)."""
     root = tmp_path / "results" / "t" / "statue"
     hull, depth = root / "hull" / "000000.ply", root / "vh" / "depth" / "000000.h5"
-    visual_hull(tiny_dataset, "statue", 0, hull, out_depth_h5=depth, progress=False)
+    visual_hull(tiny_dataset, "statue", 0, hull, out_depth_h5=depth)
     gt = tiny_dataset / "scenes" / "statue" / "gt" / "000000.ply"
     return root, hull, depth, gt
 
 
-def test_frame_stages_show_progress(frame_results, tmp_path, capsys):
+def test_frame_stages_show_progress(frame_results, tmp_path, capsys, caplog):
     """mesh (11 s at paper scale), evaluate (7.5 s), figures (45 s for 5 variants) and
     report (16 s): a line per step (with the seconds since the start) or a bar over the
-    variants' maps, renders and 3D views (5.2-8.9 s here)."""
+    variants' maps, renders and 3D views. The same functions called from Python print
+    nothing (the visual hull's included)."""
     root, hull, depth, gt = frame_results
+    assert capsys.readouterr() == ("", "")  # the fixture's visual hull
     mesh, ev = root / "vh" / "mesh" / "000000.ply", root / "vh" / "eval" / "000000"
     out, err = _run_out(["mesh", depth, mesh, "--hull", hull], capsys)
     steps = [line.split(": ")[1].split(" ")[0] for line in _lines(err)]
@@ -116,41 +137,82 @@ def test_frame_stages_show_progress(frame_results, tmp_path, capsys):
     report = ["report", tmp_path / "index.html", "--name", "t", "--metrics", metrics]
     err = _run([*report, "--results", root.parent, "--view"], capsys)
     assert "report: 3D views of statue: 100%" in err and "| 1/1 [" in err
-    frame_mesh(depth, tmp_path / "m.ply", hull_ply=hull, progress=False)
-    evaluate_frame(depth, mesh, gt, tmp_path / "e.json", progress=False)
-    scene_figures(tmp_path / "f", {"vh": depth}, {"vh": mesh}, gt, progress=False)
+    caplog.clear()
+    frame_mesh(depth, tmp_path / "m.ply", hull_ply=hull)
+    evaluate_frame(depth, mesh, gt, tmp_path / "e.json")
+    scene_figures(tmp_path / "f", {"vh": depth}, {"vh": mesh}, gt)
     build_report(
-        tmp_path / "r.html",
-        "t",
-        metrics,
-        [],
-        {},
-        [],
-        {},
-        results_dir=root.parent,
-        views=True,
-        progress=False,
+        tmp_path / "r.html", "t", metrics, [], {}, [], {}, results_dir=root.parent, views=True
     )
     assert capsys.readouterr() == ("", "")
+    assert _records(caplog) == []
 
 
 def _options(kw: dict) -> list[str]:
     return [a for k, v in kw.items() for a in (f"--{k}", *v)]
 
 
-def test_synth_shows_its_steps_before_the_views(tmp_path, capsys):
+def test_synth_shows_its_steps_before_the_views(tmp_path, capsys, caplog):
     """``colourhs synth --preset paper`` was silent 30 s before its bar: 8 s of
-    ground-truth mu maps and 21 s of camera rays (1.2-2.6 s here: the tiny preset's board
-    captures of one pose)."""
+    ground-truth mu maps and 21 s of camera rays (here the tiny preset's board captures
+    of one pose). Without :func:`show_progress` nothing is printed, and the lines are
+    ordinary log records at INFO: a caller's own logging configuration sees them."""
     preset = replace(PRESETS["tiny"], n_poses=1)
     board_only = RenderSelection(parts=("photometric",))
+    first = "synth tiny: ground-truth mu maps (gt/photometric.h5)"
     synthesise(tmp_path / "a", preset, selection=board_only, workers=1)
+    assert capsys.readouterr() == ("", "") and _records(caplog) == []
+    caplog.set_level(logging.INFO, logger=LOGGER)
+    logging.getLogger(BARS).setLevel(logging.WARNING)  # the bars would go to stderr
+    synthesise(tmp_path / "b", preset, selection=board_only, workers=1)
+    assert capsys.readouterr() == ("", "") and _records(caplog) == [first]
+    show_progress()
+    synthesise(tmp_path / "c", preset, selection=board_only, workers=1)
     err = capsys.readouterr().err
-    assert err.startswith("synth tiny: ground-truth mu maps (gt/photometric.h5)\n")
+    assert err.startswith(f"{first}\n")
     assert "synth tiny: camera rays: 100%" in err and "| 3/3 [" in err  # 3 cameras
     assert "synth tiny: 100%" in err and "| 1/1 [" in err  # one job: the board pose
-    synthesise(tmp_path / "b", preset, selection=board_only, workers=1, progress=False)
-    assert capsys.readouterr() == ("", "")
+
+
+def test_show_progress_adds_one_handler_writing_to_the_current_stderr(capsys, caplog):
+    """Calling it again (a second ``main()`` in one process) prints each line once; the
+    lines go to whatever ``sys.stderr`` is when they are logged (a redirection, a test's
+    capture), not through the root logger's handlers."""
+    log = logging.getLogger(f"{LOGGER}.test")
+    stage(log, "hidden")
+    show_progress()
+    show_progress()
+    assert len(logging.getLogger(LOGGER).handlers) == 1
+    stage(log, "step", start=0.0)
+    redirected = io.StringIO()
+    with contextlib.redirect_stderr(redirected):
+        stage(log, "redirected")
+    err = capsys.readouterr().err
+    assert _lines(err)[0].startswith("step [") and err.endswith(" s]\n") and "hidden" not in err
+    assert redirected.getvalue() == "redirected\n"
+    assert caplog.records == []  # not propagated to the root logger
+
+
+def test_bars_have_their_own_switch(capsys):
+    """``show_progress(bars=False)`` keeps the stage lines and hides the bars; the bars
+    follow the stage lines' level unless their logger is set (``--quiet`` hides both)."""
+    log = logging.getLogger(f"{LOGGER}.test")
+
+    def run() -> str:
+        stage(log, "step")
+        list(bar(range(3), "loop"))
+        return capsys.readouterr().err
+
+    assert run() == ""  # nothing configured: a library call
+    show_progress(bars=False)
+    assert run() == "step\n"
+    show_progress()
+    err = run()
+    assert err.startswith("step\n") and "loop: 100%" in err and "| 3/3 [" in err
+    logging.getLogger(BARS).setLevel(logging.WARNING)
+    assert run() == "step\n"
+    show_progress(level=logging.WARNING)
+    assert run() == ""
 
 
 def test_calibration_bars_close_when_a_fit_fails(tiny_dataset, tmp_path, monkeypatch, capsys):
@@ -165,7 +227,7 @@ def test_calibration_bars_close_when_a_fit_fails(tiny_dataset, tmp_path, monkeyp
     monkeypatch.setattr(noise, "estimate_noise", fail)
     monkeypatch.setattr(crosstalk, "fit_mixing_field", fail)
     poses = tmp_path / "poses.csv"
-    marker_poses(tiny_dataset, poses, progress=False)
+    marker_poses(tiny_dataset, poses)
     for argv in (
         ["noise", tiny_dataset, tmp_path / "n.json"],
         ["crosstalk", tiny_dataset, tmp_path / "x.json", "--poses", poses],
@@ -187,6 +249,7 @@ def test_bar_redraws_when_its_items_slow_down(monkeypatch, capsys):
 
     from colourhs.common import progress
 
+    show_progress()
     monkeypatch.setattr(progress, "MIN_INTERVAL_S", 0.05)
     for i in progress.bar(range(18), "slow down"):
         if i >= 10:
@@ -200,8 +263,6 @@ def test_stdout_reaches_a_file_line_by_line():
     """``colourhs`` makes its stdout line-buffered, so a job's printed lines reach its
     log as they are printed (block buffering held the paper preset's chromaticity
     job's lines until it ended, 7 s)."""
-    import io
-
     from colourhs.common.progress import line_buffered
 
     raw = io.BytesIO()

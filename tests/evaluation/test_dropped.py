@@ -151,16 +151,12 @@ def test_evaluate_frame_writes_the_dropped_columns(tmp_path):
     def row(variant):
         return FrameKey("s", "000000", variant)
 
-    info = evaluate_frame(
-        with_codes, None, gt_ply, out / "a.json", key=row("bayes_full"), progress=False
-    )
+    info = evaluate_frame(with_codes, None, gt_ply, out / "a.json", key=row("bayes_full"))
     assert {c: info[c] for c in DROP_COLUMNS} == EXPECTED
     assert info["coverage"] == 6 / 16
-    none = evaluate_frame(plain, None, gt_ply, out / "b.json", key=row("bayes_ph"), progress=False)
+    none = evaluate_frame(plain, None, gt_ply, out / "b.json", key=row("bayes_ph"))
     assert all(none[c] is None for c in DROP_COLUMNS) and none["coverage"] == 6 / 16
-    blind = evaluate_frame(
-        with_codes, None, None, out / "c.json", key=row("ml_full"), progress=False
-    )
+    blind = evaluate_frame(with_codes, None, None, out / "c.json", key=row("ml_full"))
     assert all(blind[c] is None for c in DROP_COLUMNS)
     csv = tmp_path / "metrics.csv"
     metrics_table(sorted(out.glob("*.json")), csv)

@@ -57,7 +57,6 @@ def exact_rigs(tmp_path_factory):
             nuisances=Nuisances().without("noise", "crosstalk"),
             draw=DrawOverrides(exact=True),
             selection=RenderSelection(parts=("photometric", "scenes"), scenes=("plane", "sheet")),
-            progress=False,
             workers=2,
         )
         out[seed] = root

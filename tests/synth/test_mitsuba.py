@@ -43,7 +43,6 @@ def test_mitsuba_renders_the_board_as_our_renderer(tmp_path):
         nuis,
         selection=RenderSelection(parts=("photometric",)),
         draw=DrawOverrides(ranges=ranges, exact=True),
-        progress=False,
     )
     spec = load_rig(data / "rig.json").image
     R, t = d.poses[0]
@@ -127,7 +126,6 @@ def test_calibration_on_mitsuba_renders_and_its_model_check(tmp_path):
         nuis,
         selection=RenderSelection(parts=("photometric",)),
         draw=DrawOverrides(ranges=ranges),
-        progress=False,
     )
     distance = float(np.mean([np.linalg.norm(c.centre) for c in d.rig.cameras]))
     renders = {

@@ -233,9 +233,9 @@ def test_saturation_is_flagged(tiny_dataset):
 
 def test_deterministic_for_a_seed(tmp_path):
     chromatic = RenderSelection(parts=("chromatic",))
-    a = synthesise(tmp_path / "a", "tiny", selection=chromatic, progress=False, workers=1)
-    b = synthesise(tmp_path / "b", "tiny", selection=chromatic, progress=False, workers=2)
-    c = synthesise(tmp_path / "c", "tiny", seed=1, selection=chromatic, progress=False)
+    a = synthesise(tmp_path / "a", "tiny", selection=chromatic, workers=1)
+    b = synthesise(tmp_path / "b", "tiny", selection=chromatic, workers=2)
+    c = synthesise(tmp_path / "c", "tiny", seed=1, selection=chromatic)
     rel = "chromatic/toy/red/cam2.png"
     assert (a / rel).read_bytes() == (b / rel).read_bytes()
     assert (a / rel).read_bytes() != (c / rel).read_bytes()
@@ -251,7 +251,7 @@ def test_a_slice_of_the_sequence_equals_the_full_render(tiny_dataset, tmp_path):
     images, masks and mesh are missing. The slice, whose frames start at 000001,
     is a valid dataset."""
     frames_1_2 = RenderSelection(frames=range(1, 3))
-    part = synthesise(tmp_path / "slice", "tiny", selection=frames_1_2, progress=False)
+    part = synthesise(tmp_path / "slice", "tiny", selection=frames_1_2)
     full, sliced = _files(tiny_dataset), _files(part)
     missing = {f"scenes/sheet/{k}/000000{e}" for k, e in (("frames", ""), ("masks", ""))}
     missing = {f"{m}/{c}.png" for m in missing for c in ("cam1", "cam2", "cam3")}
@@ -264,10 +264,10 @@ def test_a_slice_of_the_sequence_equals_the_full_render(tiny_dataset, tmp_path):
     assert open_dataset(part).scenes["sheet"].frames == ("000001", "000002")
     assert summary["scenes"]["sheet"]["frames"] == 2
     with pytest.raises(ValueError, match="frames \\[3\\]: the tiny preset's sheet has frames 0-2"):
-        synthesise(tmp_path / "x", "tiny", selection=RenderSelection(frames=[2, 3]), progress=False)
+        synthesise(tmp_path / "x", "tiny", selection=RenderSelection(frames=[2, 3]))
     with pytest.raises(ValueError, match="the sheet, which is not rendered"):
         plane_only = RenderSelection(scenes=("plane",), frames=[2])
-        synthesise(tmp_path / "x", "tiny", selection=plane_only, progress=False)
+        synthesise(tmp_path / "x", "tiny", selection=plane_only)
 
 
 def test_frame_indices_of_the_command_line():
@@ -284,14 +284,14 @@ def test_failed_render_leaves_nothing(tmp_path, monkeypatch):
 
     monkeypatch.setattr(synth_dataset, "_render_job", boom)
     with pytest.raises(RuntimeError, match="disk full"):
-        synthesise(tmp_path / "x", "tiny", progress=False, workers=1)
+        synthesise(tmp_path / "x", "tiny", workers=1)
     assert list(tmp_path.iterdir()) == []
 
 
 def test_refuses_to_overwrite(tmp_path):
     (tmp_path / "x").mkdir()
     with pytest.raises(FileExistsError, match="already exists"):
-        synthesise(tmp_path / "x", "tiny", progress=False)
+        synthesise(tmp_path / "x", "tiny")
 
 
 def test_malformed_copies_fail_with_the_right_message(tiny_dataset, tmp_path):

@@ -74,7 +74,7 @@ SEED_16_MASKS = _first_seed(lambda b, m: b == 16 and m in ("dilated", "eroded"))
 def full_datasets(tmp_path_factory):
     root = tmp_path_factory.mktemp("random")
     return {
-        s: synthesise(root / f"s{s}", "random-tiny", seed=s, progress=False, workers=2)
+        s: synthesise(root / f"s{s}", "random-tiny", seed=s, workers=2)
         for s in (SEED_8_NONE, SEED_16_MASKS)
     }
 
@@ -155,7 +155,7 @@ def test_mask_modes(full_datasets):
 
 def test_same_seed_same_bytes_and_nuisances_do_not_move_geometry(tmp_path):
     seed = 5
-    kw = dict(selection=RenderSelection(parts=("chromatic",), scenes=()), progress=False)
+    kw = dict(selection=RenderSelection(parts=("chromatic",), scenes=()))
     a = synthesise(tmp_path / "a", "random-tiny", seed=seed, workers=1, **kw)
     b = synthesise(tmp_path / "b", "random-tiny", seed=seed, workers=2, **kw)
     c = synthesise(tmp_path / "c", "random-tiny", seed=seed, nuisances=CLEAN, **kw)
@@ -422,7 +422,6 @@ def test_hs_constraint_holds_at_ground_truth(tmp_path, seed):
         nuisances=CLEAN,
         draw=DrawOverrides(exact=True),
         selection=RenderSelection(parts=("scenes",), scenes=("plane", "sheet")),
-        progress=False,
         workers=2,
     )
     for scene in ("plane", "sheet"):
@@ -565,7 +564,6 @@ def test_corner_12_bit_dataset_validates(tmp_path):
         "corner-tiny",
         seed=seed,
         selection=RenderSelection(parts=("photometric", "scenes"), scenes=("plane",)),
-        progress=False,
         workers=2,
     )
     summary = validate(root)

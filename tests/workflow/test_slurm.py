@@ -67,7 +67,7 @@ def test_tiny_preset_through_slurm_equals_the_local_run(tmp_path):
     started = subprocess.run(["bash", str(SCRIPT), "start"], capture_output=True, text=True)
     if started.returncode != 0:
         pytest.skip(f"SLURM could not start here: {started.stderr.strip()[-300:]}")
-    data = synthesise(tmp_path / "tiny", "tiny", progress=False)
+    data = synthesise(tmp_path / "tiny", "tiny")
     run_yaml = tmp_path / "run.yaml"
     run_yaml.write_text(
         yaml.safe_dump(
