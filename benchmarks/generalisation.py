@@ -159,8 +159,8 @@ def calibrate(data: Path, calib: Path) -> dict:
 
 
 def variant_files(variant: str, files: dict, chromatic: str | None) -> dict:
-    """Calibration keyword arguments of ``reconstruct_frame`` for a variant (as the
-    workflow plan passes them)."""
+    """The calibration files of a variant, as :class:`CalibrationFiles` keywords (the
+    workflow plan's choice)."""
     kw = {"noise_json": files["noise"]}
     if variant in ("ml_full", "bayes_ph", "bayes_full"):
         kw |= {"photometric_h5": files["photometric"], "crosstalk_json": files["crosstalk"]}
@@ -228,6 +228,7 @@ def evaluate_variant(data, scene, frames, variant, files, chromatic, work) -> di
     from colourhs.common.raycast import render_depth_normals
     from colourhs.evaluation.depth_errors import depth_errors, depth_summary, sigma_summary
     from colourhs.reconstruct.frame import reconstruct_frame
+    from colourhs.reconstruct.inputs import CalibrationFiles
     from colourhs.surfaces.hull import visual_hull
 
     rig = load_rig(data)
@@ -242,9 +243,8 @@ def evaluate_variant(data, scene, frames, variant, files, chromatic, work) -> di
             visual_hull(data, scene, frame, work / scene / "hull" / f"{frame}.ply", out_depth_h5=h5)
         else:
             method = "ml" if variant.startswith("ml") else "bayes"
-            reconstruct_frame(
-                data, scene, frame, h5, method, **variant_files(variant, files, chromatic)
-            )
+            calibration = CalibrationFiles(**variant_files(variant, files, chromatic))
+            reconstruct_frame(data, scene, frame, h5, method, calibration)
         gt = load_mesh(data / "scenes" / scene / "gt" / f"{frame}.ply")
         try:
             depth = read_depth(h5)

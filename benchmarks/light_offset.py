@@ -53,6 +53,7 @@ def run_offset(seed: int, preset, offset_m: float, scenes, root: Path) -> list[d
     from colourhs.common.ply import load_mesh
     from colourhs.evaluation.depth_errors import depth_errors
     from colourhs.reconstruct.frame import reconstruct_frame
+    from colourhs.reconstruct.inputs import CalibrationFiles
     from colourhs.synth.randomranges import RANGES_BY_NAME
     from colourhs.synth.simulated_rig import Nuisances
     from colourhs.synth.synthesise import DrawOverrides, RenderSelection, synthesise
@@ -83,7 +84,7 @@ def run_offset(seed: int, preset, offset_m: float, scenes, root: Path) -> list[d
         if variant == "bayes_full" and chroma.exists():
             kw["chromaticity_h5"] = chroma
         h5 = data / "out" / scene / f"{variant}.h5"
-        reconstruct_frame(data, scene, "000000", h5, "bayes", **kw)
+        reconstruct_frame(data, scene, "000000", h5, "bayes", CalibrationFiles(**kw))
         depth = read_depth(h5)
         gt = load_mesh(data / "scenes" / scene / "gt" / "000000.ply")
         err, _, m = depth_errors(depth, *gt, rig.image.width, rig.image.height)

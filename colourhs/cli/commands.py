@@ -290,20 +290,19 @@ def _reconstruct(args) -> int:
     if args.same_as:
         return _same_as(args.same_as, args.out)
     from colourhs.reconstruct.frame import reconstruct_frame
+    from colourhs.reconstruct.inputs import CalibrationFiles
 
     params = {k: v for k, v in vars(args).items() if k in RECONSTRUCT_PARAMS and v is not None}
     check_reconstruct_params(params)
+    calibration = CalibrationFiles(args.crosstalk, args.photometric, args.chromaticity, args.noise)
     result = reconstruct_frame(
         args.dataset,
         args.scene,
         args.frame,
         args.out,
         args.method,
-        args.crosstalk,
-        args.photometric,
-        args.chromaticity,
+        calibration,
         args.hull,
-        noise_json=args.noise,
         **params,
     )
     info = result.info
@@ -425,7 +424,7 @@ def _report(args) -> int:
     import yaml
 
     from colourhs.capture import open_dataset
-    from colourhs.report.page import build_report, find_benchmarks
+    from colourhs.report.page import PageOptions, ReportInputs, build_report, find_benchmarks
     from colourhs.report.provenance import resolve_config
 
     figures = _pairs(args.figures, "--figures")
@@ -436,18 +435,16 @@ def _report(args) -> int:
     build_report(
         args.out,
         args.name,
-        args.metrics,
-        args.calibration or [],
-        figures,
-        tsvs,
-        config,
-        embed_images=args.embed_images,
-        link_outside=args.link_outside,
+        ReportInputs(args.metrics, args.calibration or [], figures, tsvs, config),
+        PageOptions(
+            embed_images=args.embed_images,
+            link_outside=args.link_outside,
+            config_resolved=True,
+            views=args.view,
+        ),
         dataset=dataset,
         results_dir=args.results,
-        config_resolved=True,
         calibration_dir=args.calib,
-        views=args.view,
     )
     print(f"wrote {args.out}")
     return 0

@@ -18,7 +18,7 @@
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from functools import partial
 from time import perf_counter
 
@@ -40,7 +40,7 @@ from colourhs.common.progress import bar, stage
 from colourhs.reconstruct.bayes.integrate import IntegrationOptions, initial_surface
 from colourhs.reconstruct.dataterm import INVALID_COST, data_term, pair_arrays, prepare_images
 from colourhs.reconstruct.drops import drop_codes, reference_unusable
-from colourhs.reconstruct.inputs import Frame, RayGrid, load_frame
+from colourhs.reconstruct.inputs import CalibrationFiles, Frame, RayGrid, load_frame
 from colourhs.reconstruct.options import (
     MAX_SIGMA,
     WORKING_RADIUS,
@@ -516,28 +516,21 @@ def reconstruct_frame(
     frame,
     out_h5,
     method="bayes",
-    crosstalk_json=None,
-    photometric_h5=None,
-    chromaticity_h5=None,
+    calibration: CalibrationFiles | None = None,
     hull_ply=None,
-    noise_json=None,
     **params,
 ) -> DepthResult:
     """Load, reconstruct and write one frame (the Snakemake rule's function).
+
+    ``calibration``: the files :func:`load_frame` applies (none by default);
+    their paths and SHA-256 go into the depth file's attributes.
 
     With ``hull_ply`` (the frame's visual hull, ``colourhs hull``) the depth
     hypotheses span the hull's depth range in the reference camera
     (:func:`colourhs.surfaces.hull.hull_depth_range`) instead of the working range.
     """
-    fr = load_frame(
-        dataset_dir,
-        scene,
-        frame,
-        crosstalk_json,
-        photometric_h5,
-        chromaticity_h5,
-        noise_json=noise_json,
-    )
+    calibration = calibration or CalibrationFiles()
+    fr = load_frame(dataset_dir, scene, frame, **asdict(calibration))
     if hull_ply is not None:
         from colourhs.common.ply import load_mesh
         from colourhs.surfaces.hull import hull_depth_range
@@ -553,12 +546,7 @@ def reconstruct_frame(
         params = {**params, "depth_range": span}
     result = reconstruct(fr, method, **params)
     ref = fr.rig.camera(result.info["reference"])
-    calib = {
-        "crosstalk": crosstalk_json,
-        "photometric": photometric_h5,
-        "chromaticity": chromaticity_h5,
-        "noise": noise_json,
-    }
+    calib = calibration.provenance()
     attrs = {
         "method": method,
         "params": result.info,

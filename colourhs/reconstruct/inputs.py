@@ -23,6 +23,28 @@ from colourhs.reconstruct.dataterm import pair_arrays
 
 
 @dataclass(frozen=True)
+class CalibrationFiles:
+    """The calibration files that apply to a frame (None: that calibration is not used).
+
+    The fields are :func:`load_frame`'s keyword arguments of the same names.
+    """
+
+    crosstalk_json: str | Path | None = None  # colourhs crosstalk: the unmixing
+    photometric_h5: str | Path | None = None  # colourhs photometric: mu maps (eq. 6-8)
+    chromaticity_h5: str | Path | None = None  # colourhs chromaticity: p (eq. 9)
+    noise_json: str | Path | None = None  # colourhs noise: the noise model
+
+    def provenance(self) -> dict[str, str | Path | None]:
+        """The files by the calibration's name (crosstalk, photometric, chromaticity, noise)."""
+        return {
+            "crosstalk": self.crosstalk_json,
+            "photometric": self.photometric_h5,
+            "chromaticity": self.chromaticity_h5,
+            "noise": self.noise_json,
+        }
+
+
+@dataclass(frozen=True)
 class RayGrid:
     """The reference camera's pixel rays: a hypothesis at z-depth z of pixel p is
     the point ``centre + z rays[p]``."""

@@ -33,6 +33,7 @@ import os
 import platform
 import sys
 from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -87,6 +88,8 @@ __all__ = [
     "REQUIRED_COLUMNS",
     "VARIANT_LABELS",
     "VARIANT_ORDER",
+    "PageOptions",
+    "ReportInputs",
     "build_report",
     "find_benchmarks",
     "format_number",
@@ -425,24 +428,67 @@ def _template():
 # --------------------------------------------------------------------------- the report
 
 
+@dataclass(frozen=True)
+class ReportInputs:
+    """What the report shows.
+
+    Attributes
+    ----------
+    metrics_csv : ``reports/NAME/metrics.csv`` of the results contract; aggregated by
+        :func:`summarise_metrics`.
+    calibration_pngs : calibration figures (mu maps, chromaticity maps). A folder
+        stands for its images (PNG, GIF, JPEG, SVG, WebP), sorted by name.
+    scene_figures : ``{scene: [figure paths]}`` (or ``{scene: folder}``), arranged by
+        :func:`colourhs.report.provenance.arrange_figures`. Scenes here without
+        metrics still get a section.
+    benchmark_tsvs : Snakemake benchmark files; summarised per rule by
+        :func:`summarise_benchmarks`.
+    config : the run's configuration (a mapping, or a YAML file's path), shown as YAML.
+    """
+
+    metrics_csv: str | Path
+    calibration_pngs: Sequence[str | Path] = ()
+    scene_figures: Mapping[str, Sequence[str | Path]] = field(default_factory=dict)
+    benchmark_tsvs: Sequence[str | Path] = ()
+    config: Mapping | str | Path = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class PageOptions:
+    """How the report's page is made.
+
+    Attributes
+    ----------
+    embed_images : embed images as base64 data URIs (one file holds the whole
+        page); by default they are linked by paths relative to the page.
+    link_outside : link the images and result files outside the report folder
+        where they are (``../../results/...``) instead of copying the images into
+        ``assets/`` and naming the result files: the page then works only beside
+        ``results/``, and ``assets/`` is left as it is.
+    views : embed each scene's first-frame error-coloured meshes (``results_dir``),
+        simplified, in an offline 3D viewer (:func:`colourhs.report.view3d.scene_views`),
+        seen first from the dataset's first camera.
+    config_resolved : whether the configuration has the package's defaults filled
+        in (said on the page).
+    """
+
+    embed_images: bool = False
+    link_outside: bool = False
+    views: bool = False
+    config_resolved: bool = False
+
+
 def build_report(
     out_html: str | Path,
     dataset_name: str,
-    metrics_csv: str | Path,
-    calibration_pngs: Sequence[str | Path],
-    scene_figures: Mapping[str, Sequence[str | Path]],
-    benchmark_tsvs: Sequence[str | Path],
-    config: Mapping | str | Path,
-    extra: Mapping | None = None,
+    inputs: ReportInputs,
+    options: PageOptions | None = None,
     *,
-    embed_images: bool = False,
-    link_outside: bool = False,
+    extra: Mapping | None = None,
     dataset=None,
     results_dir: str | Path | None = None,
     provenance: Mapping | None = None,
-    config_resolved: bool = False,
     calibration_dir: str | Path | None = None,
-    views: bool = False,
 ) -> Path:
     """Write the evaluation report ``reports/NAME/index.html`` and return its path.
 
@@ -463,8 +509,8 @@ def build_report(
     The report folder (``out_html``'s) stands alone: every ``src`` and ``href`` of
     the page resolves inside it. Images outside it are copied into its ``assets/``
     (:func:`colourhs.report.assets.place_files`, :func:`~colourhs.report.assets.write_assets`)
-    and the result files of ``results_dir`` are named, not linked; ``link_outside``
-    links both where they are instead.
+    and the result files of ``results_dir`` are named, not linked;
+    ``options.link_outside`` links both where they are instead.
 
     Logs a line at INFO before the calibration's diagnostics and shows a bar over
     each scene's 3D views (:mod:`colourhs.common.progress`).
@@ -475,52 +521,30 @@ def build_report(
         Where to write the page (atomically: a temporary sibling renamed into place).
     dataset_name
         The dataset's NAME (``results/NAME``).
-    metrics_csv
-        ``reports/NAME/metrics.csv`` of the results contract; aggregated by
-        :func:`summarise_metrics`.
-    calibration_pngs
-        Calibration figures (mu maps, chromaticity maps). A folder stands for
-        its images (PNG, GIF, JPEG, SVG, WebP), sorted by name.
-    scene_figures
-        ``{scene: [figure paths]}`` (or ``{scene: folder}``), arranged by
-        :func:`colourhs.report.provenance.arrange_figures`. Scenes here without
-        metrics still get a section.
-    benchmark_tsvs
-        Snakemake benchmark files; summarised per rule by :func:`summarise_benchmarks`.
-    config
-        The run's configuration (a mapping, or a YAML file's path), shown as YAML.
+    inputs
+        What the page shows (:class:`ReportInputs`): the metrics, the figures,
+        the jobs' timings and the run's configuration.
+    options
+        How the page is made (:class:`PageOptions`; default: images linked,
+        the folder standing alone, no 3D views).
     extra
         Further ``{label: value}`` lines for the page's header table.
-    embed_images
-        Embed images as base64 data URIs (one file holds the whole page); by
-        default they are linked by paths relative to the page.
-    link_outside
-        Link the images and result files outside the report folder where they
-        are (``../../results/...``) instead of copying the images into
-        ``assets/`` and naming the result files: the page then works only beside
-        ``results/``, and ``assets/`` is left as it is.
     dataset
         The :class:`colourhs.capture.Dataset` (or None): its rig summary and
         the scenes' descriptions are shown.
     results_dir
         ``results/NAME`` (or None): each scene's meshes, error-coloured meshes
-        and depth files are listed (linked with ``link_outside``).
+        and depth files are listed (linked with ``options.link_outside``).
     provenance
         ``{label: value}`` for the provenance table (default: the git commit of
         the colourhs code and this process's command line, see
         :func:`colourhs.report.provenance.git_provenance` and
         :func:`~colourhs.report.provenance.run_command`).
-    config_resolved
-        Whether ``config`` has the package's defaults filled in (said on the page).
     calibration_dir
         ``results/NAME/calib`` (or None): the calibration's diagnostics tables
         (:func:`colourhs.report.calibration.calibration_diagnostics`: marker reprojection
         RMS, cross-talk matrices, photometric residual, mu error against the
         dataset's ``gt/photometric.h5`` when it has one).
-    views
-        Embed each scene's first-frame error-coloured meshes (``results_dir``),
-        simplified, in an offline 3D viewer (:func:`colourhs.report.view3d.scene_views`),
-        seen first from the dataset's first camera.
 
     Raises
     ------
@@ -534,6 +558,15 @@ def build_report(
     """
     out = Path(out_html)
     out_dir = out.parent
+    options = options or PageOptions()
+    embed_images, link_outside, views = options.embed_images, options.link_outside, options.views
+    metrics_csv, calibration_pngs, scene_figures, benchmark_tsvs, config = (
+        inputs.metrics_csv,
+        inputs.calibration_pngs,
+        inputs.scene_figures,
+        inputs.benchmark_tsvs,
+        inputs.config,
+    )
     # read and check every input before anything is written
     if views and results_dir is None:
         raise ValueError("the 3D views need results_dir (colourhs report --results): the meshes")
@@ -623,7 +656,7 @@ def build_report(
         provenance=provenance,
         rig=rig_summary(dataset) if dataset is not None else {},
         env=env,
-        config_resolved=config_resolved,
+        config_resolved=options.config_resolved,
         config_yaml=yaml.safe_dump(_plain(config), sort_keys=False, allow_unicode=True),
     )
     if not link_outside:

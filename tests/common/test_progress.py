@@ -24,7 +24,7 @@ from colourhs.cli.parser import main
 from colourhs.common.progress import BARS, LOGGER, bar, show_progress, stage
 from colourhs.evaluation.accuracy import evaluate_frame
 from colourhs.report.figures import scene_figures
-from colourhs.report.page import build_report
+from colourhs.report.page import PageOptions, ReportInputs, build_report
 from colourhs.surfaces.hull import visual_hull
 from colourhs.surfaces.poisson import frame_mesh
 from colourhs.synth.synthesise import PRESETS, RenderSelection, synthesise
@@ -142,7 +142,11 @@ def test_frame_stages_show_progress(frame_results, tmp_path, capsys, caplog):
     evaluate_frame(depth, mesh, gt, tmp_path / "e.json")
     scene_figures(tmp_path / "f", {"vh": depth}, {"vh": mesh}, gt)
     build_report(
-        tmp_path / "r.html", "t", metrics, [], {}, [], {}, results_dir=root.parent, views=True
+        tmp_path / "r.html",
+        "t",
+        ReportInputs(metrics, [], {}, [], {}),
+        PageOptions(views=True),
+        results_dir=root.parent,
     )
     assert capsys.readouterr() == ("", "")
     assert _records(caplog) == []

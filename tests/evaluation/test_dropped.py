@@ -17,7 +17,7 @@ from colourhs.common.ply import load_mesh, write_ply
 from colourhs.common.raycast import render_depth_normals
 from colourhs.evaluation.accuracy import FrameKey, evaluate_frame, metrics_table
 from colourhs.evaluation.depth_errors import depth_errors, depth_summary, drop_summary
-from colourhs.report.page import build_report
+from colourhs.report.page import ReportInputs, build_report
 from colourhs.report.tables import drop_table
 
 H, W = 4, 5
@@ -206,7 +206,9 @@ def test_report_shows_where_the_missing_depth_goes(tmp_path):
     }
     table = drop_table(pd.read_csv(csv, dtype={"frame": str}))
     assert table["variant"].tolist() == ["bayes_full"]  # the only rows with shares
-    out = build_report(tmp_path / "index.html", "demo", csv, [], {"plane": [], "sheet": []}, [], {})
+    out = build_report(
+        tmp_path / "index.html", "demo", ReportInputs(csv, [], {"plane": [], "sheet": []}, [], {})
+    )
     text = out.read_text(encoding="utf-8")
     plane = text[text.index('id="scene-plane"') : text.index('id="scene-sheet"')]
     sheet = text[text.index('id="scene-sheet"') : text.index('id="timing"')]

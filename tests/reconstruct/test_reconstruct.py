@@ -30,6 +30,7 @@ from colourhs.reconstruct.frame import (
     reference_rays,
     working_depth,
 )
+from colourhs.reconstruct.inputs import CalibrationFiles
 
 
 @pytest.fixture(scope="module")
@@ -131,7 +132,9 @@ def test_depth_range_from_the_visual_hull(tiny_dataset, calib, tmp_path):
     visual_hull(tiny_dataset, "statue", "000000", hull)
     kw = dict(calib, chromaticity_h5=tiny_dataset / "scenes" / "statue" / "gt" / "chromaticity.h5")
     out = tmp_path / "statue.h5"
-    res = reconstruct_frame(tiny_dataset, "statue", "000000", out, "bayes", hull_ply=hull, **kw)
+    res = reconstruct_frame(
+        tiny_dataset, "statue", "000000", out, "bayes", CalibrationFiles(**kw), hull_ply=hull
+    )
     fr = load_frame(tiny_dataset, "statue", "000000", **kw)
     ref = fr.rig.cameras[0]
     v, t, n = load_mesh(tiny_dataset / "scenes" / "statue" / "gt" / "000000.ply")
@@ -148,7 +151,13 @@ def test_depth_range_from_the_visual_hull(tiny_dataset, calib, tmp_path):
     empty.write_text("ply\nformat ascii 1.0\nelement vertex 0\nelement face 0\nend_header\n")
     with pytest.raises(Exception, match="empty.ply"):
         reconstruct_frame(
-            tiny_dataset, "statue", "000000", tmp_path / "x.h5", "bayes", hull_ply=empty, **kw
+            tiny_dataset,
+            "statue",
+            "000000",
+            tmp_path / "x.h5",
+            "bayes",
+            CalibrationFiles(**kw),
+            hull_ply=empty,
         )
     assert not (tmp_path / "x.h5").exists()
 
@@ -217,7 +226,9 @@ def test_calibrations_help(tiny_dataset, calib):
 
 def test_depth_file_follows_the_contract(tiny_dataset, calib, tmp_path):
     out = tmp_path / "results" / "depth" / "000000.h5"
-    res = reconstruct_frame(tiny_dataset, "statue", "000000", out, "bayes", **calib)
+    res = reconstruct_frame(
+        tiny_dataset, "statue", "000000", out, "bayes", CalibrationFiles(**calib)
+    )
     with h5py.File(out) as f:
         depth, normal, mask = f["depth"][()], f["normal"][()], f["mask"][()]
         assert depth.shape == (120, 160) and depth.dtype == np.float32

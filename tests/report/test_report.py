@@ -21,6 +21,8 @@ from colourhs.report.page import (
     BEST_METRIC,
     PAPER_REFERENCE,
     REQUIRED_COLUMNS,
+    PageOptions,
+    ReportInputs,
     build_report,
     find_benchmarks,
     format_number,
@@ -148,13 +150,15 @@ def report(tmp_path, metrics_csv, images, benchmarks) -> Path:
     return build_report(
         tmp_path / "reports" / "demo" / "index.html",
         "demo",
-        metrics_csv,
-        images["calib"],
-        {"plane": images["plane"], "sheet": []},
-        benchmarks,
-        config,
+        ReportInputs(
+            metrics_csv,
+            images["calib"],
+            {"plane": images["plane"], "sheet": []},
+            benchmarks,
+            config,
+        ),
+        PageOptions(embed_images=True),
         extra={"dataset folder": "data/<demo>"},
-        embed_images=True,
     )
 
 
@@ -379,11 +383,7 @@ def test_report_folder_stands_alone(tmp_path, metrics_csv, images):
     out = build_report(
         tmp_path / "reports" / "demo" / "index.html",
         "demo",
-        metrics_csv,
-        images["calib"],
-        {"plane": [*images["plane"], inside]},
-        [],
-        {},
+        ReportInputs(metrics_csv, images["calib"], {"plane": [*images["plane"], inside]}, [], {}),
         results_dir=results,
     )
     text = out.read_text(encoding="utf-8")
@@ -408,7 +408,7 @@ def test_report_copies_all_or_nothing(tmp_path, metrics_csv, images, monkeypatch
     out = tmp_path / "reports" / "demo" / "index.html"
 
     def build(calib, plane):
-        return build_report(out, "demo", metrics_csv, calib, {"plane": plane}, [], {})
+        return build_report(out, "demo", ReportInputs(metrics_csv, calib, {"plane": plane}, [], {}))
 
     def folder() -> dict:
         return {
@@ -499,7 +499,9 @@ def test_summary_marks_each_scenes_best_variant(tmp_path):
     ]
     csv = tmp_path / "metrics.csv"
     pd.DataFrame(rows, columns=list(REQUIRED_COLUMNS)).to_csv(csv, index=False)
-    text = build_report(tmp_path / "index.html", "demo", csv, [], {}, [], {}).read_text()
+    text = build_report(
+        tmp_path / "index.html", "demo", ReportInputs(csv, [], {}, [], {})
+    ).read_text()
     body = _summary_rows(text)
     header = page_tables(text)["summary"][0][0]
     col = header.index(BEST_METRIC)
@@ -520,7 +522,7 @@ def test_missing_column_raises_and_writes_nothing(tmp_path, metrics_csv, images,
     pd.read_csv(metrics_csv).drop(columns=drop).to_csv(bad, index=False)
     out = tmp_path / "reports" / "demo" / "index.html"
     with pytest.raises(ValueError, match=drop) as err:
-        build_report(out, "demo", bad, images["calib"], {}, [], {})
+        build_report(out, "demo", ReportInputs(bad, images["calib"], {}, [], {}))
     assert "bad.csv" in str(err.value)
     assert not out.exists()
     assert [p.name for p in out.parent.iterdir()] == ["metrics.csv"]  # no temporary file
@@ -529,14 +531,14 @@ def test_missing_column_raises_and_writes_nothing(tmp_path, metrics_csv, images,
 def test_missing_metrics_file_raises(tmp_path):
     out = tmp_path / "index.html"
     with pytest.raises(ValueError, match="nothere.csv"):
-        build_report(out, "demo", tmp_path / "nothere.csv", [], {}, [], {})
+        build_report(out, "demo", ReportInputs(tmp_path / "nothere.csv", [], {}, [], {}))
     assert not out.exists()
 
 
 def test_missing_figure_raises(tmp_path, metrics_csv):
     out = tmp_path / "index.html"
     with pytest.raises(ValueError, match="gone.png"):
-        build_report(out, "demo", metrics_csv, [tmp_path / "gone.png"], {}, [], {})
+        build_report(out, "demo", ReportInputs(metrics_csv, [tmp_path / "gone.png"], {}, [], {}))
     assert not out.exists()
 
 
@@ -552,12 +554,14 @@ def test_folders_config_file_and_find_benchmarks(tmp_path, metrics_csv, images, 
     out = build_report(
         tmp_path / "index.html",
         "demo",
-        metrics_csv,
-        images["calib"][0].parent,  # a folder: all its images
-        {"plane": images["plane"][0].parent},
-        find_benchmarks(root, "demo"),
-        config,
-        embed_images=True,
+        ReportInputs(
+            metrics_csv,
+            images["calib"][0].parent,
+            {"plane": images["plane"][0].parent},
+            find_benchmarks(root, "demo"),
+            config,
+        ),
+        PageOptions(embed_images=True),
     )
     text = out.read_text(encoding="utf-8")
     assert text.count("data:image/png;base64,") == 6 and text.count("data:image/gif;") == 2
@@ -614,16 +618,23 @@ def test_report_layout_provenance_and_links(tmp_path, metrics_csv, images):
     out = build_report(
         tmp_path / "reports" / "demo" / "index.html",
         "demo",
-        metrics_csv,
-        [],
-        {
-            "plane": [
-                figs / f
-                for f in ("vh_depth.png", "figure7.png", "bayes_ph_depth.png", "vh_depth_error.png")
-            ]
-        },
-        [],
-        {},
+        ReportInputs(
+            metrics_csv,
+            [],
+            {
+                "plane": [
+                    figs / f
+                    for f in (
+                        "vh_depth.png",
+                        "figure7.png",
+                        "bayes_ph_depth.png",
+                        "vh_depth_error.png",
+                    )
+                ]
+            },
+            [],
+            {},
+        ),
         dataset=_fake_dataset(tmp_path / "data"),
         results_dir=results,
     )
@@ -678,7 +689,9 @@ def test_report_layout_provenance_and_links(tmp_path, metrics_csv, images):
 
 
 def test_sequence_plot_and_frame_note(tmp_path, metrics_csv, images):
-    out = build_report(tmp_path / "index.html", "demo", metrics_csv, [], {"plane": []}, [], {})
+    out = build_report(
+        tmp_path / "index.html", "demo", ReportInputs(metrics_csv, [], {"plane": []}, [], {})
+    )
     text = out.read_text(encoding="utf-8")
     # two frames: the maps' frame is named and the depth error is plotted over frames
     assert "Sequence of 2 frames (000000 to 000001)" in text
@@ -770,7 +783,9 @@ def test_report_expected_error_and_sigma_calibration(tmp_path, images):
     csv = tmp_path / "metrics.csv"
     cols = [*REQUIRED_COLUMNS, *EXTRA_COLUMNS, "method", "same_as"]
     pd.DataFrame(rows, columns=cols).to_csv(csv, index=False)
-    out = build_report(tmp_path / "index.html", "demo", csv, [], {"plane": [], "sheet": []}, [], {})
+    out = build_report(
+        tmp_path / "index.html", "demo", ReportInputs(csv, [], {"plane": [], "sheet": []}, [], {})
+    )
     text = out.read_text(encoding="utf-8")
     tables = page_tables(text)
     sheet = text[text.index('id="scene-sheet"') : text.index('id="timing"')]

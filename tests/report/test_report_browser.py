@@ -28,7 +28,13 @@ import pytest
 from PIL import Image
 
 from colourhs.common.ply import write_ply
-from colourhs.report.page import BEST_METRIC, REQUIRED_COLUMNS, build_report
+from colourhs.report.page import (
+    BEST_METRIC,
+    REQUIRED_COLUMNS,
+    PageOptions,
+    ReportInputs,
+    build_report,
+)
 from colourhs.report.tables import EXTRA_COLUMNS, best_rows, read_metrics, summarise_metrics
 from colourhs.workflow.variants import VARIANT_ORDER
 
@@ -169,14 +175,10 @@ def _make_report(root: Path, n_scenes: int, n_frames: int) -> Path:
     return build_report(
         root / "reports" / "demo" / "index.html",
         "demo",
-        metrics,
-        sorted(calib.iterdir()),
-        figures,
-        [],
-        config,
+        ReportInputs(metrics, sorted(calib.iterdir()), figures, [], config),
+        PageOptions(views=True),
         extra={"note": long_value},
         results_dir=root / "results" / "demo",
-        views=True,
     )
 
 
