@@ -235,3 +235,31 @@ def test_open3d_plotly_viewer_is_imported_on_first_use():
             [sys.executable, "-c", probe], env=env, capture_output=True, text=True, check=True
         )
         assert out.stdout.split("\n")[:2] == expected, (eager, out.stdout, out.stderr)
+
+
+MAX_PARAMETERS = 10
+COMPILED = ("njit", "jit", "overload", "intrinsic", "vectorize", "guvectorize", "cfunc")
+
+
+def _long_parameter_lists() -> list[str]:
+    """Every function of the package (numba kernels aside) with more than
+    MAX_PARAMETERS parameters, as ``path:line name (count)``."""
+    found = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if not isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+                continue
+            if any(c in ast.unparse(d) for d in node.decorator_list for c in COMPILED):
+                continue
+            a = node.args
+            count = len(a.posonlyargs) + len(a.args) + len(a.kwonlyargs)
+            count += (a.vararg is not None) + (a.kwarg is not None)
+            if count > MAX_PARAMETERS:
+                found.append(f"{path.relative_to(PACKAGE)}:{node.lineno} {node.name} ({count})")
+    return found
+
+
+def test_long_parameter_lists_are_option_dataclasses():
+    """No function takes more than 10 parameters: what belongs together travels
+    as an option dataclass (numba kernels, whose arguments are arrays, aside)."""
+    assert _long_parameter_lists() == []
