@@ -76,7 +76,7 @@ LAYERS = {
     "evaluation": {"capture", "common"},
     "synth": {"capture", "common"},
     "report": {"calibration", "capture", "common", "evaluation", "workflow"},
-    "workflow": {"capture", "synth"},
+    "workflow": {"calibration", "capture", "synth"},
     "cli": {
         "calibration",
         "capture",

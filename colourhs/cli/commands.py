@@ -114,9 +114,16 @@ def _synth(args) -> int:
 
 
 def _validate(args) -> int:
-    from colourhs.capture import validate
+    from colourhs.calibration.rig_check import validate_rig
+    from colourhs.capture import open_dataset, validate
+    from colourhs.common.files import write_json
 
-    summary = validate(args.dataset, args.summary)
+    summary = validate(args.dataset)
+    if not args.no_rig_check:  # rig.json against the photometric captures
+        ds = open_dataset(args.dataset, check_images=False, scenes=())
+        summary["rig_check"] = validate_rig(ds)
+    if args.summary:
+        write_json(args.summary, summary)
     for warning in summary["warnings"]:
         print(f"warning: {warning}", file=sys.stderr)
     scenes = summary["scenes"]

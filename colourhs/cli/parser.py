@@ -145,6 +145,12 @@ def build_parser(show_defaults: bool | Collection[str] = False) -> argparse.Argu
     v = _command(sub, "validate", "check a dataset against the capture format")
     v.add_argument("dataset", type=Path, help="dataset folder (capture format)")
     v.add_argument("--summary", type=Path, default=None, help="write a JSON summary here")
+    v.add_argument(
+        "--no-rig-check",
+        action="store_true",
+        help="skip checking rig.json's cameras and board against the photometric captures "
+        "(the board's markers triangulated and reprojected)",
+    )
     v.set_defaults(func=_validate)
 
     m = _command(sub, "markers", "board poses and calibration planes from the ArUco markers")

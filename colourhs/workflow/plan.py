@@ -182,12 +182,17 @@ class WorkflowPlan:
         return out
 
     def check_captures(self) -> None:
-        """Validate (every image decoded) each dataset :meth:`unvalidated_captures` names;
-        :class:`MalformedDatasetError` with the validator's message (file and problem).
+        """Validate (every image decoded, rig.json checked against the photometric
+        captures: :func:`colourhs.calibration.rig_check.validate_rig`) each dataset
+        :meth:`unvalidated_captures` names; :class:`MalformedDatasetError` with the
+        validator's message (file and problem).
         What is valid but costs accuracy (the summary's ``warnings``) goes to stderr."""
+        from colourhs.calibration.rig_check import validate_rig  # cv2 only when needed
+
         for name in self.unvalidated_captures():
             try:
                 summary = validate_dataset(self.dataset_path(name))
+                validate_rig(self._open(name, self.dataset_path(name)))
             except CaptureFormatError as e:
                 raise MalformedDatasetError(name, e) from None
             for warning in summary["warnings"]:
