@@ -69,8 +69,9 @@ def write_assets(placed: Mapping[Path, str], out_dir: str | Path) -> list[Path]:
     The copies are made in a hidden temporary sibling folder, which then
     replaces ``OUT_DIR/assets`` as a whole: a failure leaves the folder as it
     was and no partial copy behind, and copies an earlier build made that this
-    one does not link are removed. Without any file to copy, an earlier
-    ``assets`` folder is removed.
+    one does not link are removed. Without any file to copy the folder is
+    empty: it exists after every build, so the workflow declares it as the
+    report job's output.
 
     Returns
     -------
@@ -86,14 +87,14 @@ def write_assets(placed: Mapping[Path, str], out_dir: str | Path) -> list[Path]:
     tmp = out_dir / f".{ASSETS}.{os.getpid()}.tmp"
     old = out_dir / f".{ASSETS}.{os.getpid()}.old"
     try:
+        tmp.mkdir(parents=True, exist_ok=True)
         for src, dst in copies.items():
             staged = tmp / dst.relative_to(folder)
             staged.parent.mkdir(parents=True, exist_ok=True)
             shutil.copyfile(src, staged)
         if folder.exists():
             os.replace(folder, old)
-        if copies:
-            os.replace(tmp, folder)
+        os.replace(tmp, folder)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
         shutil.rmtree(old, ignore_errors=True)

@@ -659,8 +659,8 @@ def build_report(
         config_resolved=options.config_resolved,
         config_yaml=yaml.safe_dump(_plain(config), sort_keys=False, allow_unicode=True),
     )
-    if not link_outside:
-        write_assets(where or {}, out_dir)
+    if where is not None and not link_outside:  # embedded images need no copies
+        write_assets(where, out_dir)
     with atomic_output(out) as tmp:
         tmp.write_text(page, encoding="utf-8")
     return out

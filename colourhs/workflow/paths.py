@@ -68,6 +68,8 @@ METRICS = "reports/{name}/metrics.csv"
 FIGURES = "reports/{name}/figures/{scene}"
 #: The evaluation report (rule report).
 REPORT = "reports/{name}/index.html"
+#: Its copies of the images it shows from outside its folder (rule report).
+REPORT_ASSETS = "reports/{name}/assets"
 
 # ---------------------------------------------------------------- datasets
 

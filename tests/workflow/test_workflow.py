@@ -151,6 +151,7 @@ def report_jobs(*scenes: str) -> set[tuple[str, str]]:
     return {
         ("metrics_table", f"reports/{NAME}/metrics.csv"),
         ("report", f"reports/{NAME}/index.html"),
+        ("report", f"reports/{NAME}/assets"),
         *{("scene_figures", f"reports/{NAME}/figures/{s}") for s in scenes},
     }
 
@@ -234,7 +235,14 @@ def run(whole_job) -> WholeJob:
 
 def test_first_run_made_every_output(run):
     files = set(run.first)
-    expected = {path for _, path in all_hs_jobs() | report_jobs() | VALIDATION}
+    assets = f"reports/{NAME}/assets"  # a folder: the calibration figures the report copies
+    assert {f for f in files if f.startswith(f"{assets}/")} - {
+        f"{assets}/.snakemake_timestamp"
+    } == {
+        f"{assets}/photometric.png",
+        *(f"{assets}/chromaticity/{obj}.png" for obj in ("statue", "toy")),
+    }
+    expected = {path for _, path in all_hs_jobs() | report_jobs() | VALIDATION} - {assets}
     expected |= {
         path for scene, frames in FRAMES.items() for f in frames for _, path in vh_jobs(scene, f)
     }

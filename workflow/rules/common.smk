@@ -30,6 +30,7 @@ from colourhs.workflow.paths import (
     PHOTOMETRIC,
     PHOTOMETRIC_PNG,
     REPORT,
+    REPORT_ASSETS,
     RESULTS_DIR,
     SYNTH_DATASET,
     VH_DEPTH,

@@ -47,11 +47,13 @@ rule report:
     input:
         unpack(lambda w: report_inputs(w.name)),
     output:
-        report(
+        html=report(
             REPORT,
             caption="../report/index.rst",
             category="Evaluation",
         ),
+        # the images it shows from outside its folder, copied: the folder stands alone
+        assets=directory(REPORT_ASSETS),
     log:
         LOGS["report"],
     threads: 1
@@ -70,7 +72,7 @@ rule report:
         calib=CALIB_DIR,
         benchmarks=BENCHMARK_ROOT,
     shell:
-        '"$COLOURHS_PYTHON" -m colourhs report {output:q} --name {wildcards.name} '
+        '"$COLOURHS_PYTHON" -m colourhs report {output.html:q} --name {wildcards.name} '
         "--metrics {input.metrics:q} --config {input.config:q} "
         "--calibration {input.calibration:q} --figures {params.figures} "
         "--dataset {params.dataset:q} --results {params.results:q} "
