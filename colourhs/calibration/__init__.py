@@ -4,5 +4,6 @@ Marker poses of the board (:mod:`.markers`), the sensor noise model
 (:mod:`.noise`), channel cross-talk (:mod:`.crosstalk`, the filter mixing
 :mod:`.crosstalk_filter`, the LED factor :mod:`.crosstalk_led`), the Helmholtz
 cameras' mu maps (:mod:`.photometric`, paper section III-C) and the surface
-chromaticity p (:mod:`.chromaticity`, section III-D).
+chromaticity p (:mod:`.chromaticity`, section III-D); the printable targets they
+are captured with, the marker board of rig.json and a ChArUco target (:mod:`.board`).
 """

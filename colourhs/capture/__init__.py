@@ -21,7 +21,8 @@ Modules (everything public is re-exported here; import from ``colourhs.capture``
 - :mod:`~colourhs.capture.rigjson`: reading and validating rig.json (its JSON Schema,
   ``rig.schema.json``, is :func:`rig_schema`);
 - :mod:`~colourhs.capture.jsonvalues`: JSON reading, schema and value checks;
-- :mod:`~colourhs.capture.png`: PNG header checks, :func:`read_image`, :func:`read_mask`;
+- :mod:`~colourhs.capture.png`: capture images (PNG or TIFF, :mod:`~colourhs.capture.tiff`
+  the TIFF header): header checks, :func:`read_image`, :func:`read_mask`;
 - :mod:`~colourhs.capture.layout`: the dataset folder, :func:`open_dataset`, :func:`validate`.
 
 Only :mod:`~colourhs.capture.base` (the standard library) is imported with the

@@ -1,7 +1,9 @@
 """What every part of the capture reader shares: the format's constants and its errors.
 
 The format's version string (:data:`FORMAT`), the light and channel colours
-(:data:`COLOURS`), the name rule of cameras and folders, the two intensity
+(:data:`COLOURS`), the name rule of cameras and folders, the image file
+suffixes (:data:`IMAGE_FORMATS`) and what a decoder-free look at an image file
+tells (:class:`_ImageHeader`, shared by the PNG and TIFF readers), the two intensity
 thresholds that follow from the format's "no ambient light" rule
 (:data:`LIT_THRESHOLD`, :data:`MIN_SIGNAL`), and the errors the reader raises:
 :class:`CaptureFormatError` (a file breaks the format) and
@@ -13,6 +15,7 @@ from __future__ import annotations
 
 import re
 from pathlib import Path
+from typing import NamedTuple
 
 FORMAT = "colourhs-capture/1"
 """Value of the ``format`` key of rig.json that :mod:`colourhs.capture` reads."""
@@ -21,6 +24,40 @@ COLOURS = ("red", "green", "blue")
 """Light / channel colours; the index of a colour is its image channel (R, G, B)."""
 
 _NAME = re.compile(r"[A-Za-z0-9_-]+")
+
+IMAGE_FORMATS = {".png": "PNG", ".tif": "TIFF", ".tiff": "TIFF"}
+"""Suffix of a capture image file -> its format. A capture of camera ``cam1`` is
+``cam1.png``, ``cam1.tif`` or ``cam1.tiff`` (lower case), exactly one of them;
+the first of this order is the name a missing capture is reported under."""
+
+
+class _ImageHeader(NamedTuple):
+    """What an image file's header says, whatever its format (read without decoding pixels).
+
+    Attributes
+    ----------
+    width, height : int
+        Size in pixels.
+    bit_depth : int
+        Bits per sample (every sample of the file has the same).
+    channels : int
+        Samples per pixel (a palette image counts 1 for TIFF, 3 for PNG).
+    kind : str
+        Colour model in words: ``"RGB"``, ``"RGBA"``, ``"greyscale"``,
+        ``"greyscale+alpha"`` or ``"palette"``.
+    fmt : str
+        ``"PNG"`` or ``"TIFF"``, for messages.
+    sample_format : str
+        ``"unsigned"`` (integers; PNG's only one), ``"signed"``, ``"floating-point"``, ...
+    """
+
+    width: int
+    height: int
+    bit_depth: int
+    channels: int
+    kind: str
+    fmt: str
+    sample_format: str = "unsigned"
 
 
 # --------------------------------------------------------------------------------------------

@@ -4,7 +4,9 @@
 the rig plus the names of the photometric poses, chromatic objects and scenes,
 with methods that turn names into the paths the format lays out; an unknown
 name is an :class:`~colourhs.capture.base.UnknownNameError` naming the known
-ones. Re-exported by :mod:`colourhs.capture`.
+ones. A capture image's file is PNG or TIFF (``<camera>.png``, ``.tif`` or
+``.tiff``); :func:`capture_file` is the one place that resolves which, for
+these methods and the layout's checks alike. Re-exported by :mod:`colourhs.capture`.
 """
 
 from __future__ import annotations
@@ -12,7 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from colourhs.capture.base import COLOURS, UnknownNameError
+from colourhs.capture.base import COLOURS, IMAGE_FORMATS, UnknownNameError
 from colourhs.capture.rig import Rig
 
 
@@ -79,26 +81,28 @@ class Dataset:
         return self.scenes[name]
 
     def photometric_image(self, pose: str, camera: str) -> Path:
-        """Path of ``photometric/<pose>/<camera>.png``."""
+        """File of ``photometric/<pose>/<camera>.png`` (or ``.tif``: :func:`capture_file`)."""
         _known(pose, self.poses, "photometric pose")
         self.rig.camera(camera)
-        return self.root / "photometric" / pose / f"{camera}.png"
+        return capture_file(self.root / "photometric" / pose, camera)
 
     def chromatic_image(self, obj: str, colour: str, camera: str) -> Path:
-        """Path of ``chromatic/<obj>/<colour>/<camera>.png``."""
+        """File of ``chromatic/<obj>/<colour>/<camera>.png`` (or ``.tif``: :func:`capture_file`)."""
         _known(obj, self.chromatic_objects, "chromatic object")
         _known(colour, COLOURS, "colour")
         self.rig.camera(camera)
-        return self.root / "chromatic" / obj / colour / f"{camera}.png"
+        return capture_file(self.root / "chromatic" / obj / colour, camera)
 
     def frame_image(self, scene: str, frame: str | int, camera: str) -> Path:
-        """Path of ``scenes/<scene>/frames/<frame>/<camera>.png``; ``frame`` may be an int."""
+        """File of ``scenes/<scene>/frames/<frame>/<camera>.png`` (or ``.tif``:
+        :func:`capture_file`); ``frame`` may be an int."""
         frame = self._frame(scene, frame)
         self.rig.camera(camera)
-        return self.root / "scenes" / scene / "frames" / frame / f"{camera}.png"
+        return capture_file(self.root / "scenes" / scene / "frames" / frame, camera)
 
     def mask_image(self, scene: str, frame: str | int, camera: str) -> Path:
-        """Path of ``scenes/<scene>/masks/<frame>/<camera>.png``.
+        """File of ``scenes/<scene>/masks/<frame>/<camera>.png`` (or ``.tif``:
+        :func:`capture_file`).
 
         Raises
         ------
@@ -109,7 +113,7 @@ class Dataset:
         if not self.scene(scene).has_masks:
             raise UnknownNameError(f"scene {scene!r} has no masks")
         self.rig.camera(camera)
-        return self.root / "scenes" / scene / "masks" / frame / f"{camera}.png"
+        return capture_file(self.root / "scenes" / scene / "masks" / frame, camera)
 
     def gt_mesh(self, scene: str, frame: str | int) -> Path:
         """Path of ``scenes/<scene>/gt/<frame>.ply``.
@@ -135,6 +139,35 @@ class Dataset:
         name = f"{frame:06d}" if isinstance(frame, int) else frame
         _known(name, self.scenes[scene].frames, f"frame of scene {scene!r}")
         return name
+
+
+def capture_files(folder: Path, camera: str) -> list[Path]:
+    """The files of ``camera``'s capture in ``folder`` that exist, in the order of
+    :data:`~colourhs.capture.base.IMAGE_FORMATS` (``.png``, ``.tif``, ``.tiff``).
+
+    A valid dataset has exactly one; more is a format error that the layout's
+    check reports, naming them all.
+    """
+    paths = (folder / f"{camera}{suffix}" for suffix in IMAGE_FORMATS)
+    return [path for path in paths if path.is_file()]
+
+
+def capture_file(folder: Path, camera: str) -> Path:
+    """The file of ``camera``'s capture image (or mask) in ``folder``.
+
+    The format takes a capture as PNG or TIFF, per file: ``<camera>.png``,
+    ``<camera>.tif`` or ``<camera>.tiff``, lower case (a dataset may mix them).
+    Every reader of a capture's path goes through here.
+
+    Returns
+    -------
+    Path
+        The one of :func:`capture_files` (the first, where a malformed dataset has
+        several); ``<camera>.png`` where none exists, the name a missing capture is
+        reported under.
+    """
+    found = capture_files(folder, camera)
+    return found[0] if found else folder / f"{camera}{next(iter(IMAGE_FORMATS))}"
 
 
 def _known(name: str, names: tuple[str, ...], what: str) -> None:

@@ -15,13 +15,20 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
-from colourhs.capture.base import _NAME, COLOURS, FORMAT, CaptureFormatError, CaptureFormatProblems
-from colourhs.capture.dataset import Dataset, Scene, _known
+from colourhs.capture.base import (
+    _NAME,
+    COLOURS,
+    FORMAT,
+    IMAGE_FORMATS,
+    CaptureFormatError,
+    CaptureFormatProblems,
+)
+from colourhs.capture.dataset import Dataset, Scene, _known, capture_file, capture_files
 from colourhs.capture.jsonvalues import _as_object, _as_str, _read_json, _show
 from colourhs.capture.png import (
     _check_image_header,
     _check_mask_header,
-    _read_png_header,
+    _read_header,
     read_image,
     read_mask,
 )
@@ -45,17 +52,16 @@ def _problem(problems: list | None, path: Path, text: str) -> None:
     _note(problems, CaptureFormatError(path, text))
 
 
-def _near_miss(path: Path) -> str:
-    """A hint when ``path``'s folder holds the file under another case or suffix
-    (``cam1.PNG``, ``cam1.jpg``, ``cam1.tif`` for ``cam1.png``)."""
-    if not path.parent.is_dir():
+def _near_miss(folder: Path, camera: str) -> str:
+    """A hint when ``folder``, which holds no capture of ``camera``, holds a file of
+    that name under another case or suffix (``cam1.PNG``, ``cam1.TIF``, ``cam1.jpg``,
+    ``CAM1.png``): the names it should have."""
+    found = sorted(p.name for p in folder.iterdir() if p.stem.lower() == camera.lower())
+    if not found:
         return ""
-    found = sorted(
-        p.name
-        for p in path.parent.iterdir()
-        if p.name != path.name and p.stem.lower() == path.stem.lower()
-    )
-    return f"; found {', '.join(found)}: images are PNG files named <camera>.png" if found else ""
+    names = [f"{camera}{suffix}" for suffix in IMAGE_FORMATS]
+    expected = f"{', '.join(names[:-1])} or {names[-1]}"
+    return f"; found {', '.join(found)}: images are PNG or TIFF files named {expected}"
 
 
 def open_dataset(
@@ -71,8 +77,9 @@ def open_dataset(
     root : str or Path
         The dataset folder (or its rig.json).
     check_images : bool
-        Also check every listed PNG's header: valid PNG, channels, bit depth and size.
-        Only headers are read (pixel data is decoded by :func:`read_image`).
+        Also check every listed image's header (PNG or TIFF): readable, channels,
+        unsigned samples, bit depth and size. Only headers are read (pixel data is
+        decoded by :func:`read_image`).
     scenes : iterable of str, optional
         Read only these scenes' folders and scene.json (each must exist; an empty
         one reads none), so that a stage reads no file of the scenes it does not
@@ -109,7 +116,7 @@ def open_dataset(
         checks += [(p, "mask file", _check_mask_header) for p in masks]
         for path, what, check in checks:
             try:
-                check(path, _read_png_header(path, what), rig.image)
+                check(path, _read_header(path, what), rig.image)
             except CaptureFormatError as error:
                 _note(problems, error)
     return Dataset(root, rig, poses, objects, scenes)
@@ -133,16 +140,29 @@ def _check_name(folder: Path, what: str, problems: list | None = None) -> str:
 def _camera_images(
     folder: Path, cameras: tuple[str, ...], what: str, problems: list | None = None
 ) -> list[Path]:
-    """``folder/<camera>.png`` for every camera, refusing (or noting) a missing one."""
+    """Every camera's capture file in ``folder`` (:func:`capture_file`: PNG or TIFF),
+    refusing (or noting) a missing one, with a hint at near misses, and a camera with
+    more than one file."""
     if not folder.is_dir():
         _problem(problems, folder, f"missing folder ({what})")
         return []
-    paths = [folder / f"{name}.png" for name in cameras]
-    for path, name in zip(paths, cameras, strict=True):
-        if not path.is_file():
-            hint = _near_miss(path)
+    paths = []
+    for name in cameras:
+        found = capture_files(folder, name)
+        if len(found) == 1:
+            paths += found
+        elif not found:
+            hint = _near_miss(folder, name)
+            path = capture_file(folder, name)
             _problem(problems, path, f"missing image of camera {name!r} ({what}){hint}")
-    return [p for p in paths if p.is_file()]
+        else:
+            files = " and ".join(p.name for p in found)
+            _problem(
+                problems,
+                found[0],
+                f"{len(found)} images of camera {name!r} ({what}): {files}; keep one",
+            )
+    return paths
 
 
 def _find_poses(

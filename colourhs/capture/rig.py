@@ -61,7 +61,7 @@ class Camera:
     Attributes
     ----------
     name : str
-        Camera name; also the image file stem ``<name>.png``.
+        Camera name; also the image file stem (``<name>.png``, ``.tif`` or ``.tiff``).
     K : ndarray, shape (3, 3)
         Intrinsic matrix, pixels.
     dist : ndarray, shape (n,), n >= 5

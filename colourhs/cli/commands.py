@@ -202,6 +202,34 @@ def _markers(args) -> int:
     return 0
 
 
+def _board(args) -> int:
+    from colourhs.calibration import board
+
+    length = args.marker_length
+    if args.squares is not None:  # a ChArUco target: its size follows from its squares
+        given = (("--size", args.size), ("--markers", args.markers))
+        extra = [option for option, value in given if value is not None]
+        if extra:
+            raise ValueError(f"--charuco sets the board's layout: drop {' and '.join(extra)}")
+        if args.square_length is None:
+            raise ValueError("--charuco needs --square-length (metres)")
+        if length is None:
+            length = board.CHARUCO_MARKER_FRACTION * args.square_length
+        target = board.charuco_layout(*args.squares, args.square_length, length, args.dictionary)
+    else:
+        if args.square_length is not None:
+            raise ValueError("--square-length is a ChArUco square's: give --charuco too")
+        target = board.board_layout(
+            args.dictionary,
+            board.DEFAULT_SIZE if args.size is None else args.size,
+            board.DEFAULT_MARKER_LENGTH if length is None else length,
+            args.markers,
+        )
+    out, block = board.write_board(target, args.out, dpi=args.dpi)
+    print(f"wrote {out} and {block} (the rig.json block of the printed board)")
+    return 0
+
+
 def _noise(args) -> int:
     from colourhs.calibration.noise import calibrate_noise
 

@@ -20,6 +20,7 @@ from colourhs.cli.commands import (  # noqa: F401 (imported from here by users)
     PROJECT_ROOT,
     RECONSTRUCT_PARAMS,
     SNAKEFILE,
+    _board,
     _chromaticity,
     _config,
     _crosstalk,
@@ -163,6 +164,58 @@ def build_parser(show_defaults: bool | Collection[str] = False) -> argparse.Argu
         help="markers seen by >= 2 cameras a pose needs (default 3)",
     )
     m.set_defaults(func=_markers)
+
+    bd = _command(sub, "board", "print a white marker board (or a ChArUco target) at true scale")
+    bd.add_argument(
+        "out",
+        type=Path,
+        help="print to write: .pdf, .png or .svg; its rig.json block goes beside it "
+        "(for b.pdf: b.board.json, with --charuco b.geometric_board.json)",
+    )
+    bd.add_argument(
+        "--dictionary",
+        default="DICT_5X5_100",
+        help="OpenCV ArUco dictionary of the markers (default DICT_5X5_100)",
+    )
+    bd.add_argument(
+        "--size",
+        type=float,
+        nargs=2,
+        default=None,
+        help="board width and height, metres (default 0.30 0.22)",
+    )
+    bd.add_argument(
+        "--markers",
+        type=int,
+        default=None,
+        help="number of markers, ids 0 to MARKERS - 1 in a regular grid (default: the "
+        "densest grid that fits)",
+    )
+    bd.add_argument(
+        "--marker-length",
+        type=float,
+        default=None,
+        help="side of every marker, metres (default 0.04; with --charuco 0.75 of the square)",
+    )
+    bd.add_argument(
+        "--dpi",
+        type=float,
+        default=600,
+        help="resolution of a PNG, dots per inch (default 600; PDF and SVG are vector)",
+    )
+    bd.add_argument(
+        "--charuco",
+        dest="squares",
+        type=int,
+        nargs=2,
+        default=None,
+        help="print instead a ChArUco target of SQUARES squares across and down (for the "
+        "geometric calibration; needs --square-length)",
+    )
+    bd.add_argument(
+        "--square-length", type=float, default=None, help="side of a ChArUco square, metres"
+    )
+    bd.set_defaults(func=_board)
 
     nz = _command(sub, "noise", "sensor noise model of every camera channel (JSON)")
     nz.add_argument("dataset", type=Path, help="dataset folder (capture format)")

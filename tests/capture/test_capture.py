@@ -1,7 +1,8 @@
 """Tests of colourhs.capture: reading the capture format, version 1 (a valid dataset).
 
 rig.json violations: test_capture_rig.py; layout violations: test_capture_layout.py;
-reading images and masks: test_capture_images.py; builders: capture_helpers.py.
+reading images and masks: test_capture_images.py; TIFF images and the names of capture
+files: test_capture_tiff.py; builders: capture_helpers.py.
 """
 
 from __future__ import annotations

@@ -63,7 +63,7 @@ def test_validate_names_every_problem_at_once_with_near_misses(tiny_dataset, tmp
     pose = sorted((bad / "photometric").iterdir())[0]
     (pose / "cam2.png").rename(pose / "cam2.PNG")  # a near miss
     frame = bad / "scenes" / "statue" / "frames" / "000000"
-    (frame / "cam1.png").rename(frame / "cam1.tif")
+    (frame / "cam1.png").rename(frame / "cam1.TIF")
     truncated = bad / "chromatic" / "toy" / "green" / "cam3.png"
     truncated.write_bytes(truncated.read_bytes()[:200])
     (bad / "scenes" / "plane" / "scene.json").write_text("{")
@@ -74,7 +74,7 @@ def test_validate_names_every_problem_at_once_with_near_misses(tiny_dataset, tmp
     lines = err.splitlines()[head + 1 :]
     assert len(lines) == 4, err
     assert any(f"{pose / 'cam2.png'}: missing image" in t and "found cam2.PNG" in t for t in lines)
-    assert any(f"{frame / 'cam1.png'}: missing image" in t and "found cam1.tif" in t for t in lines)
+    assert any(f"{frame / 'cam1.png'}: missing image" in t and "found cam1.TIF" in t for t in lines)
     assert any(str(truncated) in t for t in lines)
     assert any(str(bad / "scenes" / "plane" / "scene.json") in t for t in lines)
 
@@ -578,7 +578,7 @@ def test_every_option_shows_its_default():
             if tuning or a.default not in (None, "", []):
                 checked.append(f"{command} {a.option_strings[0]}")
                 assert "default" in (a.help or ""), (command, a.option_strings, a.help)
-    assert len(checked) == 37, checked  # measured: 37 options with a default (--box-px)
+    assert len(checked) == 39, checked  # 39 options with a default (--box-px)
 
 
 def _subcommands():
@@ -604,7 +604,7 @@ def test_help_speaks_to_users_with_one_description_per_command():
     assert parser.description.startswith("Colour Helmholtz Stereopsis")
     assert "colourhs run DATASET" in parser.description
     assert not re.search(r":(func|mod):|``", parser.format_help())
-    assert len(commands) == 16
+    assert len(commands) == 17
     for name, p in commands.items():
         assert p.description and p.description[0].isupper(), name
         for a in p._actions:
