@@ -19,28 +19,11 @@ order that :func:`colourhs.calibration.markers.detect_markers` returns and the
 pose fit matches to the board model.
 
 The ChArUco target (for a geometric calibration of the cameras).
-:func:`charuco_layout` describes it as a JSON object, the future
-``geometric_board`` block of rig.json, with the keys:
-
-``type``
-    ``"charuco"``.
-``dictionary``
-    Name of the OpenCV predefined ArUco dictionary (``DICT_...``) of its markers.
-``squares``
-    [squares_x, squares_y]: chessboard squares across (x) and down (y), integers >= 2.
-``square_length``
-    Side of a chessboard square, metres.
-``marker_length``
-    Side of a marker, metres, less than ``square_length``.
-
-:func:`charuco_board` builds the matching :class:`cv2.aruco.CharucoBoard` (OpenCV's
-pattern, not its legacy one: the top-left square is black). Its frame is the
-board frame above with the chessboard's outer corner as origin: the board is
-``squares_x * square_length`` by ``squares_y * square_length``, markers sit
-centred in the white squares with ids 0, 1, ... row by row, and interior
-corner k (row-major, ``(squares_x - 1) * (squares_y - 1)`` of them) lies at
-``((k % (squares_x - 1) + 1) * square_length, (k // (squares_x - 1) + 1) *
-square_length)``.
+:func:`charuco_layout` describes it as a JSON object, rig.json's
+``geometric_board`` block, and :func:`charuco_board` builds the matching
+:class:`cv2.aruco.CharucoBoard`; both, the description's keys and the target's
+frame are :mod:`colourhs.capture.targets` (re-exported here), which rig.json's
+reader and the renderer share.
 
 Printing. :func:`render_board` rasterises either target at true scale (each
 pixel the exact share of it that is white). :func:`write_board` writes a
@@ -65,6 +48,17 @@ import cv2
 import numpy as np
 
 from colourhs.capture import Board, rig_from_dict
+from colourhs.capture.targets import (
+    CHARUCO_MARKER_FRACTION,
+    DEFAULT_DICTIONARY,
+    charuco_black_squares,
+    charuco_board,
+    charuco_layout,
+    charuco_markers,
+)
+from colourhs.capture.targets import _mm as _mm
+from colourhs.capture.targets import aruco_dictionary as _dictionary
+from colourhs.capture.targets import checked_charuco as _checked_charuco
 from colourhs.common.files import atomic_output
 
 __all__ = [
@@ -87,17 +81,11 @@ __all__ = [
 M_PER_INCH = 0.0254
 """Metres per inch (a dpi of d is d / M_PER_INCH pixels per metre)."""
 
-DEFAULT_DICTIONARY = "DICT_5X5_100"
-"""ArUco dictionary of a new board: 100 ids with more bits between any two than 4x4's."""
-
 DEFAULT_SIZE = (0.30, 0.22)
 """Width and height of a new marker board, metres (the capture format's example)."""
 
 DEFAULT_MARKER_LENGTH = 0.04
 """Side of a new board's markers, metres (the capture format's example)."""
-
-CHARUCO_MARKER_FRACTION = 0.75
-"""A ChArUco marker's side as a fraction of its square's when none is given."""
 
 GAP_CELLS = 2.0
 """Least white gap between two markers, and between a marker and the board's edge,
@@ -271,105 +259,6 @@ def check_board_block(block: Mapping[str, Any]) -> Board:
     return rig_from_dict(rig, "board block").board
 
 
-def charuco_layout(
-    squares_x: int,
-    squares_y: int,
-    square_length: float,
-    marker_length: float,
-    dictionary: str = DEFAULT_DICTIONARY,
-) -> dict[str, Any]:
-    """The JSON description of a ChArUco target (the keys are in the module's docstring).
-
-    Parameters
-    ----------
-    squares_x, squares_y : int
-        Chessboard squares across and down, >= 2 each.
-    square_length : float
-        Side of a square, metres.
-    marker_length : float
-        Side of a marker, metres; less than ``square_length``.
-    dictionary : str
-        OpenCV predefined ArUco dictionary of the markers.
-
-    Returns
-    -------
-    dict
-        ``{"type": "charuco", "dictionary", "squares": [x, y], "square_length",
-        "marker_length"}``.
-
-    Raises
-    ------
-    ValueError
-        For an unknown dictionary, fewer than 2 squares a way, a non-positive length,
-        a marker not smaller than its square, or more markers than the dictionary has.
-    """
-    aruco = _dictionary(dictionary)
-    sx, sy = int(squares_x), int(squares_y)
-    if sx != squares_x or sy != squares_y or sx < 2 or sy < 2:
-        raise ValueError(
-            f"a ChArUco target needs at least 2 x 2 squares (whole numbers), got "
-            f"{squares_x} x {squares_y}"
-        )
-    square, marker = float(square_length), float(marker_length)
-    if not (math.isfinite(square) and square > 0):
-        raise ValueError(f"square length must be a positive number of metres, got {square:g}")
-    if not (math.isfinite(marker) and 0 < marker < square):
-        raise ValueError(
-            f"marker length {_mm(marker)} mm must be positive and less than the square "
-            f"length {_mm(square)} mm (the marker sits inside a white square)"
-        )
-    needed, capacity = sx * sy // 2, int(aruco.bytesList.shape[0])
-    if needed > capacity:
-        raise ValueError(
-            f"a {sx} x {sy} ChArUco target has {needed} markers; {dictionary} has only "
-            f"{capacity} ids: give fewer squares or a larger dictionary"
-        )
-    return {
-        "type": "charuco",
-        "dictionary": dictionary,
-        "squares": [sx, sy],
-        "square_length": square,
-        "marker_length": marker,
-    }
-
-
-def charuco_board(layout: Mapping[str, Any]) -> cv2.aruco.CharucoBoard:
-    """The :class:`cv2.aruco.CharucoBoard` of a :func:`charuco_layout` description.
-
-    Raises
-    ------
-    ValueError
-        If the description is not one :func:`charuco_layout` accepts.
-    """
-    c = _checked_charuco(layout)
-    board = cv2.aruco.CharucoBoard(
-        tuple(c["squares"]), c["square_length"], c["marker_length"], _dictionary(c["dictionary"])
-    )
-    board.setLegacyPattern(False)
-    return board
-
-
-def _checked_charuco(layout: Mapping[str, Any]) -> dict[str, Any]:
-    if layout.get("type") != "charuco":
-        raise ValueError(f"not a ChArUco description (type {layout.get('type')!r})")
-    try:
-        sx, sy = layout["squares"]
-        return charuco_layout(
-            sx, sy, layout["square_length"], layout["marker_length"], layout["dictionary"]
-        )
-    except (KeyError, TypeError) as err:
-        raise ValueError(f"ChArUco description without a valid {err}") from None
-
-
-def _dictionary(name: str) -> cv2.aruco.Dictionary:
-    """OpenCV's predefined ArUco dictionary ``name``; ValueError naming the known ones."""
-    code = getattr(cv2.aruco, name, None) if str(name).startswith("DICT_") else None
-    if not isinstance(code, int):
-        known = ", ".join(n for n in dir(cv2.aruco) if n.startswith("DICT_"))
-        raise ValueError(f"unknown ArUco dictionary {name!r}; OpenCV's: {known}")
-    return cv2.aruco.getPredefinedDictionary(code)
-
-
 # --------------------------------------------------------------------------------------------
 # Drawing: black axis-aligned rectangles (x0, y0, x1, y1) in metres
 
@@ -425,27 +314,25 @@ def _target(board: Board | Mapping[str, Any]) -> _Target:
 
 
 def _charuco_target(layout: dict[str, Any]) -> _Target:
+    """The print of a ChArUco target: its markers' modules (checked against OpenCV's
+    board, so the print is what OpenCV's detector expects) and its black squares."""
     board = charuco_board(layout)
     aruco = _dictionary(layout["dictionary"])
     (sx, sy), square, length = layout["squares"], layout["square_length"], layout["marker_length"]
     unit = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])  # TL, TR, BR, BL
-    black, with_marker = [], set()
-    for cv_corners, mid in zip(board.getObjPoints(), np.ravel(board.getIds()), strict=True):
+    centres = charuco_markers(layout)
+    ids = [int(mid) for mid in np.ravel(board.getIds())]
+    if ids != list(centres):
+        raise RuntimeError(f"OpenCV's ChArUco marker ids {ids} are not {list(centres)}")
+    black = []
+    for cv_corners, mid in zip(board.getObjPoints(), ids, strict=True):
         cv_corners = np.asarray(cv_corners, float).reshape(4, 3)[:, :2]
-        i, j = (int(v) for v in np.floor(cv_corners.mean(axis=0) / square))
         # The same corners in float64 (OpenCV keeps float32), in OpenCV's order.
-        corners = np.array([i, j]) * square + (square - length) / 2 + unit * length
+        corners = centres[mid] - length / 2 + unit * length
         if not np.allclose(corners, cv_corners, rtol=0.0, atol=1e-6):
             raise RuntimeError(f"OpenCV's ChArUco marker {mid} is not where expected: {cv_corners}")
-        black.append(_marker_modules(aruco, int(mid), corners))
-        with_marker.add((i, j))
-    squares = [
-        [i * square, j * square, (i + 1) * square, (j + 1) * square]
-        for j in range(sy)
-        for i in range(sx)
-        if (i, j) not in with_marker
-    ]
-    black.append(np.array(squares, float).reshape(-1, 4))
+        black.append(_marker_modules(aruco, mid, corners))
+    black.append(charuco_black_squares(layout))
     caption = (
         f"ChArUco {sx} x {sy} squares of {_mm(square)} mm, {layout['dictionary']} markers of "
         f"{_mm(layout['marker_length'])} mm, board {_mm(sx * square)} x {_mm(sy * square)} mm; "
@@ -723,8 +610,3 @@ def _num(value: float) -> str:
 
 def _escape(text: str) -> str:
     return text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
-
-
-def _mm(metres: float) -> str:
-    """A length in metres as millimetres for a message or caption (to 0.01 mm)."""
-    return f"{round(metres * 1e3, 2):g}"

@@ -20,6 +20,8 @@ Modules (everything public is re-exported here; import from ``colourhs.capture``
 - :mod:`~colourhs.capture.dataset`: :class:`Scene` and :class:`Dataset`;
 - :mod:`~colourhs.capture.rigjson`: reading and validating rig.json (its JSON Schema,
   ``rig.schema.json``, is :func:`rig_schema`);
+- :mod:`~colourhs.capture.targets`: the ChArUco target of rig.json's optional
+  ``geometric_board`` (its description, checks and geometry; import it from there);
 - :mod:`~colourhs.capture.jsonvalues`: JSON reading, schema and value checks;
 - :mod:`~colourhs.capture.png`: capture images (PNG or TIFF, :mod:`~colourhs.capture.tiff`
   the TIFF header): header checks, :func:`read_image`, :func:`read_mask`;

@@ -1,7 +1,8 @@
 """A validated dataset's types: :class:`Scene` and :class:`Dataset` (paths by name).
 
 :class:`Dataset` is what :func:`colourhs.capture.layout.open_dataset` returns:
-the rig plus the names of the photometric poses, chromatic objects and scenes,
+the rig plus the names of the photometric poses, chromatic objects, scenes and
+geometric poses,
 with methods that turn names into the paths the format lays out; an unknown
 name is an :class:`~colourhs.capture.base.UnknownNameError` naming the known
 ones. A capture image's file is PNG or TIFF (``<camera>.png``, ``.tif`` or
@@ -67,6 +68,9 @@ class Dataset:
         Folders under ``chromatic/`` (``"white"`` included when present), ascending.
     scenes : dict of str to Scene
         Scenes by name, ascending.
+    geometric_poses : tuple of str
+        Poses of the ChArUco target (folder names under ``geometric/``), ascending;
+        empty without ``geometric/``.
     """
 
     root: Path
@@ -74,6 +78,7 @@ class Dataset:
     poses: tuple[str, ...]
     chromatic_objects: tuple[str, ...]
     scenes: dict[str, Scene]
+    geometric_poses: tuple[str, ...] = ()
 
     def scene(self, name: str) -> Scene:
         """The scene ``name``; :class:`UnknownNameError` naming the dataset's scenes."""
@@ -85,6 +90,13 @@ class Dataset:
         _known(pose, self.poses, "photometric pose")
         self.rig.camera(camera)
         return capture_file(self.root / "photometric" / pose, camera)
+
+    def geometric_image(self, pose: str, camera: str) -> Path:
+        """File of ``geometric/<pose>/<camera>.png`` (or ``.tif``: :func:`capture_file`),
+        a view of the ChArUco target ``rig.geometric_board``."""
+        _known(pose, self.geometric_poses, "geometric pose")
+        self.rig.camera(camera)
+        return capture_file(self.root / "geometric" / pose, camera)
 
     def chromatic_image(self, obj: str, colour: str, camera: str) -> Path:
         """File of ``chromatic/<obj>/<colour>/<camera>.png`` (or ``.tif``: :func:`capture_file`)."""

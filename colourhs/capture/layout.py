@@ -1,8 +1,8 @@
 """A whole dataset folder: :func:`open_dataset` checks its layout, :func:`validate` every image.
 
 :func:`open_dataset` walks the layout the format specifies (rig.json,
-``photometric/``, ``chromatic/``, ``scenes/`` with frames, masks, ground truth
-and an optional scene.json) and returns a
+``photometric/``, the optional ``geometric/``, ``chromatic/``, ``scenes/`` with
+frames, masks, ground truth and an optional scene.json) and returns a
 :class:`~colourhs.capture.dataset.Dataset`; :func:`validate` also decodes every
 image and summarises the dataset (the ``colourhs validate`` command).
 Re-exported by :mod:`colourhs.capture`.
@@ -32,7 +32,7 @@ from colourhs.capture.png import (
     read_image,
     read_mask,
 )
-from colourhs.capture.rig import light_offset_warning, reciprocity_defect_deg
+from colourhs.capture.rig import Rig, light_offset_warning, reciprocity_defect_deg
 from colourhs.capture.rigjson import load_rig
 from colourhs.common.progress import bar
 
@@ -108,10 +108,12 @@ def open_dataset(
     rig = load_rig(root / "rig.json")
     cams = rig.camera_names
     poses, pose_images = _find_poses(root / "photometric", cams, problems)
+    geometric, geometric_images = _find_geometric(root / "geometric", rig, problems)
     objects, chromatic_images = _find_chromatic(root / "chromatic", cams, problems)
     scenes, frame_images, masks = _find_scenes(root / "scenes", cams, objects, scenes, problems)
     if check_images:
-        checks = [(p, "image file", _check_image_header) for p in (*pose_images, *chromatic_images)]
+        captures = (*pose_images, *geometric_images, *chromatic_images)
+        checks = [(p, "image file", _check_image_header) for p in captures]
         checks += [(p, "image file", _check_image_header) for p in frame_images]
         checks += [(p, "mask file", _check_mask_header) for p in masks]
         for path, what, check in checks:
@@ -119,7 +121,7 @@ def open_dataset(
                 check(path, _read_header(path, what), rig.image)
             except CaptureFormatError as error:
                 _note(problems, error)
-    return Dataset(root, rig, poses, objects, scenes)
+    return Dataset(root, rig, poses, objects, scenes, geometric)
 
 
 def _subfolders(folder: Path) -> list[Path]:
@@ -178,6 +180,39 @@ def _find_poses(
         path
         for pose in poses
         for path in _camera_images(folder / pose, cameras, f"photometric pose {pose}", problems)
+    ]
+    return tuple(poses), images
+
+
+def _find_geometric(
+    folder: Path, rig: Rig, problems: list | None = None
+) -> tuple[tuple[str, ...], list[Path]]:
+    """The poses of the ChArUco target under ``folder`` (``geometric/``) and their images.
+
+    Optional: no folder, no poses. A folder needs rig.json's ``geometric_board`` (what
+    the captures show) and at least one pose; each pose holds one image per camera,
+    as a photometric pose does (a camera that does not see the target in a pose
+    still has its image).
+    """
+    if not folder.is_dir():
+        return (), []
+    if rig.geometric_board is None:
+        _problem(
+            problems,
+            folder,
+            f"geometric/ holds captures of a ChArUco target, but {rig.path} has no "
+            "geometric_board (the target's description): add it, or remove geometric/",
+        )
+        return (), []
+    poses = [_check_name(p, "geometric pose", problems) for p in _subfolders(folder)]
+    if not poses:
+        _problem(problems, folder, "geometric/ holds no pose folders (at least 1 is required)")
+    images = [
+        path
+        for pose in poses
+        for path in _camera_images(
+            folder / pose, rig.camera_names, f"geometric pose {pose}", problems
+        )
     ]
     return tuple(poses), images
 
@@ -339,6 +374,7 @@ def all_images(ds: Dataset) -> list[Path]:
     """Every image and silhouette the dataset lists, in a stable order."""
     cams = ds.rig.camera_names
     paths = [ds.photometric_image(p, c) for p in ds.poses for c in cams]
+    paths += [ds.geometric_image(p, c) for p in ds.geometric_poses for c in cams]
     paths += [
         ds.chromatic_image(o, col, c) for o in ds.chromatic_objects for col in COLOURS for c in cams
     ]
@@ -364,7 +400,8 @@ def validate(dataset: str | Path, summary_json: str | Path | None = None) -> dic
     Returns
     -------
     dict summary: cameras with their light colours, reciprocal pairs, board
-    poses, chromatic objects, scenes with their frame counts, image count, the
+    poses, the ChArUco target's poses (``geometric_poses``, empty without
+    ``geometric/``), chromatic objects, scenes with their frame counts, image count, the
     fraction of saturated pixels, the lights' reciprocity defect at the rig's
     fixation point (degrees, :func:`colourhs.capture.rig.reciprocity_defect_deg`)
     and ``warnings``: what is valid but costs accuracy
@@ -419,6 +456,7 @@ def validate(dataset: str | Path, summary_json: str | Path | None = None) -> dic
             for p in ds.rig.reciprocal_pairs()
         ],
         "poses": list(ds.poses),
+        "geometric_poses": list(ds.geometric_poses),
         "chromatic_objects": list(ds.chromatic_objects),
         "scenes": {
             n: {

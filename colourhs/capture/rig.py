@@ -3,7 +3,8 @@
 :class:`Rig` is the contents of a validated rig.json (read by
 :func:`colourhs.capture.rigjson.load_rig`): its :class:`Camera` objects (each a
 calibrated pinhole camera with its collocated light), the :class:`ImageSpec`
-shared by all images, the calibration :class:`Board` and the Helmholtz
+shared by all images, the calibration :class:`Board`, the optional ChArUco
+target of the geometric captures (``Rig.geometric_board``) and the Helmholtz
 :class:`ReciprocalPair` of every two cameras (camera i records camera j's light
 in the channel of j's light colour). Geometry follows OpenCV (``x_cam = R X + t``),
 lengths in metres. Re-exported by :mod:`colourhs.capture`.
@@ -201,6 +202,11 @@ class Rig:
         World position of the chromatic-capture light, metres.
     path : Path
         The rig.json file this was read from.
+    geometric_board : dict or None
+        The ChArUco target of the ``geometric/`` captures, rig.json's optional
+        ``geometric_board`` block as :func:`colourhs.capture.targets.charuco_layout`
+        returns it (``type``, ``dictionary``, ``squares`` [x, y], ``square_length``
+        and ``marker_length`` in metres; do not modify it); None when rig.json has none.
     """
 
     cameras: tuple[Camera, ...]
@@ -208,6 +214,7 @@ class Rig:
     board: Board
     chromatic_light: np.ndarray
     path: Path
+    geometric_board: dict | None = None
 
     @property
     def camera_names(self) -> tuple[str, ...]:

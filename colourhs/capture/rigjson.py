@@ -7,7 +7,10 @@ What a schema cannot say is checked here: each R is a rotation
 (:data:`ROTATION_TOLERANCE`), black_level < white_level, camera names are
 unique and the lights' colours all different, the board's dictionary is one
 OpenCV knows, its marker ids are unique (as integers) and in the dictionary,
-and every marker lies wholly on the board. The first violation found is a
+and every marker lies wholly on the board; the optional ``geometric_board`` (a
+ChArUco target) is one :func:`colourhs.capture.targets.charuco_layout` accepts
+(a dictionary OpenCV knows with an id for every marker, markers smaller than
+their squares). The first violation found is a
 :class:`~colourhs.capture.base.CaptureFormatError`. Re-exported by
 :mod:`colourhs.capture`.
 """
@@ -26,6 +29,7 @@ import numpy as np
 from colourhs.capture.base import CaptureFormatError
 from colourhs.capture.jsonvalues import _check_schema, _frozen, _read_json, _Validator
 from colourhs.capture.rig import Board, Camera, ImageSpec, Rig, _square_corners
+from colourhs.capture.targets import aruco_dictionary, charuco_layout
 
 DIST_LENGTHS = (0, 4, 5, 8, 12, 14)
 """Lengths of an OpenCV distortion vector that rig.json may give (as its schema says)."""
@@ -96,6 +100,7 @@ def rig_from_dict(data: Any, path: str | Path = "rig.json") -> Rig:
         board=_board(data["board"], path),
         chromatic_light=_frozen(data["chromatic_light"]["position"]),
         path=path,
+        geometric_board=_geometric_board(data.get("geometric_board"), path),
     )
 
 
@@ -191,9 +196,27 @@ def _board(obj: dict[str, Any], path: Path) -> Board:
     )
 
 
+def _geometric_board(obj: dict[str, Any] | None, path: Path) -> dict[str, Any] | None:
+    """The ChArUco description of ``geometric_board`` (None when absent), as
+    :func:`~colourhs.capture.targets.charuco_layout` returns it (ints and floats)."""
+    if obj is None:
+        return None
+    dictionary = obj["dictionary"]
+    if _dictionary_size(dictionary) is None:
+        raise CaptureFormatError(
+            path,
+            f"geometric_board.dictionary {dictionary!r} is not a known OpenCV ArUco dictionary",
+        )
+    sx, sy = obj["squares"]
+    try:
+        return charuco_layout(sx, sy, obj["square_length"], obj["marker_length"], dictionary)
+    except ValueError as err:
+        raise CaptureFormatError(path, f"geometric_board: {err}") from None
+
+
 def _dictionary_size(name: str) -> int | None:
     """Number of markers in an OpenCV predefined ArUco dictionary (None if unknown)."""
     try:
-        return int(cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, name)).bytesList.shape[0])
-    except (AttributeError, cv2.error, TypeError):
+        return int(aruco_dictionary(name).bytesList.shape[0])
+    except (ValueError, cv2.error):
         return None

@@ -230,6 +230,19 @@ def _board(args) -> int:
     return 0
 
 
+def _calibrate_rig(args) -> int:
+    from colourhs.calibration.geometric import calibrate_rig, report_summary
+
+    report = calibrate_rig(
+        args.dataset, args.out, world=args.world, base_rig=args.base_rig, report_json=args.report
+    )
+    for warning in report["warnings"]:
+        print(f"warning: {warning}", file=sys.stderr)
+    print(report_summary(report))
+    print(f"wrote {args.out}" + (f" and {args.report}" if args.report else ""))
+    return 0
+
+
 def _noise(args) -> int:
     from colourhs.calibration.noise import calibrate_noise
 

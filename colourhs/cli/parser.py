@@ -21,6 +21,7 @@ from colourhs.cli.commands import (  # noqa: F401 (imported from here by users)
     RECONSTRUCT_PARAMS,
     SNAKEFILE,
     _board,
+    _calibrate_rig,
     _chromaticity,
     _config,
     _crosstalk,
@@ -216,6 +217,40 @@ def build_parser(show_defaults: bool | Collection[str] = False) -> argparse.Argu
         "--square-length", type=float, default=None, help="side of a ChArUco square, metres"
     )
     bd.set_defaults(func=_board)
+
+    cr = _command(
+        sub, "calibrate-rig", "calibrate the cameras from views of a ChArUco target (rig.json)"
+    )
+    cr.add_argument(
+        "dataset", type=Path, help="dataset folder with geometric/POSE/CAMERA.png (capture format)"
+    )
+    cr.add_argument(
+        "out",
+        type=Path,
+        help="rig.json to write: the calibrated cameras merged into the dataset's rig.json "
+        "(or --base-rig), everything else kept",
+    )
+    cr.add_argument(
+        "--world",
+        default="reference",
+        help="world frame: reference (the first camera of rig.json at R = I, t = 0) or "
+        "board:POSE (the target's frame in geometric/POSE) (default reference)",
+    )
+    cr.add_argument(
+        "--report",
+        type=Path,
+        default=None,
+        help="also write the report here (JSON: reprojection RMS per camera and pose, "
+        "corner coverage, pair angles and baselines)",
+    )
+    cr.add_argument(
+        "--base-rig",
+        type=Path,
+        default=None,
+        help="rig.json to merge into, with the names, lights, image encoding, lens model "
+        "(the length of each dist) and geometric_board (default: the dataset's)",
+    )
+    cr.set_defaults(func=_calibrate_rig)
 
     nz = _command(sub, "noise", "sensor noise model of every camera channel (JSON)")
     nz.add_argument("dataset", type=Path, help="dataset folder (capture format)")
@@ -431,6 +466,7 @@ def _version() -> str:
 INPUTS = {
     "validate": ("dataset",),
     "markers": ("dataset",),
+    "calibrate-rig": ("dataset", "base_rig"),
     "noise": ("dataset",),
     "crosstalk": ("dataset", "poses"),
     "photometric": ("dataset", "poses", "crosstalk"),
@@ -458,6 +494,7 @@ INPUTS = {
 #: read to the end), ``ply`` (starts with a PLY header), ``json`` or ``yaml``
 #: (parses). Folders are refused.
 INPUT_KINDS = {
+    "base_rig": "json",
     "crosstalk": "json",
     "noise": "json",
     "photometric": "hdf5",

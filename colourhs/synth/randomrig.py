@@ -63,6 +63,9 @@ board poses           7 calibration poses + the held-out ``plane``:      slant <
                       deg incidence and every marker cell spans >= 2
                       px; the ``plane`` drawn as the others
                       (``corner``: at a slant to the reference camera)
+ChArUco target        sized to the drawn rig and posed from the seed's   same
+                      own stream, as in every preset (``geometric/``:
+                      :mod:`colourhs.synth.geometric_target`)
 LED profile           cos(tx)^mx cos(ty)^my (1 + sx tx + sy ty): mx      same
                       U(10, 14), my U(6, 9), sx, sy U(-0.4, 0.4) /rad;
                       axis tilted U(0, 8) deg off the optical axis

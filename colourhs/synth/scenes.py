@@ -1,4 +1,4 @@
-"""Synthetic scene geometry: marker board, white reference, statue, toy, sheet.
+"""Synthetic scene geometry: marker board, ChArUco target, white reference, statue, toy, sheet.
 
 Each builder returns a :class:`SceneGeometry`: a triangle mesh in world
 coordinates (metres) with smooth vertex normals, a material (reciprocal BRDF)
@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from colourhs.capture.targets import charuco_black_squares, charuco_markers, charuco_size
 from colourhs.common.geometry import axis_angle, outward_triangles, vertex_normals
 from colourhs.synth.brdf import Material
 
@@ -130,35 +131,73 @@ def marker_bits(dictionary: str, marker_id: int) -> np.ndarray:
     return cv2.aruco.generateImageMarker(d, int(marker_id), n) > 127
 
 
-def board_reflectance(board: dict, xy_board: np.ndarray) -> np.ndarray:
-    """Reflectance (N,) of the board at board-frame points (N, 2), metres.
+def printed_markers(target: dict) -> dict:
+    """The ArUco markers of a printed target, as a rig.json ``board`` block.
 
-    White calibration surface everywhere but the printed ArUco markers.
+    ``target`` is rig.json's ``board`` block (returned as it is) or a ChArUco
+    description (``type`` ``"charuco"``, :mod:`colourhs.capture.targets`): then its
+    markers in the white squares, their ``dictionary`` and ``marker_length``, and its
+    chessboard's ``size``, in the target frame (its chessboard's outer top-left corner
+    the origin).
     """
+    if target.get("type") != "charuco":
+        return target
+    return {
+        "dictionary": target["dictionary"],
+        "marker_length": target["marker_length"],
+        "size": list(charuco_size(target)),
+        "markers": {str(k): c.tolist() for k, c in charuco_markers(target).items()},
+    }
+
+
+def black_squares(target: dict) -> np.ndarray:
+    """The black squares (K, 4) of a printed target, x0, y0, x1, y1 in metres: a ChArUco
+    target's chessboard squares without a marker, none (0, 4) for a marker board."""
+    if target.get("type") != "charuco":
+        return np.zeros((0, 4))
+    return charuco_black_squares(target)
+
+
+def board_reflectance(target: dict, xy_board: np.ndarray) -> np.ndarray:
+    """Reflectance (N,) of a printed target at target-frame points (N, 2), metres.
+
+    ``target``: rig.json's ``board`` block or a ChArUco description
+    (:func:`printed_markers`). White (:data:`WHITE_ALBEDO`) everywhere but the
+    printed ArUco markers' black cells and the black squares (:data:`BLACK_ALBEDO`):
+    a matte print. A square covers the points with x0 <= x < x1 and y0 <= y < y1, as
+    a marker's cells do.
+    """
+    board = printed_markers(target)
     out = np.full(len(xy_board), WHITE_ALBEDO)
     L = board["marker_length"]
+    x, y = xy_board[:, 0], xy_board[:, 1]
     for mid, centre in board["markers"].items():
         bits = marker_bits(board["dictionary"], int(mid))
         n = bits.shape[0]
-        rel = (xy_board - (np.asarray(centre) - L / 2)) / L * n
+        # The points near the marker (a superset, cheap), then the exact test on them.
+        near = np.flatnonzero((np.abs(x - centre[0]) < 0.6 * L) & (np.abs(y - centre[1]) < 0.6 * L))
+        rel = (xy_board[near] - (np.asarray(centre) - L / 2)) / L * n
         inside = np.all((rel >= 0) & (rel < n), axis=1)
         cells = np.floor(rel[inside]).astype(int)
-        out[inside] = np.where(bits[cells[:, 1], cells[:, 0]], WHITE_ALBEDO, BLACK_ALBEDO)
+        out[near[inside]] = np.where(bits[cells[:, 1], cells[:, 0]], WHITE_ALBEDO, BLACK_ALBEDO)
+    for x0, y0, x1, y1 in black_squares(target):
+        out[(x >= x0) & (x < x1) & (y >= y0) & (y < y1)] = BLACK_ALBEDO
     return out
 
 
-def board_geometry(board: dict, R_b: np.ndarray, t_b: np.ndarray, name="board") -> SceneGeometry:
-    """The white marker board at pose (R_b, t_b): world X = R_b X_board + t_b.
+def board_geometry(target: dict, R_b: np.ndarray, t_b: np.ndarray, name="board") -> SceneGeometry:
+    """A printed target at pose (R_b, t_b): world X = R_b X_board + t_b.
 
-    ``board`` is rig.json's board entry (dictionary, marker_length, size,
-    markers). The white face looks along the board's -z axis.
+    ``target`` is rig.json's board entry (dictionary, marker_length, size,
+    markers) or a ChArUco description (:func:`printed_markers`). The white face
+    looks along the board's -z axis.
     """
-    corners = board_corners(board["size"]) @ R_b.T + t_b
+    corners = board_corners(printed_markers(target)["size"]) @ R_b.T + t_b
     tris = np.array([[0, 1, 2], [0, 2, 3]], np.int32)  # normal along board -z (y down)
 
     def albedo(points, _tri):
         xy = ((points - t_b) @ R_b)[:, :2]
-        return np.repeat(board_reflectance(board, xy)[:, None], 3, axis=1)
+        return np.repeat(board_reflectance(target, xy)[:, None], 3, axis=1)
 
     return merge(name, [(corners, tris, 0)], [MATTE], albedo)
 

@@ -1,12 +1,15 @@
 """Render whole synthetic datasets in the capture format (``capture-format.md``).
 
-A dataset holds: board poses for photometric calibration, chromatic
+A dataset holds: board poses for photometric calibration, views of a ChArUco
+target for a geometric calibration (``geometric/``, the target in rig.json's
+``geometric_board``: :mod:`colourhs.synth.geometric_target`), chromatic
 captures of the white reference and of every coloured object under red,
 green and blue light, the scenes ``plane`` (a held-out board pose),
 ``statue``, ``toy`` and ``sheet`` (dynamic), ground-truth meshes per frame,
 silhouettes, the true mu maps (``gt/photometric.h5``) and, as optional
 extensions of the format, the full rig model (``gt/rig_model.json``), the
-true board poses (``gt/board_poses.json``) and true chromaticity maps
+true board poses (``gt/board_poses.json``), the true target poses
+(``gt/geometric_poses.json``) and true chromaticity maps
 (``scenes/<scene>/gt/chromaticity.h5``).
 """
 
@@ -34,6 +37,7 @@ from colourhs.common.ply import write_ply
 from colourhs.common.progress import bar, stage
 from colourhs.common.raycast import raycasting_scene
 from colourhs.synth import scenes as sc
+from colourhs.synth.geometric_target import N_POSES, GeometricCaptures, geometric_captures
 from colourhs.synth.groundtruth import true_mu_maps
 from colourhs.synth.groundtruth import true_poses_csv as true_poses_csv  # re-exported
 from colourhs.synth.image_formation import (
@@ -88,6 +92,8 @@ class Preset:
     ``black_level`` and ``white_level`` are then ignored). ``bit_depth`` is the
     PNGs' (8 or 16); ``white_level`` the raw value of full scale, None for
     ``2**bit_depth - 1`` (4095 for 12-bit data in 16-bit PNGs).
+    ``geometric_poses``: poses of the ChArUco target under ``geometric/``
+    (:mod:`colourhs.synth.geometric_target`).
     """
 
     name: str
@@ -104,6 +110,7 @@ class Preset:
     white_level: int | None = None
     randomised: bool = False
     random_ranges: str = "random"
+    geometric_poses: int = N_POSES
 
 
 PRESETS = {
@@ -144,7 +151,8 @@ class Content:
     (``sheet`` takes the phase in [0, 1]). ``mask_mode``: ``"exact"``
     (coverage >= 0.5), ``"none"`` (no ``masks/`` folder), ``"dilated"`` or
     ``"eroded"`` (by 1 px, 3x3). ``extra_gt``: more about the draw for
-    ``gt/rig_model.json`` (key ``draw``).
+    ``gt/rig_model.json`` (key ``draw``). ``geometric``: the ChArUco target and its
+    poses (None: no ``geometric/`` and no ``geometric_board``).
     """
 
     white: object
@@ -154,6 +162,7 @@ class Content:
     mask_mode: str = "exact"
     scene_meta: dict = field(default_factory=lambda: SCENE_META)
     extra_gt: dict | None = None
+    geometric: GeometricCaptures | None = None
 
 
 def fixed_content(preset: Preset) -> Content:
@@ -166,11 +175,14 @@ def fixed_content(preset: Preset) -> Content:
     )
 
 
-PARTS = ("photometric", "chromatic", "scenes")
+PARTS = ("photometric", "chromatic", "scenes", "geometric")
 
 
-def rig_json(rig: RigModel, preset: Preset, board: dict) -> dict:
-    """The dataset's rig.json (capture format, version 1)."""
+def rig_json(
+    rig: RigModel, preset: Preset, board: dict, geometric_board: dict | None = None
+) -> dict:
+    """The dataset's rig.json (capture format, version 1), with the ChArUco target's
+    ``geometric_board`` when one is given."""
     return {
         "format": FORMAT,
         "units": "m",
@@ -183,6 +195,7 @@ def rig_json(rig: RigModel, preset: Preset, board: dict) -> dict:
         },
         "cameras": [c.to_json() for c in rig.cameras],
         "board": board,
+        **({} if geometric_board is None else {"geometric_board": geometric_board}),
         "chromatic_light": {"position": rig.chromatic_lights["red"].position.tolist()},
     }
 
@@ -232,7 +245,7 @@ def _jobs(preset: Preset, poses, parts, content: Content | None = None, frames=N
         R, t = poses[-1]
         jobs.append(
             _Job(
-                lambda: sc.board_geometry(board, R, t, name="plane"),
+                lambda R=R, t=t: sc.board_geometry(board, R, t, name="plane"),
                 ("scenes/plane/frames/000000",),
                 mask="scenes/plane/masks/000000" if masks else None,
                 gt_mesh="scenes/plane/gt/000000.ply",
@@ -258,6 +271,16 @@ def _jobs(preset: Preset, poses, parts, content: Content | None = None, frames=N
                     (f"scenes/sheet/frames/{f:06d}",),
                     mask=f"scenes/sheet/masks/{f:06d}" if masks else None,
                     gt_mesh=f"scenes/sheet/gt/{f:06d}.ply",
+                )
+            )
+    geometric = content.geometric
+    if "geometric" in parts and geometric is not None:
+        target = geometric.target
+        for name, (R, t) in zip(geometric.names, geometric.poses, strict=True):
+            jobs.append(
+                _Job(
+                    lambda R=R, t=t: sc.board_geometry(target, R, t, name="charuco"),
+                    (f"geometric/{name}",),
                 )
             )
     return [j for j in jobs if j.frames or j.chromatic]
@@ -302,8 +325,9 @@ class RenderSelection:
     Attributes
     ----------
     parts : subset of :data:`PARTS` (``"photometric"``, ``"chromatic"``,
-        ``"scenes"``) to render; names. Default all three: a complete dataset in
-        the capture format, on any rig.
+        ``"scenes"``, ``"geometric"``) to render; names. Default all four: a
+        complete dataset in the capture format, on any rig. rig.json (with its
+        ``geometric_board``) and ``gt/`` are the same whatever the parts.
     scenes : render only these of ``plane``, ``statue``, ``toy``, ``sheet`` (their
         frames and chromatic captures); names. Default (None) all four: every
         preset, fixed or randomised, has them.
@@ -434,6 +458,7 @@ def synthesise(
         rig = make_rig(p.width, p.height, p.focal_px, rng, nuis)
         poses = board_poses(rig, p.board, p.n_poses + 1, rng)
         content = fixed_content(p)
+    content = replace(content, geometric=geometric_captures(rig, p.geometric_poses, seed))
     tmp = out.with_name(out.name + ".partial")
     if tmp.exists():
         shutil.rmtree(tmp)
@@ -469,7 +494,9 @@ def _write_dataset(root, rig, p, poses, content, seed, nuis, selection, workers)
     """Write the dataset of a drawn rig, preset, board poses and content into ``root``:
     rig.json, the ground truth and the images ``selection`` (its frames checked) asks."""
     parts, scenes = selection.parts, selection.scenes
-    (root / "rig.json").write_text(json.dumps(rig_json(rig, p, p.board), indent=2))
+    geometric = content.geometric
+    target = None if geometric is None else geometric.target
+    (root / "rig.json").write_text(json.dumps(rig_json(rig, p, p.board, target), indent=2))
     gt = root / "gt"
     gt.mkdir()
     model = rig.to_json()
@@ -477,11 +504,9 @@ def _write_dataset(root, rig, p, poses, content, seed, nuis, selection, workers)
         model["draw"] = content.extra_gt
     (gt / "rig_model.json").write_text(json.dumps(model, indent=1))
     names = [f"pose{k:02d}" for k in range(len(poses) - 1)] + ["plane"]
-    (gt / "board_poses.json").write_text(
-        json.dumps(
-            {n: {"R": R.tolist(), "t": t.tolist()} for n, (R, t) in zip(names, poses, strict=True)}
-        )
-    )
+    (gt / "board_poses.json").write_text(_poses_json(names, poses))
+    if geometric is not None:
+        (gt / "geometric_poses.json").write_text(_poses_json(geometric.names, geometric.poses))
     stage(log, f"synth {p.name}: ground-truth mu maps (gt/photometric.h5)")
     with h5py.File(gt / "photometric.h5", "w") as f:
         f.attrs["note"] = "mu = rho / sigma (eq. 2) on pixel centres; one scale per pair is free"
@@ -503,6 +528,13 @@ def _write_dataset(root, rig, p, poses, content, seed, nuis, selection, workers)
     views = bar(None, f"synth {p.name}", len(jobs), unit="view")
     _render_all(args, workers, views)
     views.close()
+
+
+def _poses_json(names, poses) -> str:
+    """True poses as JSON: name -> {"R": 3x3, "t": [3]} (world X = R X_board + t, metres)."""
+    return json.dumps(
+        {n: {"R": R.tolist(), "t": t.tolist()} for n, (R, t) in zip(names, poses, strict=True)}
+    )
 
 
 def _render_all(args, workers, bar):

@@ -99,8 +99,9 @@ def test_whole_job_runs_every_stage_reading_only_its_declared_inputs(whole_job):
     assert n_jobs == 68 and not problems, "\n".join(sorted(problems))
     work = whole_job.workdir
     summary = json.loads((work / "results" / "t" / "capture" / "summary.json").read_text())
-    # 7 poses x 3 cameras + 3 chromatic objects x 3 colours x 3 + 6 frames x 3 + 18 masks.
-    assert summary["images"] == 21 + 27 + 18 + 18
+    # 7 poses x 3 cameras + 3 chromatic objects x 3 colours x 3 + 6 frames x 3 + 18 masks
+    # + 15 geometric poses x 3 cameras.
+    assert summary["images"] == 21 + 27 + 18 + 18 + 45
 
 
 def _metrics(whole_job) -> pd.DataFrame:
@@ -578,7 +579,7 @@ def test_every_option_shows_its_default():
             if tuning or a.default not in (None, "", []):
                 checked.append(f"{command} {a.option_strings[0]}")
                 assert "default" in (a.help or ""), (command, a.option_strings, a.help)
-    assert len(checked) == 39, checked  # 39 options with a default (--box-px)
+    assert len(checked) == 40, checked  # 40 options with a default (--box-px)
 
 
 def _subcommands():
@@ -604,7 +605,7 @@ def test_help_speaks_to_users_with_one_description_per_command():
     assert parser.description.startswith("Colour Helmholtz Stereopsis")
     assert "colourhs run DATASET" in parser.description
     assert not re.search(r":(func|mod):|``", parser.format_help())
-    assert len(commands) == 17
+    assert len(commands) == 18
     for name, p in commands.items():
         assert p.description and p.description[0].isupper(), name
         for a in p._actions:

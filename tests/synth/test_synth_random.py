@@ -98,7 +98,9 @@ def test_full_datasets_validate_and_have_the_layout(full_datasets):
         assert ds.gt_photometric is not None
         # Nothing beyond the format tells the preset or the seed.
         rig = json.loads((root / "rig.json").read_text())
-        assert set(rig) == {"format", "units", "image", "cameras", "board", "chromatic_light"}
+        keys = {"format", "units", "image", "cameras", "board", "chromatic_light"}
+        assert set(rig) == keys | {"geometric_board"}
+        assert len(ds.geometric_poses) == 15 == len(summary["geometric_poses"])
         for cam in rig["cameras"]:
             assert set(cam) == {"name", "K", "dist", "R", "t", "light"}
             assert cam["light"]["offset"] == [0.0, 0.0, 0.0]
