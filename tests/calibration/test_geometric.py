@@ -48,10 +48,10 @@ from colourhs.common.geometry import (
     camera_centre,
     look_at,
     normalised_coordinates,
-    pixels_of,
     project,
     ray_directions,
 )
+from colourhs.evaluation.rig_errors import distortion_field_error
 
 W, H = 640, 480
 LAYOUT = charuco_layout(10, 8, 0.025, 0.019, "DICT_4X4_50")  # 0.25 x 0.2 m, 63 corners
@@ -151,24 +151,8 @@ def _rotation_deg(Ra: np.ndarray, Rb: np.ndarray) -> float:
 
 def _field_error(cam, K, dist, corners_px: np.ndarray, size=(W, H)) -> float:
     """Largest difference (pixels) of the lens's displacement, true against estimated,
-    over the image points inside the convex hull of ``corners_px``: at each point the
-    ideal (distortion-free) pixel of its true ray, and the displacement each model
-    makes there with its own K."""
-    w, h = size
-    gu, gv = np.meshgrid(np.linspace(0, w - 1, 65), np.linspace(0, h - 1, 49))
-    grid = np.stack([gu, gv], axis=-1).reshape(-1, 2)
-    hull = cv2.convexHull(np.asarray(corners_px, np.float32))
-    inside = [cv2.pointPolygonTest(hull, (float(u), float(v)), False) >= 0 for u, v in grid]
-    grid = grid[np.array(inside)]
-    xy = normalised_coordinates(grid, cam.K, cam.dist)
-    u_true, v_true = pixels_of(xy[:, 0], xy[:, 1], cam.K, cam.dist)
-    ideal = xy @ cam.K[:2, :2].T + cam.K[:2, 2]  # the same rays without distortion
-    yn = (ideal[:, 1] - K[1, 2]) / K[1, 1]
-    xn = (ideal[:, 0] - K[0, 2] - K[0, 1] * yn) / K[0, 0]
-    u_est, v_est = pixels_of(xn, yn, K, dist)
-    shift_true = np.column_stack([u_true, v_true]) - ideal
-    shift_est = np.column_stack([u_est, v_est]) - ideal
-    return float(np.linalg.norm(shift_true - shift_est, axis=1).max())
+    inside the convex hull of ``corners_px`` (:func:`distortion_field_error`)."""
+    return distortion_field_error(cam.K, cam.dist, K, dist, size, corners_px)
 
 
 def _errors(cams, cal, detections) -> dict[str, dict[str, float]]:
