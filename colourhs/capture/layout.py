@@ -32,7 +32,12 @@ from colourhs.capture.png import (
     read_image,
     read_mask,
 )
-from colourhs.capture.rig import Rig, light_offset_warning, reciprocity_defect_deg
+from colourhs.capture.rig import (
+    Rig,
+    light_offset_problem,
+    light_offset_warning,
+    reciprocity_defect_deg,
+)
 from colourhs.capture.rigjson import load_rig
 from colourhs.common.progress import bar
 
@@ -438,6 +443,9 @@ def validate(dataset: str | Path, summary_json: str | Path | None = None) -> dic
             continue
         n_pixels += saturated.size
         n_saturated += int(saturated.sum())
+    offset = light_offset_problem(ds.rig)
+    if offset is not None:
+        problems.append(CaptureFormatError(ds.rig.path, offset))
     if len(problems) == 1:
         raise problems[0]
     if problems:

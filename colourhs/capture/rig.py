@@ -28,6 +28,15 @@ readings of a glossy lobe (GGX, roughness 0.1) differ by about 1 %, a mid-scale
 reading's sensor noise, so beyond it a glossy surface's rows carry an error the
 noise model does not have."""
 
+RECIPROCITY_DEFECT_LIMIT_DEG = 5.0
+"""Largest half-vector defect at the rig's fixation point that validation accepts
+(:func:`light_offset_problem`, degrees). Why it holds on any rig: an angle, scaled by
+the rig; around it a glossy surface's two readings no longer belong to one
+reciprocal configuration: on random rigs its depth error grows faster than the angle
+(``benchmarks/light_offset.py``) to tens of times its error bar, while matte
+surfaces stay exact, so beyond it the rig is not a Helmholtz rig but two cameras
+with lamps beside them."""
+
 
 @dataclass(frozen=True)
 class ImageSpec:
@@ -293,6 +302,28 @@ def light_offset_warning(rig: Rig, tolerance_deg: float | None = None) -> str | 
         "reciprocity then holds for matte surfaces only: the depth of a glossy surface can "
         "be off by more than its depth_sigma. Put each light at its lens centre (or a ring "
         "of lights around the lens)."
+    )
+
+
+def light_offset_problem(rig: Rig, limit_deg: float | None = None) -> str | None:
+    """Why the rig's lights sit too far beside their lenses for colour HS, else None.
+
+    Beyond the paper. The largest :meth:`Rig.reciprocity_defect` at the rig's
+    fixation point against ``limit_deg`` (default
+    :data:`RECIPROCITY_DEFECT_LIMIT_DEG`): validation refuses a rig beyond it.
+    """
+    limit = RECIPROCITY_DEFECT_LIMIT_DEG if limit_deg is None else limit_deg
+    defect = reciprocity_defect_deg(rig)
+    if defect is None or defect <= limit:
+        return None
+    offset = max(float(np.linalg.norm(c.light_offset)) for c in rig.cameras)
+    return (
+        f"the lights sit up to {offset * 1e3:.0f} mm beside the lenses: at the rig's "
+        f"fixation point a reciprocal pair's two readings see the surface at half-vectors "
+        f"{defect:.1f} degrees apart (limit {limit:g}). Helmholtz reciprocity (eq. 3) no "
+        "longer pairs them: a glossy surface's depth would be off by many times its "
+        "error bar. Mount each light at its lens (or a ring of lights around it), or check "
+        "light.offset (metres, in the camera's coordinates)"
     )
 
 

@@ -124,3 +124,32 @@ def test_validate_summary_carries_the_defect_and_warns(tmp_path, capsys):
     assert data["reciprocity_defect_deg"] == pytest.approx(reciprocity_defect_deg(load_rig(root)))
     assert data["warnings"] == [light_offset_warning(load_rig(root))]
     assert f"warning: {root / 'rig.json'}: the lights sit" in capsys.readouterr().err
+
+
+def test_validate_refuses_lights_too_far_beside_their_lenses(tmp_path, capsys):
+    """Beyond RECIPROCITY_DEFECT_LIMIT_DEG at the fixation point the rig is refused,
+    naming rig.json, the offset and the angle; within it only warned about."""
+    from colourhs.capture import validate
+    from colourhs.capture.base import CaptureFormatError
+    from colourhs.capture.rig import RECIPROCITY_DEFECT_LIMIT_DEG, light_offset_problem
+
+    root = make_dataset(tmp_path / "d")
+    rig = load_rig(root)
+    assert reciprocity_defect_deg(rig) < RECIPROCITY_DEFECT_LIMIT_DEG
+    assert light_offset_problem(rig) is None
+
+    def far(doc):
+        doc["cameras"][2]["light"]["offset"] = [0.0, 0.3, 0.0]
+
+    edit_json(root / "rig.json", far)
+    rig = load_rig(root)
+    defect = reciprocity_defect_deg(rig)
+    assert defect > RECIPROCITY_DEFECT_LIMIT_DEG
+    with pytest.raises(CaptureFormatError) as err:
+        validate(root)
+    assert err.value.path == root / "rig.json"
+    text = str(err.value)
+    assert "300 mm beside the lenses" in text and f"{defect:.1f} degrees" in text
+    assert light_offset_problem(rig, limit_deg=defect + 0.1) is None
+    assert main(["validate", str(root), "--no-rig-check"]) == 1
+    assert "limit 5)" in capsys.readouterr().err
