@@ -281,6 +281,15 @@ def cameras_fixation_point(cameras) -> np.ndarray:
     return fixation_point(axes, [c.centre for c in cameras])
 
 
+def _lights_beyond(rig: Rig, limit_deg: float) -> tuple[float, float] | None:
+    """(the defect at the fixation point, degrees; the largest light offset, metres)
+    where the defect exceeds ``limit_deg``, else None."""
+    defect = reciprocity_defect_deg(rig)
+    if defect is None or defect <= limit_deg:
+        return None
+    return defect, max(float(np.linalg.norm(c.light_offset)) for c in rig.cameras)
+
+
 def light_offset_warning(rig: Rig, tolerance_deg: float | None = None) -> str | None:
     """A warning where the rig's lights sit beside its lenses far enough to matter, else None.
 
@@ -291,10 +300,10 @@ def light_offset_warning(rig: Rig, tolerance_deg: float | None = None) -> str | 
     be off by more than its ``depth_sigma``, which does not model it.
     """
     tolerance = RECIPROCITY_DEFECT_TOLERANCE_DEG if tolerance_deg is None else tolerance_deg
-    defect = reciprocity_defect_deg(rig)
-    if defect is None or defect <= tolerance:
+    beyond = _lights_beyond(rig, tolerance)
+    if beyond is None:
         return None
-    offset = max(float(np.linalg.norm(c.light_offset)) for c in rig.cameras)
+    defect, offset = beyond
     return (
         f"{rig.path}: the lights sit up to {offset * 1e3:.0f} mm beside the lenses; at the "
         f"rig's fixation point a reciprocal pair's two readings see the surface at "
@@ -313,10 +322,10 @@ def light_offset_problem(rig: Rig, limit_deg: float | None = None) -> str | None
     :data:`RECIPROCITY_DEFECT_LIMIT_DEG`): validation refuses a rig beyond it.
     """
     limit = RECIPROCITY_DEFECT_LIMIT_DEG if limit_deg is None else limit_deg
-    defect = reciprocity_defect_deg(rig)
-    if defect is None or defect <= limit:
+    beyond = _lights_beyond(rig, limit)
+    if beyond is None:
         return None
-    offset = max(float(np.linalg.norm(c.light_offset)) for c in rig.cameras)
+    defect, offset = beyond
     return (
         f"the lights sit up to {offset * 1e3:.0f} mm beside the lenses: at the rig's "
         f"fixation point a reciprocal pair's two readings see the surface at half-vectors "
