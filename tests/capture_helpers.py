@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import re
+import shutil
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -128,6 +129,19 @@ def make_dataset(root: Path, bit_depth: int = 16) -> Path:
     for frame in ("000000", "000001"):
         write_camera_images(wave / "frames" / frame, bit_depth)
     (root / "notes.txt").write_text("extra files are ignored\n")
+    return root
+
+
+def add_geometric(root: Path, poses=("p0", "p1")) -> Path:
+    """Give a :func:`make_dataset` folder ``geometric/<pose>/`` views (copies of its first
+    board pose's images) and rig.json a ``geometric_board``: the layout of the
+    geometric captures, not a calibratable set."""
+    from colourhs.capture.targets import charuco_layout
+
+    for pose in poses:
+        shutil.copytree(root / "photometric" / POSES[0], root / "geometric" / pose)
+    board = charuco_layout(7, 5, 0.04, 0.03, "DICT_4X4_50")
+    edit_json(root / "rig.json", lambda rig: rig.update(geometric_board=board))
     return root
 
 

@@ -64,7 +64,7 @@ from colourhs.capture import (
     MIN_SIGNAL,
     CaptureFormatError,
     Dataset,
-    open_dataset,
+    dataset_of,
     read_image,
     read_mask,
 )
@@ -447,11 +447,7 @@ def chromaticity_maps(
         image of the object (the figure's), ``camera``: that camera's name.
     """
     # The images it decodes are checked as they are read (read_image), not every header.
-    dataset = (
-        dataset_dir
-        if isinstance(dataset_dir, Dataset)
-        else open_dataset(dataset_dir, check_images=False)
-    )
+    dataset = dataset_of(dataset_dir)
     _check_object(dataset, obj)
     maps, infos = {}, {}
     cams = bar(dataset.rig.camera_names, f"chromaticity {obj}", unit="camera")

@@ -96,7 +96,7 @@ from colourhs.calibration.crosstalk_led import (
     read_board_shots,
     shrink_towards_filter,
 )
-from colourhs.capture import COLOURS, open_dataset, read_image
+from colourhs.capture import COLOURS, Dataset, dataset_of, read_image
 from colourhs.common.files import write_json
 from colourhs.common.progress import bar
 
@@ -157,7 +157,7 @@ def unmix(image: np.ndarray, M, uv: np.ndarray | None = None) -> np.ndarray:
 
 # --------------------------------------------------------------------------- calibration files
 def calibrate_crosstalk(
-    dataset_dir: str | Path,
+    dataset_dir: str | Path | Dataset,
     out_json: str | Path | None = None,
     poses_csv: str | Path | None = None,
     spatial: bool | None = None,
@@ -191,7 +191,7 @@ def calibrate_crosstalk(
     board captures read and the board poses, and logs a line at INFO per stage
     of the LED factor (:mod:`colourhs.common.progress`).
     """
-    ds = open_dataset(dataset_dir, check_images=False, scenes=())
+    ds = dataset_of(dataset_dir, scenes=())
     if "white" not in ds.chromatic_objects:
         raise ValueError(f"{ds.root / 'chromatic' / 'white'}: missing (needed for cross-talk)")
     spatial = (poses_csv is not None) if spatial is None else bool(spatial)

@@ -97,6 +97,7 @@ __all__ = [
     "calibration_report",
     "corner_coverage",
     "detect_charuco",
+    "in_base_world",
     "in_world",
     "lens_model",
     "merge_rig",
@@ -437,7 +438,9 @@ def _check_world(world: str, views) -> None:
         return
     used = sorted({p for per_pose in views.values() for p in per_pose})
     if not world.startswith("board:"):
-        raise ValueError(f"world {world!r}: expected 'reference' or 'board:POSE'")
+        raise ValueError(
+            f"world {world!r}: expected 'reference' or 'board:POSE' (calibrate-rig: also 'base')"
+        )
     if world.removeprefix("board:") not in used:
         raise ValueError(
             f"world {world!r}: no usable view of the target in pose "
@@ -848,6 +851,35 @@ def in_world(cal: Calibration, world: str) -> Calibration:
         R0, t0 = Rb.T, -Rb.T @ tb
     else:
         raise ValueError(f"world {world!r}: expected 'reference' or 'board:POSE'")
+    return _moved(cal, R0, t0, world)
+
+
+def in_base_world(cal: Calibration, old_cameras: list[Mapping[str, Any]]) -> Calibration:
+    """``cal`` expressed in the world frame of an existing rig.json's cameras (``world``
+    ``"base"``): the rigid map of :func:`world_transform` from that world to ``cal``'s,
+    inverted, so that ground truth, lights and anything else given in the old world
+    keep their coordinates.
+
+    Raises
+    ------
+    ValueError
+        Where the old cameras do not describe the rig (:func:`_world_fits`: beyond
+        :data:`WORLD_FIT_TOL_DEG` or :data:`WORLD_FIT_TOL_FRACTION` after the fit).
+    """
+    A, b, rot_rms, centre_rms = world_transform(old_cameras, cal.R, cal.t)
+    if not _world_fits(cal, rot_rms, centre_rms):
+        raise ValueError(
+            "world 'base': the base rig's cameras do not match the calibrated ones "
+            f"(rotations {rot_rms:.2f} deg RMS, centres {centre_rms * 1e3:.1f} mm RMS apart "
+            f"after the best rigid fit; at most {WORLD_FIT_TOL_DEG:g} deg and "
+            f"{WORLD_FIT_TOL_FRACTION:.0%} of the baseline), so their world frame is unknown: "
+            "give their poses roughly, or choose the world 'reference' or 'board:POSE'"
+        )
+    return _moved(cal, A.T, -A.T @ b, "base")  # X_old = A^T (X_new - b)
+
+
+def _moved(cal: Calibration, R0: np.ndarray, t0: np.ndarray, world: str) -> Calibration:
+    """``cal``'s cameras and board poses in the frame ``X_new = R0 X_old + t0``."""
     # X_new = R0 X_old + t0; a camera's x_c = R X_old + t = R R0^T (X_new - t0) + t.
     R = {c: _orthonormal(cal.R[c] @ R0.T) for c in cal.cameras}
     t = {c: cal.t[c] - R[c] @ t0 for c in cal.cameras}
@@ -1067,10 +1099,7 @@ def merge_rig(base: Mapping[str, Any], cal: Calibration) -> tuple[dict[str, Any]
         )
     warnings = []
     A, b, rot_rms, centre_rms = world_transform(entries, cal.R, cal.t)
-    centres = [camera_centre(cal.R[c], cal.t[c]) for c in cal.cameras]
-    baselines = [np.linalg.norm(p - q) for i, p in enumerate(centres) for q in centres[i + 1 :]]
-    scale = float(np.mean(baselines)) if baselines else 0.0
-    usable = rot_rms <= WORLD_FIT_TOL_DEG and centre_rms <= WORLD_FIT_TOL_FRACTION * scale
+    usable = _world_fits(cal, rot_rms, centre_rms)
     light = rig.get("chromatic_light", {})
     if "position" in light:
         if usable:
@@ -1094,6 +1123,16 @@ def merge_rig(base: Mapping[str, Any], cal: Calibration) -> tuple[dict[str, Any]
         entry["t"] = np.asarray(cal.t[cam], float).tolist()
     fit = {"rotation_rms_deg": rot_rms, "centre_rms_mm": 1e3 * centre_rms, "carried": usable}
     return rig, {"old_world": fit, "warnings": warnings}
+
+
+def _world_fits(cal: Calibration, rot_rms_deg: float, centre_rms_m: float) -> bool:
+    """Whether an old rig's cameras fit ``cal``'s (:func:`world_transform`'s residuals)
+    within :data:`WORLD_FIT_TOL_DEG` and :data:`WORLD_FIT_TOL_FRACTION` of ``cal``'s mean
+    baseline: then they describe the rig and their world frame is known."""
+    centres = [camera_centre(cal.R[c], cal.t[c]) for c in cal.cameras]
+    baselines = [np.linalg.norm(p - q) for i, p in enumerate(centres) for q in centres[i + 1 :]]
+    scale = float(np.mean(baselines)) if baselines else 0.0
+    return rot_rms_deg <= WORLD_FIT_TOL_DEG and centre_rms_m <= WORLD_FIT_TOL_FRACTION * scale
 
 
 def _orthonormal(R: np.ndarray) -> np.ndarray:
@@ -1130,8 +1169,10 @@ def calibrate_rig(
         The rig.json to write: the calibrated cameras merged into the base
         (:func:`merge_rig`), checked by rig.json's reader first, written atomically.
     world : str
-        ``"reference"`` (the first camera of rig.json at R = I, t = 0) or
-        ``"board:<pose>"`` (the target's frame in that pose).
+        ``"reference"`` (the first camera of rig.json at R = I, t = 0),
+        ``"board:<pose>"`` (the target's frame in that pose) or ``"base"`` (the base
+        rig.json's own world, :func:`in_base_world`: its cameras must be roughly right;
+        ground truth and world positions given in it stay valid).
     base_rig : str or Path, optional
         The rig.json to merge into and take the names, image encoding, model
         (:func:`lens_model` of each camera) and ``geometric_board`` from; default the
@@ -1142,13 +1183,18 @@ def calibrate_rig(
     Returns
     -------
     dict
-        The report, with the warnings of the merge among its ``warnings``.
+        The report, with the warnings of the merge among its ``warnings`` and
+        ``rig_check``, the calibrated rig against the photometric captures (None
+        without them).
 
     Raises
     ------
     ValueError
         No ``geometric/`` folder, no ``geometric_board`` in rig.json, too few views of a
         camera, a camera that cannot be posed, or a rig.json that the result would break.
+        Also where the dataset has photometric captures and the calibrated rig
+        disagrees with them (:func:`colourhs.calibration.rig_check.validate_rig`: a
+        camera moved between the geometric and the photometric captures).
     """
     from colourhs.capture import read_image, rig_from_dict
 
@@ -1166,7 +1212,7 @@ def calibrate_rig(
             "writes one beside the print)"
         )
     files = _geometric_files(root, rig.camera_names)
-    if world != "reference":  # a pose that was not captured is named before any work
+    if world not in ("reference", "base"):  # a pose not captured is named before any work
         _check_world(world, {"captures": dict.fromkeys(files)})
     detections: dict[str, dict[str, tuple[np.ndarray, np.ndarray]]] = {
         c: {} for c in rig.camera_names
@@ -1178,17 +1224,46 @@ def calibrate_rig(
     model = max(models, key=lambda m: (m.n_dist, m.skew, m.written))
     size = (rig.image.width, rig.image.height)
     stage(log, f"calibrate-rig: bundle adjustment of {len(files)} poses")
-    cal = calibrate_cameras(detections, layout, size, model, world)
+    fitted_world = "reference" if world == "base" else world
+    cal = calibrate_cameras(detections, layout, size, model, fitted_world)
+    if world == "base":
+        cal = in_base_world(cal, base["cameras"])
     report = calibration_report(cal, detections, size)
     new_rig, info = merge_rig(base, cal)
     report["old_world"] = info["old_world"]
     report["warnings"] += info["warnings"]
-    rig_from_dict(new_rig, out_json)  # the package's reader accepts it, or nothing is written
+    checked = rig_from_dict(new_rig, out_json)  # the reader accepts it, or nothing is written
+    report["rig_check"] = _photometric_check(root, checked)
     with atomic_output(out_json) as tmp:
         tmp.write_text(_rig_text(new_rig), encoding="utf-8")
     if report_json is not None:
         write_json(report_json, report)
     return report
+
+
+def _photometric_check(root: Path, rig) -> dict | None:
+    """The calibrated ``rig`` against the dataset's photometric captures
+    (:func:`colourhs.calibration.rig_check.validate_rig`), before it is written: cameras
+    moved between the geometric and the photometric captures are a ValueError here.
+    None where the dataset has no photometric poses (or is the geometric captures
+    alone)."""
+    from colourhs.calibration.rig_check import validate_rig
+    from colourhs.capture import CaptureFormatError, open_dataset
+
+    try:
+        ds = open_dataset(root, check_images=False, scenes=())
+    except CaptureFormatError:  # geometric/ and rig.json alone: nothing to check against
+        return None
+    if not ds.poses:
+        return None
+    try:
+        return validate_rig(replace(ds, rig=rig))
+    except CaptureFormatError as e:
+        raise ValueError(
+            f"{rig.path}: not written: the calibrated cameras disagree with the photometric "
+            f"captures of {root} ({e.problem}); were cameras moved between the geometric/ "
+            "and the photometric/ captures?"
+        ) from None
 
 
 def _geometric_files(root: Path, cameras: tuple[str, ...]) -> dict[str, dict[str, Path]]:

@@ -39,7 +39,7 @@ from scipy.ndimage import map_coordinates
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
-from colourhs.capture import Board, Camera, Rig, open_dataset, read_image
+from colourhs.capture import Board, Camera, Dataset, Rig, dataset_of, read_image
 from colourhs.common.files import atomic_output
 from colourhs.common.geometry import normalised_coordinates, pixels_of, project, triangulate
 from colourhs.common.progress import bar
@@ -490,7 +490,7 @@ def csv_columns(cameras: tuple[str, ...] | list[str]) -> list[str]:
 
 
 def marker_poses(
-    dataset_dir: str | Path, out_csv: str | Path, min_markers: int = 3
+    dataset_dir: str | Path | Dataset, out_csv: str | Path, min_markers: int = 3
 ) -> pd.DataFrame:
     """Board pose and calibration plane of every photometric shot of a dataset.
 
@@ -498,7 +498,7 @@ def marker_poses(
 
     Parameters
     ----------
-    dataset_dir : str or Path
+    dataset_dir : str, Path or Dataset
         Dataset folder (capture format, version 1); only rig.json and ``photometric/``
         are used.
     out_csv : str or Path
@@ -531,9 +531,8 @@ def marker_poses(
     """
     if int(min_markers) < 1:
         raise ValueError(f"min_markers must be at least 1, got {min_markers}")
-    dataset_dir = Path(dataset_dir)
     out_csv = Path(out_csv)
-    ds = open_dataset(dataset_dir, check_images=False, scenes=())
+    ds = dataset_of(dataset_dir, scenes=())
     rig = ds.rig
     rows = []
     for pose in bar(ds.poses, "markers: board poses", unit="pose"):
@@ -545,7 +544,7 @@ def marker_poses(
         n_tri = sum(sum(m in d for d in detections.values()) >= 2 for m in seen)
         if n_tri < min_markers:
             warnings.warn(
-                f"{dataset_dir}: pose {pose!r} left out: {n_tri} marker(s) seen by two or more "
+                f"{ds.root}: pose {pose!r} left out: {n_tri} marker(s) seen by two or more "
                 f"cameras, {min_markers} needed "
                 + "; ".join(f"{c}: {sorted(d) or 'none'}" for c, d in detections.items()),
                 stacklevel=2,
@@ -556,7 +555,7 @@ def marker_poses(
     if len(rows) < 3:
         usable = [r["pose"] for r in rows]
         raise ValueError(
-            f"{dataset_dir}: only {len(rows)} usable board pose(s) {usable} of the poses found "
+            f"{ds.root}: only {len(rows)} usable board pose(s) {usable} of the poses found "
             f"{list(ds.poses)}; at least 3 are needed (each with >= {min_markers} markers "
             "seen by two or more cameras)"
         )

@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from colourhs.capture import COLOURS, open_dataset, read_image
+from colourhs.capture import COLOURS, dataset_of, read_image
 from colourhs.common.files import write_json
 from colourhs.common.progress import bar
 
@@ -154,7 +154,7 @@ def calibrate_noise(dataset_dir, out_json=None) -> NoiseModel:
     cross-talk unmixing, which changes the variance by well under 1 %). Shows a
     bar over the images read (:func:`colourhs.common.progress.bar`).
     """
-    ds = open_dataset(dataset_dir, check_images=False, scenes=())
+    ds = dataset_of(dataset_dir, scenes=())
     gains, offsets, out = {}, {}, {"cameras": {}, "units": "full scale; var = gain * i + offset"}
     paths = {
         cam: [ds.photometric_image(p, cam) for p in ds.poses]

@@ -101,7 +101,7 @@ from colourhs.calibration.photometric_solve import (
     shading_coordinates,
     solve_mu_grids,
 )
-from colourhs.capture import COLOURS, Rig, open_dataset, read_image
+from colourhs.capture import COLOURS, Rig, dataset_of, read_image
 from colourhs.common.files import atomic_output, note_read, sha256_files
 from colourhs.common.progress import bar, stage
 
@@ -246,7 +246,7 @@ def read_poses_table(poses_csv):
 def load_views(dataset_dir, poses_csv, crosstalk_json=None) -> tuple[Rig, list[PoseView]]:
     """Read every usable board pose (from the marker poses table) and its images
     (a bar over the poses, :func:`colourhs.common.progress.bar`)."""
-    ds = open_dataset(dataset_dir, check_images=False, scenes=())
+    ds = dataset_of(dataset_dir, scenes=())
     table = read_poses_table(poses_csv)
     mixing = load_crosstalk(crosstalk_json) if crosstalk_json else {}
     views = []
@@ -468,11 +468,11 @@ def photometric_maps(
     import the figures.
     """
     t0 = perf_counter()
-    rig, views = load_views(dataset_dir, poses_csv, crosstalk_json)
+    ds = dataset_of(dataset_dir, scenes=())
+    rig, views = load_views(ds, poses_csv, crosstalk_json)
     mixing_sd = load_mixing_sd(crosstalk_json) if crosstalk_json else None
     mixing_cov = load_mixing_cov(crosstalk_json) if crosstalk_json else None
     result = calibrate(rig, views, mixing_sd=mixing_sd, mixing_cov=mixing_cov, **params)
-    ds = open_dataset(dataset_dir, check_images=False, scenes=())
     inputs = [ds.photometric_image(v.name, c) for v in views for c in rig.camera_names]
     inputs += [Path(poses_csv)] + ([Path(crosstalk_json)] if crosstalk_json else [])
     stage(log, f"photometric: writing {Path(out_h5).name}", t0)

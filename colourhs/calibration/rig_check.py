@@ -280,7 +280,7 @@ def validate_rig(ds: Dataset) -> dict:
     check = check_rig(ds)
     problems = rig_problems(check)
     if problems:
-        raise CaptureFormatError(ds.root / "rig.json", "; ".join(problems))
+        raise CaptureFormatError(ds.rig.path, "; ".join(problems))
     return {
         k: (None if isinstance(v, float) and not np.isfinite(v) else v)
         for k, v in asdict(check).items()

@@ -50,7 +50,7 @@ from colourhs.capture.base import (
 
 if TYPE_CHECKING:  # the names _LAZY loads, for type checkers (and the import graph)
     from colourhs.capture.dataset import Dataset, Scene
-    from colourhs.capture.layout import all_images, open_dataset, validate
+    from colourhs.capture.layout import all_images, dataset_of, open_dataset, validate
     from colourhs.capture.png import read_image, read_mask
     from colourhs.capture.rig import Board, Camera, ImageSpec, ReciprocalPair, Rig
     from colourhs.capture.rigjson import (
@@ -64,7 +64,7 @@ if TYPE_CHECKING:  # the names _LAZY loads, for type checkers (and the import gr
 #: Submodule -> the public names it holds, imported on first use (:func:`__getattr__`).
 _LAZY = {
     "dataset": ("Dataset", "Scene"),
-    "layout": ("all_images", "open_dataset", "validate"),
+    "layout": ("all_images", "dataset_of", "open_dataset", "validate"),
     "png": ("read_image", "read_mask"),
     "rig": ("Board", "Camera", "ImageSpec", "ReciprocalPair", "Rig"),
     "rigjson": ("DIST_LENGTHS", "ROTATION_TOLERANCE", "load_rig", "rig_from_dict", "rig_schema"),
@@ -89,6 +89,7 @@ __all__ = [
     "Scene",
     "UnknownNameError",
     "all_images",
+    "dataset_of",
     "load_rig",
     "open_dataset",
     "read_image",

@@ -74,6 +74,7 @@ def open_dataset(
     check_images: bool = True,
     scenes: Iterable[str] | None = None,
     problems: list | None = None,
+    rig_json: str | Path | None = None,
 ) -> Dataset:
     """Validate a whole dataset folder and describe its contents.
 
@@ -93,6 +94,10 @@ def open_dataset(
         Collect every violation found here instead of raising at the first (what
         :func:`validate` reports); the parts of the dataset that break the format
         are left out of the result. A rig.json that cannot be read still raises.
+    rig_json : str or Path, optional
+        Read the rig from this file instead of the dataset's own rig.json (a rig
+        calibrated from the dataset's ``geometric/`` captures, ``colourhs
+        calibrate-rig``'s output); the dataset is checked against it.
 
     Returns
     -------
@@ -110,7 +115,7 @@ def open_dataset(
         root = root.parent
     if not root.is_dir():
         raise CaptureFormatError(root, "dataset folder not found")
-    rig = load_rig(root / "rig.json")
+    rig = load_rig(Path(rig_json) if rig_json is not None else root / "rig.json")
     cams = rig.camera_names
     poses, pose_images = _find_poses(root / "photometric", cams, problems)
     geometric, geometric_images = _find_geometric(root / "geometric", rig, problems)
@@ -127,6 +132,15 @@ def open_dataset(
             except CaptureFormatError as error:
                 _note(problems, error)
     return Dataset(root, rig, poses, objects, scenes, geometric)
+
+
+def dataset_of(dataset: str | Path | Dataset, scenes: Iterable[str] | None = None) -> Dataset:
+    """``dataset`` itself when it is a :class:`Dataset` (opened by the caller, e.g. with
+    another rig.json), else :func:`open_dataset` of the folder without opening an image,
+    reading only ``scenes`` (default every scene): how each stage takes its dataset."""
+    if isinstance(dataset, Dataset):
+        return dataset
+    return open_dataset(dataset, check_images=False, scenes=scenes)
 
 
 def _subfolders(folder: Path) -> list[Path]:
@@ -391,7 +405,9 @@ def all_images(ds: Dataset) -> list[Path]:
     return paths
 
 
-def validate(dataset: str | Path, summary_json: str | Path | None = None) -> dict:
+def validate(
+    dataset: str | Path, summary_json: str | Path | None = None, rig_json: str | Path | None = None
+) -> dict:
     """Validate a whole dataset, decoding every image, and summarise it.
 
     Shows a bar over the images decoded (:func:`colourhs.common.progress.bar`).
@@ -401,6 +417,8 @@ def validate(dataset: str | Path, summary_json: str | Path | None = None) -> dic
     dataset : the dataset folder (capture format, version 1).
     summary_json : optional path of a JSON summary to write (written only
         when the dataset is valid, atomically).
+    rig_json : optional rig.json to check the dataset against instead of its own
+        (:func:`open_dataset`).
 
     Returns
     -------
@@ -420,7 +438,7 @@ def validate(dataset: str | Path, summary_json: str | Path | None = None) -> dic
         read stops the check at once: the rest is read against it).
     """
     problems: list[CaptureFormatError] = []
-    ds = open_dataset(dataset, problems=problems)
+    ds = open_dataset(dataset, problems=problems, rig_json=rig_json)
     headers_bad = {p.path for p in problems}
     masks = {
         ds.mask_image(s, f, c)

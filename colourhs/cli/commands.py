@@ -92,20 +92,31 @@ def frame_indices(text: str) -> tuple[int, ...]:
     return tuple(sorted(out))
 
 
+def _dataset(args, scenes=()):
+    """What a stage takes as its dataset: the folder, or with ``--rig`` the dataset opened
+    with that rig.json instead of its own (reading only ``scenes``; None: every one)."""
+    if getattr(args, "rig", None) is None:
+        return args.dataset
+    from colourhs.capture import open_dataset
+
+    return open_dataset(args.dataset, check_images=False, scenes=scenes, rig_json=args.rig)
+
+
 def _synth(args) -> int:
     from colourhs.synth.simulated_rig import Nuisances
-    from colourhs.synth.synthesise import PRESETS, RenderSelection, synthesise
+    from colourhs.synth.synthesise import PARTS, PRESETS, RenderSelection, synthesise
 
     if args.preset not in PRESETS:
         raise ValueError(f"unknown preset {args.preset!r}; presets: {', '.join(PRESETS)}")
     nuisances = Nuisances().without(*args.off)
     scenes = None if args.scenes is None else tuple(s.strip() for s in args.scenes.split(","))
+    parts = PARTS if args.parts is None else tuple(s.strip() for s in args.parts.split(","))
     synthesise(
         args.out,
         args.preset,
         seed=args.seed,
         nuisances=nuisances,
-        selection=RenderSelection(scenes=scenes, frames=args.frames),
+        selection=RenderSelection(parts=parts, scenes=scenes, frames=args.frames),
         overwrite=args.overwrite,
         workers=args.workers,
     )
@@ -118,9 +129,9 @@ def _validate(args) -> int:
     from colourhs.capture import open_dataset, validate
     from colourhs.common.files import write_json
 
-    summary = validate(args.dataset)
+    summary = validate(args.dataset, rig_json=args.rig)
     if not args.no_rig_check:  # rig.json against the photometric captures
-        ds = open_dataset(args.dataset, check_images=False, scenes=())
+        ds = open_dataset(args.dataset, check_images=False, scenes=(), rig_json=args.rig)
         summary["rig_check"] = validate_rig(ds)
     if args.summary:
         write_json(args.summary, summary)
@@ -170,6 +181,8 @@ def _run(args) -> int:
     config = {"datasets": {name: {"path": str(dataset)}}, "only": [name]}
     if reconstruction:
         config["reconstruction"] = reconstruction
+    if args.calibrate_rig:
+        config["calibration"] = {"calibrate_rig": True}
     config_path.parent.mkdir(parents=True, exist_ok=True)
     config_path.write_text(yaml.safe_dump(config))
     # Snakemake's own arguments (targets included) go before --configfile,
@@ -197,7 +210,7 @@ def _run(args) -> int:
 def _markers(args) -> int:
     from colourhs.calibration.markers import marker_poses
 
-    table = marker_poses(args.dataset, args.out, min_markers=args.min_markers)
+    table = marker_poses(_dataset(args), args.out, min_markers=args.min_markers)
     print(f"wrote {args.out}: {len(table)} board poses, rms <= {table['rms_px'].max():.3f} px")
     return 0
 
@@ -246,7 +259,7 @@ def _calibrate_rig(args) -> int:
 def _noise(args) -> int:
     from colourhs.calibration.noise import calibrate_noise
 
-    model = calibrate_noise(args.dataset, args.out)
+    model = calibrate_noise(_dataset(args), args.out)
     for cam, gain in model.gain.items():
         wells = ", ".join(f"{1 / g:.0f}" if g > 0 else "-" for g in gain)
         print(f"{cam}: full well (electrons per full scale, R G B) {wells}")
@@ -257,7 +270,7 @@ def _noise(args) -> int:
 def _crosstalk(args) -> int:
     from colourhs.calibration.crosstalk import calibrate_crosstalk
 
-    result = calibrate_crosstalk(args.dataset, args.out, poses_csv=args.poses)
+    result = calibrate_crosstalk(_dataset(args), args.out, poses_csv=args.poses)
     print(json.dumps(result, indent=2))
     return 0
 
@@ -266,7 +279,7 @@ def _photometric(args) -> int:
     from colourhs.calibration.photometric import photometric_maps
 
     params = {k: v for k, v in vars(args).items() if k in PHOTOMETRIC_PARAMS and v is not None}
-    result = photometric_maps(args.dataset, args.poses, args.out, args.crosstalk, **params)
+    result = photometric_maps(_dataset(args), args.poses, args.out, args.crosstalk, **params)
     if args.figure:
         from colourhs.report.figures import mu_maps_figure
 
@@ -296,7 +309,9 @@ def _chromaticity(args) -> int:
 
     from colourhs.calibration.chromaticity import chromaticity_maps
 
-    result = chromaticity_maps(args.dataset, args.object, args.out, min_signal=args.min_signal)
+    result = chromaticity_maps(
+        _dataset(args, None), args.object, args.out, min_signal=args.min_signal
+    )
     if args.figure:
         from colourhs.report.figures import chromaticity_figure
 
@@ -344,7 +359,7 @@ def _reconstruct(args) -> int:
     check_reconstruct_params(params)
     calibration = CalibrationFiles(args.crosstalk, args.photometric, args.chromaticity, args.noise)
     result = reconstruct_frame(
-        args.dataset,
+        _dataset(args, [args.scene]),
         args.scene,
         args.frame,
         args.out,
@@ -392,7 +407,7 @@ def _hull(args) -> int:
     from colourhs.surfaces.hull import HullOptions, visual_hull
 
     info = visual_hull(
-        args.dataset,
+        _dataset(args, [args.scene]),
         args.scene,
         args.frame,
         args.out,
@@ -479,7 +494,9 @@ def _report(args) -> int:
     tsvs = find_benchmarks(args.benchmarks, args.name)
     config = yaml.safe_load(args.config.read_text()) or {} if args.config else {}
     config = resolve_config(config, _defaults("reconstruct"), _defaults("photometric"))
-    dataset = open_dataset(args.dataset, check_images=False) if args.dataset else None
+    dataset = (
+        open_dataset(args.dataset, check_images=False, rig_json=args.rig) if args.dataset else None
+    )
     build_report(
         args.out,
         args.name,

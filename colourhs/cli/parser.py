@@ -82,6 +82,17 @@ def _command(sub, name: str, summary: str) -> argparse.ArgumentParser:
     return sub.add_parser(name, help=summary, description=summary[0].upper() + summary[1:] + ".")
 
 
+RIG_HELP = (
+    "rig.json to use instead of the dataset's own (e.g. colourhs calibrate-rig's output "
+    "from the dataset's geometric/ captures)"
+)
+
+
+def _rig_argument(parser) -> None:
+    """--rig: the rig.json a stage reads instead of the dataset's."""
+    parser.add_argument("--rig", type=Path, default=None, help=RIG_HELP)
+
+
 def _frame_arguments(parser) -> None:
     """The positional DATASET SCENE FRAME of the per-frame stages."""
     parser.add_argument("dataset", type=Path, help="dataset folder (capture format)")
@@ -142,6 +153,12 @@ def build_parser(show_defaults: bool | Collection[str] = False) -> argparse.Argu
         help="comma-separated scenes to render, of plane, statue, toy, sheet (with their "
         "chromatic captures; default all); the calibration captures are always rendered",
     )
+    s.add_argument(
+        "--parts",
+        default=None,
+        help="comma-separated captures to render, of photometric, chromatic, scenes, "
+        "geometric (default all; rig.json and gt/ are always written)",
+    )
     s.set_defaults(func=_synth)
 
     v = _command(sub, "validate", "check a dataset against the capture format")
@@ -153,6 +170,7 @@ def build_parser(show_defaults: bool | Collection[str] = False) -> argparse.Argu
         help="skip checking rig.json's cameras and board against the photometric captures "
         "(the board's markers triangulated and reprojected)",
     )
+    _rig_argument(v)
     v.set_defaults(func=_validate)
 
     m = _command(sub, "markers", "board poses and calibration planes from the ArUco markers")
@@ -164,6 +182,7 @@ def build_parser(show_defaults: bool | Collection[str] = False) -> argparse.Argu
         default=3,
         help="markers seen by >= 2 cameras a pose needs (default 3)",
     )
+    _rig_argument(m)
     m.set_defaults(func=_markers)
 
     bd = _command(sub, "board", "print a white marker board (or a ChArUco target) at true scale")
@@ -233,8 +252,9 @@ def build_parser(show_defaults: bool | Collection[str] = False) -> argparse.Argu
     cr.add_argument(
         "--world",
         default="reference",
-        help="world frame: reference (the first camera of rig.json at R = I, t = 0) or "
-        "board:POSE (the target's frame in geometric/POSE) (default reference)",
+        help="world frame: reference (the first camera of rig.json at R = I, t = 0), "
+        "board:POSE (the target's frame in geometric/POSE) or base (the base rig.json's "
+        "world, whose cameras must then be roughly right) (default reference)",
     )
     cr.add_argument(
         "--report",
@@ -255,6 +275,7 @@ def build_parser(show_defaults: bool | Collection[str] = False) -> argparse.Argu
     nz = _command(sub, "noise", "sensor noise model of every camera channel (JSON)")
     nz.add_argument("dataset", type=Path, help="dataset folder (capture format)")
     nz.add_argument("out", type=Path, help="noise model JSON to write")
+    _rig_argument(nz)
     nz.set_defaults(func=_noise)
 
     x = _command(sub, "crosstalk", "calibrate each camera's channel mixing matrix")
@@ -267,6 +288,7 @@ def build_parser(show_defaults: bool | Collection[str] = False) -> argparse.Argu
         help="the markers stage's board poses: also fit the LED factor (the rig's own "
         "lights' channel mixing relative to the chromatic light)",
     )
+    _rig_argument(x)
     x.set_defaults(func=_crosstalk)
 
     ph = _command(sub, "photometric", "mu maps of the Helmholtz cameras (eqs. 6-8)")
@@ -276,6 +298,7 @@ def build_parser(show_defaults: bool | Collection[str] = False) -> argparse.Argu
     ph.add_argument("--crosstalk", type=Path, default=None, help="unmix with this calibration")
     ph.add_argument("--figure", type=Path, default=None, help="also write the heat maps PNG")
     _tuning_options(ph, PHOTOMETRIC_PARAMS, defaults_of("photometric"))
+    _rig_argument(ph)
     ph.set_defaults(func=_photometric)
 
     c = _command(sub, "chromaticity", "surface chromaticity maps of a chromatic object")
@@ -289,6 +312,7 @@ def build_parser(show_defaults: bool | Collection[str] = False) -> argparse.Argu
         default=MIN_SIGNAL,
         help=f"smallest usable intensity, fraction of full scale (default {MIN_SIGNAL})",
     )
+    _rig_argument(c)
     c.set_defaults(func=_chromaticity)
 
     rc = _command(sub, "reconstruct", "depth and normals of one frame (ML or Bayesian HS)")
@@ -317,6 +341,7 @@ def build_parser(show_defaults: bool | Collection[str] = False) -> argparse.Argu
     )
     rc.add_argument("--same-as", type=Path, default=None, help=SAME_AS_HELP)
     _tuning_options(rc, RECONSTRUCT_PARAMS, defaults_of("reconstruct"))
+    _rig_argument(rc)
     rc.set_defaults(func=_reconstruct)
 
     h = _command(sub, "hull", "visual hull of one frame from its silhouettes (PLY)")
@@ -336,6 +361,7 @@ def build_parser(show_defaults: bool | Collection[str] = False) -> argparse.Argu
         help="silhouettes of scenes without masks: lit pixels above this fraction "
         f"of full scale (default {LIT_THRESHOLD})",
     )
+    _rig_argument(h)
     h.set_defaults(func=_hull)
 
     me = _command(sub, "mesh", "oriented points of a depth file -> Poisson mesh (PLY)")
@@ -426,6 +452,7 @@ def build_parser(show_defaults: bool | Collection[str] = False) -> argparse.Argu
         help="embed each scene's first-frame error-coloured meshes from --results, "
         "simplified to 3000 triangles, in an offline 3D viewer",
     )
+    _rig_argument(rp)
     rp.set_defaults(func=_report)
 
     cf = _command(sub, "config", "write a run's configuration (JSON text) as YAML")
@@ -448,6 +475,13 @@ def build_parser(show_defaults: bool | Collection[str] = False) -> argparse.Argu
     r.add_argument(
         "--scenes", default=None, help="comma-separated scenes to reconstruct (default: all)"
     )
+    r.add_argument(
+        "--calibrate-rig",
+        action="store_true",
+        help="calibrate the cameras from the dataset's geometric/ captures and run every "
+        "stage with that rig (results/NAME/calib/rig.json, in the world of the dataset's "
+        "rig.json) instead of the dataset's rig.json",
+    )
     r.set_defaults(func=_run)
     r.epilog = "Arguments after `--` are passed on to snakemake."
     return p
@@ -464,15 +498,16 @@ def _version() -> str:
 
 #: Input paths of each subcommand (argument names): they must exist before it runs.
 INPUTS = {
-    "validate": ("dataset",),
-    "markers": ("dataset",),
+    "validate": ("dataset", "rig"),
+    "markers": ("dataset", "rig"),
     "calibrate-rig": ("dataset", "base_rig"),
-    "noise": ("dataset",),
-    "crosstalk": ("dataset", "poses"),
-    "photometric": ("dataset", "poses", "crosstalk"),
-    "chromaticity": ("dataset",),
+    "noise": ("dataset", "rig"),
+    "crosstalk": ("dataset", "rig", "poses"),
+    "photometric": ("dataset", "rig", "poses", "crosstalk"),
+    "chromaticity": ("dataset", "rig"),
     "reconstruct": (
         "dataset",
+        "rig",
         "crosstalk",
         "photometric",
         "chromaticity",
@@ -480,12 +515,12 @@ INPUTS = {
         "hull",
         "same_as",
     ),
-    "hull": ("dataset",),
+    "hull": ("dataset", "rig"),
     "mesh": ("depth", "hull", "same_as"),
     "evaluate": ("depth", "mesh", "gt", "same_as"),
     "metrics": ("json",),
     "figures": ("depth", "mesh", "gt", "coloured", "animate"),
-    "report": ("metrics", "calibration", "config", "dataset", "calib"),
+    "report": ("metrics", "calibration", "config", "dataset", "rig", "calib"),
 }
 
 #: Input files whose contents are checked before a subcommand runs, by kind:
@@ -495,6 +530,7 @@ INPUTS = {
 #: (parses). Folders are refused.
 INPUT_KINDS = {
     "base_rig": "json",
+    "rig": "json",
     "crosstalk": "json",
     "noise": "json",
     "photometric": "hdf5",
@@ -637,7 +673,7 @@ def _check_maps(args) -> None:
 
     from colourhs.capture import COLOURS, load_rig
 
-    rig = load_rig(Path(args.dataset) / "rig.json")
+    rig = load_rig(args.rig or Path(args.dataset) / "rig.json")
     pairs = rig.reciprocal_pairs()
     need = {
         "photometric": [f"{p.cam_a}/{COLOURS[p.channel_a]}" for p in pairs]

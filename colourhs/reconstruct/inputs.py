@@ -17,7 +17,7 @@ import numpy as np
 
 from colourhs.calibration.crosstalk import load_crosstalk, unmix
 from colourhs.calibration.noise import NoiseModel, estimate_noise, load_noise
-from colourhs.capture import COLOURS, Rig, open_dataset, read_image, read_mask
+from colourhs.capture import COLOURS, Rig, dataset_of, read_image, read_mask
 from colourhs.common.files import note_read
 from colourhs.reconstruct.dataterm import pair_arrays
 
@@ -87,7 +87,7 @@ def load_frame(
     noise variance; without it the noise model is estimated from the frame's
     own images (:func:`colourhs.calibration.noise.estimate_noise`).
     """
-    ds = open_dataset(dataset_dir, check_images=False, scenes=[scene])
+    ds = dataset_of(dataset_dir, scenes=[scene])
     rig = ds.rig
     mixing = load_crosstalk(crosstalk_json) if crosstalk_json else {}
     imgs, sats, sils, inputs = [], [], [], []

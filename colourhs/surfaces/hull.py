@@ -46,7 +46,7 @@ import numpy as np
 from colourhs.capture import (
     Camera,
     CaptureFormatError,
-    open_dataset,
+    dataset_of,
 )
 from colourhs.capture.rig import cameras_fixation_point
 from colourhs.common.files import sha256_files
@@ -254,7 +254,7 @@ def visual_hull(
 
     Parameters
     ----------
-    dataset_dir : str or Path
+    dataset_dir : str, Path or Dataset
     scene : str
     frame : str or int
     out_ply : str or Path
@@ -282,7 +282,7 @@ def visual_hull(
         (naming the frame folder).
     """
     t0 = perf_counter()
-    ds = open_dataset(dataset_dir, check_images=False, scenes=[scene])
+    ds = dataset_of(dataset_dir, scenes=[scene])
     cams = list(ds.rig.cameras)
     ref = ds.rig.camera(reference) if reference else cams[0]
     frame_dir = ds.frame_image(scene, frame, cams[0].name).parent  # an unknown frame: refused

@@ -13,7 +13,7 @@ import numpy as np
 from colourhs.capture import (
     LIT_THRESHOLD,
     CaptureFormatError,
-    open_dataset,
+    dataset_of,
     read_image,
     read_mask,
 )
@@ -82,7 +82,7 @@ def silhouettes(
 
     Parameters
     ----------
-    dataset_dir : str or Path
+    dataset_dir : str, Path or Dataset
         A dataset in the capture format.
     scene : str
     frame : str or int
@@ -101,7 +101,7 @@ def silhouettes(
         A mask or image is missing or malformed, or a silhouette has no object
         pixel (the error names the mask, or the image that was thresholded).
     """
-    ds = open_dataset(dataset_dir, check_images=False, scenes=[scene])
+    ds = dataset_of(dataset_dir, scenes=[scene])
     return silhouettes_and_sources(ds, scene, frame, threshold)[0]
 
 

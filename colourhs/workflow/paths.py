@@ -30,6 +30,10 @@ CAPTURE_SUMMARY = "results/{name}/capture/summary.json"
 
 #: The calibration folder (the report's diagnostics read it).
 CALIB_DIR = "results/{name}/calib"
+#: The rig calibrated from the dataset's geometric/ captures and its report (rule
+#: calibrate_rig, when calibration.calibrate_rig is on: every stage then reads it).
+RIG = "results/{name}/calib/rig.json"
+RIG_REPORT = "results/{name}/calib/rig_report.json"
 #: One row per usable board pose (rule marker_poses).
 MARKER_POSES = "results/{name}/calib/marker_poses.csv"
 #: Channel mixing per camera (rule crosstalk).
@@ -82,6 +86,7 @@ SYNTH_DATASET = "data/synthetic/{name}"
 LOGS = {
     "synth_dataset": "logs/synth/{name}.log",
     "validate_dataset": "logs/capture/{name}.log",
+    "calibrate_rig": "logs/calib/{name}/rig.log",
     "marker_poses": "logs/calib/{name}/marker_poses.log",
     "crosstalk": "logs/calib/{name}/crosstalk.log",
     "noise_model": "logs/calib/{name}/noise.log",
@@ -111,6 +116,7 @@ def _benchmark(folder: str, job: str) -> str:
 BENCHMARKS = {
     "synth_dataset": _benchmark("synth", "{name}"),
     "validate_dataset": _benchmark("validate_dataset", "{name}"),
+    "calibrate_rig": _benchmark("calibrate_rig", "{name}"),
     "marker_poses": _benchmark("marker_poses", "{name}"),
     "crosstalk": _benchmark("crosstalk", "{name}"),
     "noise_model": _benchmark("noise_model", "{name}"),

@@ -39,6 +39,7 @@ from colourhs.workflow.paths import (
     PHOTOMETRIC,
     PHOTOMETRIC_PNG,
     REPORT,
+    RIG,
     SYNTH_DATASET,
     fill,
 )
@@ -136,11 +137,16 @@ class WorkflowPlan:
         return self.config["datasets"][name]["path"]
 
     def synth_settings(self, name: str) -> dict:
-        """The dataset's ``synth`` entry (preset, seed)."""
+        """The dataset's ``synth`` entry (preset, seed) and ``parts``, the captures to
+        render: the geometric ones only where :meth:`calibrates_rig` (they cost render
+        time and nothing else reads them)."""
         entry = self.config["datasets"].get(name, {}).get("synth")
         if entry is None:
             raise ValueError(f"config: dataset {name!r} is not synthetic (no `synth` entry)")
-        return entry
+        from colourhs.synth.synthesise import PARTS
+
+        parts = [p for p in PARTS if p != "geometric" or self.calibrates_rig(name)]
+        return {**entry, "parts": ",".join(parts)}
 
     def _open(self, name: str, root: str) -> Dataset:
         """open_dataset(root) without opening an image, once per folder."""
@@ -192,7 +198,8 @@ class WorkflowPlan:
         for name in self.unvalidated_captures():
             try:
                 summary = validate_dataset(self.dataset_path(name))
-                validate_rig(self._open(name, self.dataset_path(name)))
+                if not self.calibrates_rig(name):  # else rule calibrate_rig checks its rig
+                    validate_rig(self._open(name, self.dataset_path(name)))
             except CaptureFormatError as e:
                 raise MalformedDatasetError(name, e) from None
             for warning in summary["warnings"]:
@@ -229,17 +236,50 @@ class WorkflowPlan:
         gt = [ds.gt_mesh(s, f) for s, sc in ds.scenes.items() if sc.has_gt for f in sc.frames]
         return _paths({ds.rig.path, *all_images(ds), *_scene_jsons(ds), *gt})
 
+    def rig_file(self, name: str) -> str:
+        """The rig.json the stages read: the calibrated one (:data:`RIG`) where
+        :meth:`calibrates_rig`, else the dataset's own."""
+        if self.calibrates_rig(name):
+            return fill(RIG, name=name)
+        return str(self.layout(name).rig.path)
+
+    def rig_option(self, name: str) -> str:
+        """``--rig PATH`` (quoted) where the stages read the calibrated rig, else ""."""
+        return f"--rig {shlex.quote(self.rig_file(name))}" if self.calibrates_rig(name) else ""
+
+    def geometric_inputs(self, name: str) -> list[str]:
+        """What ``colourhs calibrate-rig`` reads: the dataset's rig.json (the base it
+        merges into), every geometric capture and the photometric captures (the
+        calibrated rig is checked against them); a MalformedDatasetError where the
+        dataset has no geometric captures."""
+        ds = self.layout(name)
+        cams = ds.rig.camera_names
+        if not ds.geometric_poses:
+            hint = f" (remove {ds.root} to render them)" if self.synthetic(name) else ""
+            raise MalformedDatasetError(
+                name,
+                CaptureFormatError(
+                    Path(ds.root) / "geometric",
+                    "calibration.calibrate_rig is on but the dataset has no geometric "
+                    f"captures (geometric/<pose>/<camera>.png){hint}",
+                ),
+            )
+        images = [ds.geometric_image(p, c) for p in ds.geometric_poses for c in cams]
+        images += [ds.photometric_image(p, c) for p in ds.poses for c in cams]
+        return [str(ds.rig.path)] + _paths(images)
+
     def photometric_inputs(self, name: str) -> list[str]:
-        """rig.json and every photometric board image."""
+        """The rig.json the stages read (:meth:`rig_file`) and every photometric board
+        image."""
         ds = self.layout(name)
         cams = ds.rig.camera_names
         images = [ds.photometric_image(pose, c) for pose in ds.poses for c in cams]
-        return [str(ds.rig.path)] + _paths(images)
+        return [self.rig_file(name)] + _paths(images)
 
     def chromatic_inputs(self, name: str, obj: str) -> list[str]:
-        """rig.json and one chromatic object's captures."""
+        """The rig.json the stages read and one chromatic object's captures."""
         ds = self.layout(name)
-        return [str(ds.rig.path)] + _paths(_chromatic_images(ds, obj))
+        return [self.rig_file(name)] + _paths(_chromatic_images(ds, obj))
 
     def chromaticity_inputs(self, name: str, obj: str) -> list[str]:
         """What ``colourhs chromaticity`` reads: rig.json, the object's and the white
@@ -255,11 +295,10 @@ class WorkflowPlan:
                 out += _paths(masks)
         return out
 
-    @staticmethod
-    def _scene_files(ds, scene: str) -> list[str]:
-        """rig.json and the scene's scene.json when it has one."""
-        meta = Path(ds.root) / "scenes" / scene / "scene.json"
-        return [str(ds.rig.path)] + ([str(meta)] if meta.exists() else [])
+    def _scene_files(self, name: str, scene: str) -> list[str]:
+        """The rig.json the stages read and the scene's scene.json when it has one."""
+        meta = Path(self.layout(name).root) / "scenes" / scene / "scene.json"
+        return [self.rig_file(name)] + ([str(meta)] if meta.exists() else [])
 
     def silhouette_inputs(self, name: str, scene: str, frame: str) -> list[str]:
         """rig.json, the scene's scene.json (read when the dataset is opened) and a
@@ -267,14 +306,15 @@ class WorkflowPlan:
         ds = self.layout(name)
         image = ds.mask_image if ds.scene(scene).has_masks else ds.frame_image
         cams = ds.rig.camera_names
-        return self._scene_files(ds, scene) + _paths(image(scene, frame, c) for c in cams)
+        return self._scene_files(name, scene) + _paths(image(scene, frame, c) for c in cams)
 
     def frame_inputs(self, name: str, scene: str, frame: str) -> list[str]:
         """rig.json, the scene's scene.json (read when the dataset is opened), a
         frame's images and its silhouettes (when the scene has masks)."""
         ds = self.layout(name)
         cams = ds.rig.camera_names
-        out = self._scene_files(ds, scene) + _paths(ds.frame_image(scene, frame, c) for c in cams)
+        out = self._scene_files(name, scene)
+        out += _paths(ds.frame_image(scene, frame, c) for c in cams)
         if ds.scene(scene).has_masks:
             out += _paths(ds.mask_image(scene, frame, c) for c in cams)
         return out
@@ -297,6 +337,11 @@ class WorkflowPlan:
             out[key] = {**out.get(key, {}), **value} if isinstance(value, dict) else value
         return out
 
+    def calibrates_rig(self, name: str) -> bool:
+        """Whether the stages read a rig calibrated from the dataset's geometric captures
+        (calibration.calibrate_rig) instead of its rig.json."""
+        return bool(self.calibration(name).get("calibrate_rig", False))
+
     def unmix_crosstalk(self, name: str) -> bool:
         """Whether the dataset's images are unmixed (calibration.unmix_crosstalk)."""
         return bool(self.calibration(name)["unmix_crosstalk"])
@@ -315,6 +360,7 @@ class WorkflowPlan:
     def calibration_targets(self, name: str) -> list[str]:
         """The dataset's calibration files (known before the run, synthetic or not)."""
         out = [fill(t, name=name) for t in (MARKER_POSES, PHOTOMETRIC, NOISE)]
+        out += [fill(RIG, name=name)] if self.calibrates_rig(name) else []
         out += self.crosstalk_file(name)
         out += [fill(CHROMATICITY, name=name, object=o) for o in self.chromatic_objects(name)]
         return out
@@ -474,9 +520,10 @@ class WorkflowPlan:
         }
 
     def _dataset_files(self, name: str) -> list[str]:
-        """rig.json and the scene.json of every scene (what opening the dataset reads)."""
+        """The rig.json the stages read and the scene.json of every scene (what opening
+        the dataset reads)."""
         ds = self.layout(name)
-        out = [str(ds.rig.path)]
+        out = [self.rig_file(name)]
         for scene in ds.scenes:
             meta = Path(ds.root) / "scenes" / scene / "scene.json"
             out += [str(meta)] if meta.exists() else []

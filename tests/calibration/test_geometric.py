@@ -564,6 +564,59 @@ def test_calibrate_rig_errors_are_one_line(rendered, tmp_path, capsys):
     assert not (tmp_path / "o").exists()
 
 
+# Measured: the centres 0.76 mm and rotations 0.125 deg from the true ones in the base's
+# world (the principal point's trade with the tilt, test_calibrate_rig_writes_...); the
+# tiny rig's third-camera reprojection 0.116 px (the check's tolerance: 1 px).
+CENTRE_BASE_MM, ROTATION_BASE_DEG = 1.0, 0.16
+THIRD_PX_TINY = 0.15
+
+
+def test_world_base_keeps_the_base_rigs_world(rendered, tmp_path):
+    """``--world base``: the calibrated cameras in the base rig.json's own world (its
+    cameras at the true poses, placeholder intrinsics), so that ground truth and world
+    positions given in it stay valid; a placeholder base has no world to keep."""
+    true = load_rig(rendered.parent / "true_rig.json")
+    report = calibrate_rig(rendered, tmp_path / "rig.json", world="base")
+    rig = load_rig(tmp_path / "rig.json")
+    centre_mm = max(
+        1e3 * float(np.linalg.norm(rig.camera(c.name).centre - c.centre)) for c in true.cameras
+    )
+    rotation_deg = max(_rotation_deg(c.R, rig.camera(c.name).R) for c in true.cameras)
+    print(f"world base: centres {centre_mm:.3f} mm, rotations {rotation_deg:.4f} deg")
+    assert report["world"] == "base" and report["old_world"]["carried"]
+    assert centre_mm < CENTRE_BASE_MM and rotation_deg < ROTATION_BASE_DEG
+    placeholder = json.loads((rendered / "rig.json").read_text())
+    for cam in placeholder["cameras"]:
+        cam["R"], cam["t"] = np.eye(3).tolist(), [0.0, 0.0, 0.0]
+    base = tmp_path / "placeholder.json"
+    base.write_text(json.dumps(placeholder))
+    with pytest.raises(ValueError, match="world 'base': the base rig's cameras do not match"):
+        calibrate_rig(rendered, tmp_path / "o.json", world="base", base_rig=base)
+    assert not (tmp_path / "o.json").exists()
+
+
+def test_calibrate_rig_checks_its_rig_against_the_photometric_captures(tiny_dataset, tmp_path):
+    """With photometric captures the calibrated rig is checked against them before it is
+    written (colourhs.calibration.rig_check): its figures go into the report, and views
+    that disagree (cam1's and cam2's board images swapped: cameras moved between the
+    captures) are an error and no file."""
+    report = calibrate_rig(tiny_dataset, tmp_path / "rig.json", world="base")
+    check = report["rig_check"]
+    print("rig check of the calibrated tiny rig:", check)
+    assert max(check["third_px"].values()) < THIRD_PX_TINY
+    assert abs(check["marker_scale"] - 1) < 2e-3
+    moved = tmp_path / "moved"
+    shutil.copytree(tiny_dataset, moved, ignore=shutil.ignore_patterns("scenes", "chromatic"))
+    for pose in (moved / "photometric").iterdir():
+        a, b = pose / "cam1.png", pose / "cam2.png"
+        a.rename(pose / "swap.png")
+        b.rename(a)
+        (pose / "swap.png").rename(b)
+    with pytest.raises(ValueError, match="not written: the calibrated cameras disagree"):
+        calibrate_rig(moved, tmp_path / "o.json")
+    assert not (tmp_path / "o.json").exists()
+
+
 # --------------------------------------------------------------------------------------------
 # The synthetic renderer's geometric captures (slow)
 

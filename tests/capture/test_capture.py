@@ -262,6 +262,6 @@ def test_every_public_name_resolves() -> None:
         value = getattr(capture, name)
         module = getattr(value, "__module__", None)
         assert module is None or module.startswith("colourhs.capture."), (name, module)
-    assert set(capture.__all__) <= set(dir(capture)) and len(capture.__all__) == 24
+    assert set(capture.__all__) <= set(dir(capture)) and len(capture.__all__) == 25
     with pytest.raises(AttributeError, match="no attribute 'nosuch'"):
         capture.nosuch  # noqa: B018

@@ -186,7 +186,7 @@ def test_whole_job_second_run_does_nothing_and_snakemake_reports_it(whole_job):
 def test_workflow_lint_is_clean(tmp_path):
     """Snakemake's linter finds nothing but the lint the project accepts: no rule
     declares a conda environment or container (``--sdm conda`` is not
-    supported, README), so it flags each of the 15 rules with a command."""
+    supported, README), so it flags each of the 16 rules with a command."""
     snakefile = str(PROJECT_ROOT / "Snakefile")
     config = str(PROJECT_ROOT / "config.yaml")
     done = subprocess.run(
@@ -208,9 +208,9 @@ def test_workflow_lint_is_clean(tmp_path):
     out = done.stdout + done.stderr
     assert done.returncode == 1, out[-2000:]  # 1: lints found
     rules = re.findall(r"^Lints for rule (\w+) ", out, re.M)
-    assert len(set(rules)) == len(rules) == 15 and "Lints for snakefile" not in out
+    assert len(set(rules)) == len(rules) == 16 and "Lints for snakefile" not in out
     no_software = "Specify a conda environment or container for each rule."
-    assert re.findall(r"^ +\* (.+):$", out, re.M) == [no_software] * 15, out[-2000:]
+    assert re.findall(r"^ +\* (.+):$", out, re.M) == [no_software] * 16, out[-2000:]
 
 
 def test_missing_dataset_stops_the_run_before_any_job(tmp_path):
@@ -673,3 +673,45 @@ def test_synth_help_names_exactly_the_presets(capsys):
     listed = re.search(r"--preset PRESET (.+?) \(default demo\)", text).group(1)
     listed = re.sub(r"-\s+", "-", listed)  # argparse may wrap a line after a hyphen
     assert set(re.split(r", | or ", listed)) == set(PRESETS)
+
+
+def test_rig_option_replaces_the_datasets_rig_json(tiny_dataset, tmp_path, capsys):
+    """--rig: a stage reads that rig.json instead of the dataset's (the workflow's
+    calibrated rig). A dataset whose own rig.json swaps two cameras' poses fails the
+    rig check; with --rig naming the right description it validates, and its marker
+    poses equal the original dataset's."""
+    data = tmp_path / "swapped"
+    shutil.copytree(tiny_dataset, data, ignore=shutil.ignore_patterns("scenes", "geometric"))
+    good = tmp_path / "good rig.json"
+    shutil.copy(data / "rig.json", good)
+    rig = json.loads(good.read_text())
+    a, b = rig["cameras"][0], rig["cameras"][1]
+    (a["R"], a["t"]), (b["R"], b["t"]) = (b["R"], b["t"]), (a["R"], a["t"])
+    (data / "rig.json").write_text(json.dumps(rig))
+    capsys.readouterr()
+    assert main(["validate", str(data)]) == 1
+    assert str(data / "rig.json") in capsys.readouterr().err
+    assert main(["validate", str(data), "--rig", str(good)]) == 0
+    ours, theirs = tmp_path / "ours.csv", tmp_path / "theirs.csv"
+    assert main(["markers", str(data), str(ours), "--rig", str(good)]) == 0
+    assert main(["markers", str(tiny_dataset), str(theirs)]) == 0
+    pd.testing.assert_frame_equal(pd.read_csv(ours), pd.read_csv(theirs))
+    capsys.readouterr()
+    assert main(["markers", str(data), str(tmp_path / "x.csv"), "--rig", str(tmp_path / "no")]) == 1
+    assert "--rig" in capsys.readouterr().err and not (tmp_path / "x.csv").exists()
+
+
+def test_run_calibrate_rig_plans_the_rig_calibration_first(tiny_dataset, tmp_path, capfd):
+    """``colourhs run --calibrate-rig``: the run's config turns calibration.calibrate_rig
+    on, and the dry run plans rule calibrate_rig with every stage reading its rig."""
+    work = tmp_path / "work"
+    argv = ["run", str(tiny_dataset), "--name", "c", "--directory", str(work), "--calibrate-rig"]
+    assert main([*argv, "--", "-n", "-p"]) == 0
+    out = capfd.readouterr().out
+    config = yaml.safe_load((work / "results/c/run-config.yaml").read_text())
+    assert config["calibration"] == {"calibrate_rig": True}
+    assert "rule calibrate_rig:" in out and "--world base" in out
+    for stage in ("markers", "photometric", "reconstruct", "chromaticity", "noise"):
+        lines = [x for x in out.splitlines() if f"-m colourhs {stage} " in x]
+        assert lines and all("--rig results/c/calib/rig.json" in x for x in lines), stage
+    assert not (work / "results/c/calib").exists()

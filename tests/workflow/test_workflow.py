@@ -454,3 +454,79 @@ def test_object_mask_reruns_its_chromaticity_map(run):
     required |= vh_jobs(s, f) | hs_jobs(s, f) | hs_jobs(s, f, "bayes_full") | report_jobs(s)
     assert_plan(plan, required, optional=VALIDATION)
     assert not planned_jobs(run.workdir, run.configfiles)
+
+
+def test_geometric_image_reruns_nothing_without_calibrate_rig(run):
+    """The ChArUco views are read by rule calibrate_rig only, which runs only with
+    calibration.calibrate_rig on: otherwise a changed view reruns no stage."""
+    pose = sorted((run.data / "geometric").iterdir())[2]
+    with replaced(pose / "cam2.png", tweak_png, run.workdir):
+        plan = planned_jobs(run.workdir, run.configfiles)
+    assert_plan(plan, set(), optional=VALIDATION)
+
+
+def test_calibrate_rig_runs_every_stage_on_the_rig_calibrated_from_the_captures(run, tmp_path):
+    """calibration.calibrate_rig: the cameras calibrated from geometric/ (rule
+    calibrate_rig, in the dataset's world: calibration.rig_world base) are what every
+    stage that reads the rig reads (--rig): switching it on reruns them all; a changed
+    ChArUco view reruns the calibration and everything after it. A real run of one
+    scene and variant on a copy of the run's folder: its depth against the true rig's."""
+    import json
+
+    work = copy_run(run, tmp_path / "my run")
+    config = yaml.safe_load(run.configfiles[1].read_text())
+    config.setdefault("calibration", {})["calibrate_rig"] = True
+    on = tmp_path / "calibrate-rig.yaml"
+    on.write_text(yaml.safe_dump(config))
+    calib = f"results/{NAME}/calib"
+    rig = {("calibrate_rig", f"{calib}/rig.json"), ("calibrate_rig", f"{calib}/rig_report.json")}
+    plan = planned_jobs(work, [run.configfiles[0], on])
+    every_frame = {
+        job for scene, frames in FRAMES.items() for f in frames for job in vh_jobs(scene, f)
+    }
+    required = rig | run_outputs(run) | all_hs_jobs() | every_frame | report_jobs(*SCENES)
+    recorded = {("effective_config", f"results/{NAME}/config.yaml")}  # the changed config
+    assert_plan(plan, required, optional=recorded | VALIDATION)
+
+    config["reconstruction"].update(scenes=["plane"], variants=["bayes_ph"])
+    one = tmp_path / "calibrate-rig-plane.yaml"
+    one.write_text(yaml.safe_dump(config))
+    ok, _, _ = _snakemake(work, [run.configfiles[0], one])
+    assert ok
+    report = json.loads((work / calib / "rig_report.json").read_text())
+    assert report["world"] == "base" and report["rig_check"]["tolerance_px"] > 0
+    assert max(report["rig_check"]["third_px"].values()) < report["rig_check"]["tolerance_px"]
+    evals = "plane/bayes_ph/eval/000000.json"
+    true_rig = json.loads((run.workdir / f"results/{NAME}" / evals).read_text())
+    calibrated = json.loads((work / f"results/{NAME}" / evals).read_text())
+    print(
+        "plane bayes_ph depth median: true rig",
+        true_rig["depth_median_mm"],
+        "calibrated",
+        calibrated["depth_median_mm"],
+    )
+    assert calibrated["depth_median_mm"] < 1.1 * true_rig["depth_median_mm"]
+    assert calibrated["coverage"] > 0.95 * true_rig["coverage"]
+
+    pose = sorted((run.data / "geometric").iterdir())[2]
+    with replaced(pose / "cam2.png", tweak_png, work):
+        plan = planned_jobs(work, [run.configfiles[0], one])
+    required = rig | run_outputs(run) | hs_jobs("plane", "000000") | report_jobs("plane")
+    assert_plan(plan, required, optional=VALIDATION)
+    assert not planned_jobs(work, [run.configfiles[0], one])
+
+
+def run_outputs(run) -> set[tuple[str, str]]:
+    """(rule, output) of every calibration file of the run (each reads the rig)."""
+    calib = f"results/{NAME}/calib"
+    files = {
+        "marker_poses": ["marker_poses.csv"],
+        "crosstalk": ["crosstalk.json"],
+        "noise_model": ["noise.json"],
+        "photometric_maps": ["photometric.h5", "photometric.png"],
+        "chromaticity_map": [
+            str(p.relative_to(run.workdir / calib))
+            for p in (run.workdir / calib / "chromaticity").iterdir()
+        ],
+    }
+    return {(rule, f"{calib}/{name}") for rule, names in files.items() for name in names}

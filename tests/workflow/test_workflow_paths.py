@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pytest
 import yaml
-from capture_helpers import make_dataset
+from capture_helpers import add_geometric, make_dataset
 
 from colourhs.cli.parser import PROJECT_ROOT, SNAKEFILE
 from colourhs.workflow import paths
@@ -200,16 +200,19 @@ def _jobs(text: str) -> list[dict]:
 
 @pytest.fixture(scope="module")
 def dry_run(tmp_path_factory) -> list[dict]:
-    """Every job of a dataset given by path (meshes and depth ranges from the visual
-    hull) and the rendering of a synthetic one (asked for by its folder: the default
-    target waits for it before it plans the others' reconstructions)."""
+    """Every job of a dataset given by path (its rig calibrated from its geometric/
+    captures, meshes and depth ranges from the visual hull) and the rendering of a
+    synthetic one (asked for by its folder: the default target waits for it before it
+    plans the others' reconstructions)."""
     root = tmp_path_factory.mktemp("paths")
-    data = make_dataset(root / "my data")
+    data = add_geometric(make_dataset(root / "my data"))
     config = root / "config.yaml"
+    # The rig calibrated from geometric/ (rule calibrate_rig; every stage reads it).
+    calibrated = {"path": str(data), "calibration": {"calibrate_rig": True}}
     config.write_text(
         yaml.safe_dump(
             {
-                "datasets": {"d": {"path": str(data)}, "s": {"synth": {"preset": "tiny"}}},
+                "datasets": {"d": calibrated, "s": {"synth": {"preset": "tiny"}}},
                 "only": ["d"],
                 "reconstruction": {"depth_from_hull": True},
                 "surfaces": {"mesh_with_hull": True},

@@ -13,7 +13,7 @@ import shutil
 from pathlib import Path
 
 import pytest
-from capture_helpers import make_dataset
+from capture_helpers import add_geometric, make_dataset
 from snakemake.utils import validate
 
 from colourhs.cli.parser import PROJECT_ROOT
@@ -90,11 +90,15 @@ def test_schema_defaults_and_the_calibration_layers(data):
     assert set(config["datasets"]["d"]["calibration"]) == {"unmix_crosstalk", "photometric"}
     photometric = {"coupling": 0.2, "smoothness": 0.001}
     assert plan.calibration("d") == {
+        "calibrate_rig": False,
+        "rig_world": "base",
         "unmix_crosstalk": False,
         "chromaticity": {},
         "photometric": photometric,
     }
     assert plan.calibration("s") == {
+        "calibrate_rig": False,
+        "rig_world": "base",
         "unmix_crosstalk": True,
         "chromaticity": {},
         "photometric": {"coupling": 0.2},
@@ -143,6 +147,45 @@ def test_inputs_are_the_files_of_the_capture_format(plan, data):
     assert plan.gt_mesh("d", "wave", "000000") == []
     with pytest.raises(KeyError, match="000000, 000001"):
         plan.frame_inputs("d", "wave", "000002")
+
+
+def test_calibrate_rig_puts_the_calibrated_rig_under_every_stage(data, tmp_path):
+    """calibration.calibrate_rig: every input list that held the dataset's rig.json holds
+    results/NAME/calib/rig.json instead, the stages get --rig, rule calibrate_rig reads
+    the geometric and photometric captures and the dataset's rig.json; a dataset
+    without geometric captures is named before any job. Off: the dataset's rig.json,
+    no --rig, and a synthetic dataset is rendered without geometric/."""
+    from colourhs.synth.synthesise import PARTS
+
+    config = {
+        "datasets": {
+            "d": {"path": str(data), "calibration": {"calibrate_rig": True}},
+            "s": {"synth": {"preset": "tiny"}},
+            "g": {"synth": {"preset": "tiny"}, "calibration": {"calibrate_rig": True}},
+        }
+    }
+    plan = plan_of(config)
+    rig = "results/d/calib/rig.json"
+    assert plan.calibrates_rig("d") and not plan.calibrates_rig("s")
+    assert plan.rig_file("d") == rig and plan.rig_option("d") == f"--rig {rig}"
+    assert plan.photometric_inputs("d")[0] == rig
+    assert plan.chromatic_inputs("d", "slinky")[0] == rig
+    assert plan.frame_inputs("d", "toy", "000000")[0] == rig
+    assert plan.silhouette_inputs("d", "wave", "000001")[0] == rig
+    assert plan.report_inputs("d")["dataset"][0] == rig
+    assert str(data / "rig.json") not in plan.frame_inputs("d", "toy", "000000")
+    assert rig in plan.calibration_targets("d")
+    with pytest.raises(MalformedDatasetError, match="no geometric captures"):
+        plan.geometric_inputs("d")
+    assert plan.synth_settings("g")["parts"] == ",".join(PARTS)
+    assert "geometric" not in plan.synth_settings("s")["parts"].split(",")
+    assert plan.rig_option("s") == ""
+    with_views = add_geometric(shutil.copytree(data, tmp_path / "with views"))
+    config["datasets"]["d"]["path"] = str(with_views)
+    inputs = plan_of(config).geometric_inputs("d")
+    assert inputs[0] == str(with_views / "rig.json")
+    assert inputs[1:4] == [str(with_views / f"geometric/p0/cam{i}.png") for i in (1, 2, 3)]
+    assert len(inputs) == 1 + 2 * 3 + 3 * 3  # rig.json, 2 views and 3 board poses x 3 cameras
 
 
 def test_variants_targets_and_options(data):
@@ -343,7 +386,7 @@ def test_rules_run_the_python_that_runs_snakemake(data, tmp_path, monkeypatch):
     config.write_text(yaml.safe_dump({"datasets": {"d": {"path": str(data)}}}))
     with quiet_workflow(tmp_path, [config]) as (workflow, rules):
         workflow.list_rules()
-    assert len(rules.getvalue().split()) == 16  # the workflow was read: 15 rules and all
+    assert len(rules.getvalue().split()) == 17  # the workflow was read: 16 rules and all
     assert shell('printf %s "$COLOURHS_PYTHON"', read=True) == python
 
 

@@ -1,5 +1,29 @@
 # Calibration stages (paper sections III-C and III-D, and channel cross-talk):
 # marker poses -> photometric (mu) maps; chromaticity maps per coloured object.
+# With calibration.calibrate_rig, the cameras first (beyond the paper): every
+# stage then reads results/NAME/calib/rig.json (--rig) instead of the dataset's.
+
+
+rule calibrate_rig:
+    input:
+        lambda w: geometric_inputs(w.name),
+    output:
+        rig=RIG,
+        report=RIG_REPORT,
+    log:
+        LOGS["calibrate_rig"],
+    benchmark:
+        BENCHMARKS["calibrate_rig"]
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=10,
+    params:
+        dataset=lambda w: dataset_path(w.name),
+        world=lambda w: calibration(w.name)["rig_world"],
+    shell:
+        '"$COLOURHS_PYTHON" -m colourhs calibrate-rig {params.dataset:q} {output.rig:q} '
+        "--world {params.world:q} --report {output.report:q} > {log:q} 2>&1"
 
 
 rule marker_poses:
@@ -17,8 +41,9 @@ rule marker_poses:
         runtime=10,
     params:
         dataset=lambda w: dataset_path(w.name),
+        rig=lambda w: rig_option(w.name),
     shell:
-        '"$COLOURHS_PYTHON" -m colourhs markers {params.dataset:q} {output:q} > {log:q} 2>&1'
+        '"$COLOURHS_PYTHON" -m colourhs markers {params.dataset:q} {params.rig} {output:q} > {log:q} 2>&1'
 
 
 rule crosstalk:
@@ -39,8 +64,9 @@ rule crosstalk:
         runtime=5,
     params:
         dataset=lambda w: dataset_path(w.name),
+        rig=lambda w: rig_option(w.name),
     shell:
-        '"$COLOURHS_PYTHON" -m colourhs crosstalk {params.dataset:q} {output:q} --poses {input.poses:q} > {log:q} 2>&1'
+        '"$COLOURHS_PYTHON" -m colourhs crosstalk {params.dataset:q} {params.rig} {output:q} --poses {input.poses:q} > {log:q} 2>&1'
 
 
 rule noise_model:
@@ -60,8 +86,9 @@ rule noise_model:
         runtime=5,
     params:
         dataset=lambda w: dataset_path(w.name),
+        rig=lambda w: rig_option(w.name),
     shell:
-        '"$COLOURHS_PYTHON" -m colourhs noise {params.dataset:q} {output:q} > {log:q} 2>&1'
+        '"$COLOURHS_PYTHON" -m colourhs noise {params.dataset:q} {params.rig} {output:q} > {log:q} 2>&1'
 
 
 rule photometric_maps:
@@ -84,9 +111,10 @@ rule photometric_maps:
         runtime=20,
     params:
         dataset=lambda w: dataset_path(w.name),
+        rig=lambda w: rig_option(w.name),
         options=lambda w: photometric_options(w.name),
     shell:
-        '"$COLOURHS_PYTHON" -m colourhs photometric {params.dataset:q} {input.poses:q} {output.h5:q} '
+        '"$COLOURHS_PYTHON" -m colourhs photometric {params.dataset:q} {params.rig} {input.poses:q} {output.h5:q} '
         "--figure {output.png:q} {params.options} > {log:q} 2>&1"
 
 
@@ -108,7 +136,8 @@ rule chromaticity_map:
         runtime=10,
     params:
         dataset=lambda w: dataset_path(w.name),
+        rig=lambda w: rig_option(w.name),
         options=lambda w: cli_options(calibration(w.name)["chromaticity"]),
     shell:
-        '"$COLOURHS_PYTHON" -m colourhs chromaticity {params.dataset:q} {wildcards.object} {output.h5:q} '
+        '"$COLOURHS_PYTHON" -m colourhs chromaticity {params.dataset:q} {params.rig} {wildcards.object} {output.h5:q} '
         "--figure {output.png:q} {params.options} > {log:q} 2>&1"

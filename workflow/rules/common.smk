@@ -32,6 +32,8 @@ from colourhs.workflow.paths import (
     REPORT,
     REPORT_ASSETS,
     RESULTS_DIR,
+    RIG,
+    RIG_REPORT,
     SYNTH_DATASET,
     VH_DEPTH,
 )
@@ -66,6 +68,8 @@ photometric_inputs = PLAN.photometric_inputs
 chromatic_inputs = PLAN.chromatic_inputs
 chromaticity_inputs = PLAN.chromaticity_inputs
 calibration = PLAN.calibration
+geometric_inputs = PLAN.geometric_inputs
+rig_option = PLAN.rig_option
 crosstalk_file = PLAN.crosstalk_file
 photometric_options = PLAN.photometric_options
 calibration_targets = PLAN.calibration_targets

@@ -29,11 +29,12 @@ rule reconstruct_frame:
         runtime=10,
     params:
         dataset=lambda w: dataset_path(w.name),
+        rig=lambda w: rig_option(w.name),
         options=lambda w: reconstruct_options(w.name, w.scene, w.variant),
         hull=lambda w, input: (
             f"--hull {shlex.quote(str(input.hull))}" if input.hull else ""
         ),
         same=lambda w, input: same_option(input),
     shell:
-        'NUMBA_NUM_THREADS={threads} "$COLOURHS_PYTHON" -m colourhs reconstruct {params.dataset:q} {wildcards.scene} {wildcards.frame} '
+        'NUMBA_NUM_THREADS={threads} "$COLOURHS_PYTHON" -m colourhs reconstruct {params.dataset:q} {params.rig} {wildcards.scene} {wildcards.frame} '
         "{output:q} {params.options} {params.hull} {params.same} > {log:q} 2>&1"

@@ -68,6 +68,7 @@ rule report:
             for d in report_inputs(w.name)["figures"]
         ),
         dataset=lambda w: dataset_path(w.name),
+        rig=lambda w: rig_option(w.name),
         results=RESULTS_DIR,
         calib=CALIB_DIR,
         benchmarks=BENCHMARK_ROOT,
@@ -75,6 +76,6 @@ rule report:
         '"$COLOURHS_PYTHON" -m colourhs report {output.html:q} --name {wildcards.name} '
         "--metrics {input.metrics:q} --config {input.config:q} "
         "--calibration {input.calibration:q} --figures {params.figures} "
-        "--dataset {params.dataset:q} --results {params.results:q} "
+        "--dataset {params.dataset:q} {params.rig} --results {params.results:q} "
         "--calib {params.calib:q} --view "
         "--benchmarks {params.benchmarks:q} > {log:q} 2>&1"

@@ -25,9 +25,10 @@ rule visual_hull:
         runtime=10,
     params:
         dataset=lambda w: dataset_path(w.name),
+        rig=lambda w: rig_option(w.name),
         options=lambda w: cli_options(config["surfaces"]["hull"]),
     shell:
-        '"$COLOURHS_PYTHON" -m colourhs hull {params.dataset:q} {wildcards.scene} {wildcards.frame} '
+        '"$COLOURHS_PYTHON" -m colourhs hull {params.dataset:q} {params.rig} {wildcards.scene} {wildcards.frame} '
         "{output.ply:q} --depth {output.depth:q} {params.options} > {log:q} 2>&1"
 
 

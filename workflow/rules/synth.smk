@@ -15,6 +15,7 @@ checkpoint synth_dataset:
     params:
         preset=lambda w: synth_settings(w.name)["preset"],
         seed=lambda w: synth_settings(w.name)["seed"],
+        parts=lambda w: synth_settings(w.name)["parts"],
     shell:
         '"$COLOURHS_PYTHON" -m colourhs synth --preset {params.preset} --seed {params.seed} '
-        "--workers {threads} {output:q} 2> {log:q}"
+        "--parts {params.parts} --workers {threads} {output:q} 2> {log:q}"
