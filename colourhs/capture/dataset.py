@@ -32,6 +32,12 @@ class Scene:
     chromatic : str or None
         Folder under ``chromatic/`` with the object's coloured captures; None for a white
         surface.
+    chromatic_frame : str
+        The frame (folder name) whose pose of the object the chromatic captures show:
+        scene.json's ``chromatic_frame``, by default (and when None is given) the first
+        frame. The paper calibrates the surface chromaticity p (eq. 4) per pixel in
+        that pose; in any other frame of a moving object it no longer lies on those
+        pixels.
     dynamic : bool
         True for a sequence of a moving or deforming surface. Without a scene.json, or without
         its ``dynamic`` key, a scene is dynamic unless its only frame is ``000000``.
@@ -50,6 +56,11 @@ class Scene:
     description: str
     has_masks: bool
     has_gt: bool
+    chromatic_frame: str | None = None
+
+    def __post_init__(self) -> None:
+        if self.chromatic_frame is None and self.frames:
+            object.__setattr__(self, "chromatic_frame", self.frames[0])
 
 
 @dataclass(frozen=True, eq=False)

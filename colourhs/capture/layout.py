@@ -312,7 +312,7 @@ def _find_scene(
         _problem(problems, frames_dir, f"scene {name!r} has no frames")
         return None
     try:
-        meta = _read_scene_json(folder / "scene.json", objects)
+        meta = _read_scene_json(folder / "scene.json", objects, tuple(frames))
     except CaptureFormatError as error:
         _note(problems, error)
         meta = {}
@@ -356,6 +356,7 @@ def _find_scene(
         name=name,
         frames=tuple(frames),
         chromatic=meta.get("chromatic"),
+        chromatic_frame=meta.get("chromatic_frame", frames[0]),
         dynamic=bool(dynamic),
         description=meta.get("description", ""),
         has_masks=masks_dir.is_dir(),
@@ -364,8 +365,13 @@ def _find_scene(
     return scene, images, masks
 
 
-def _read_scene_json(path: Path, objects: tuple[str, ...]) -> dict[str, Any]:
-    """Validated keys of an optional scene.json ({} when absent); unknown keys are ignored."""
+def _read_scene_json(
+    path: Path, objects: tuple[str, ...], frames: tuple[str, ...] = ()
+) -> dict[str, Any]:
+    """Validated keys of an optional scene.json ({} when absent); unknown keys are ignored.
+
+    ``chromatic_frame`` (a frame folder name or its index) must name one of ``frames``
+    (the scene's); it is returned as the folder name."""
     if not path.exists():
         return {}
     obj = _as_object(_read_json(path, "scene.json"), "scene.json", path)
@@ -378,6 +384,8 @@ def _read_scene_json(path: Path, objects: tuple[str, ...]) -> dict[str, Any]:
                 path, f"chromatic object {chromatic!r} has no folder chromatic/{chromatic}"
             )
         meta["chromatic"] = chromatic
+    if obj.get("chromatic_frame") is not None:
+        meta["chromatic_frame"] = _chromatic_frame(obj["chromatic_frame"], frames, path)
     if "dynamic" in obj:
         if not isinstance(obj["dynamic"], bool):
             raise CaptureFormatError(
@@ -387,6 +395,28 @@ def _read_scene_json(path: Path, objects: tuple[str, ...]) -> dict[str, Any]:
     if obj.get("description") is not None:
         meta["description"] = _as_str(obj["description"], "description", path)
     return meta
+
+
+def _chromatic_frame(value: Any, frames: tuple[str, ...], path: Path) -> str:
+    """scene.json's ``chromatic_frame``: a 6-digit frame name or a non-negative integer,
+    naming a frame of the scene (one of ``frames``), as the frame's folder name."""
+    if isinstance(value, int) and not isinstance(value, bool) and value >= 0:
+        name = f"{value:06d}"
+    elif isinstance(value, str) and _FRAME.fullmatch(value):
+        name = value
+    else:
+        raise CaptureFormatError(
+            path,
+            f"chromatic_frame must be a 6-digit frame name or a frame index, got {_show(value)}",
+        )
+    if name not in frames:
+        shown = ", ".join(frames) if len(frames) <= 4 else f"{frames[0]} to {frames[-1]}"
+        raise CaptureFormatError(
+            path,
+            f"chromatic_frame {name} is not a frame of the scene (frames/ holds "
+            f"{len(frames)}: {shown})",
+        )
+    return name
 
 
 def all_images(ds: Dataset) -> list[Path]:
@@ -489,6 +519,7 @@ def validate(
                 "frames": len(s.frames),
                 "dynamic": s.dynamic,
                 "chromatic": s.chromatic,
+                "chromatic_frame": s.chromatic_frame if s.chromatic else None,
                 "masks": s.has_masks,
                 "ground_truth": s.has_gt,
             }

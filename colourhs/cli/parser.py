@@ -125,9 +125,11 @@ def build_parser(show_defaults: bool | Collection[str] = False) -> argparse.Argu
     s.add_argument(
         "--preset",
         default="demo",
-        help="tiny, demo, paper, random, random-tiny, random-tiny-lens, corner or corner-tiny "
-        "(default demo); the random and corner presets draw a different rig, board, encoding "
-        "and scene set for every --seed (corner: the ranges' hard ends combined)",
+        help="tiny, demo, paper, random, random-tiny, random-tiny-lens, corner, corner-tiny, "
+        "dynamic, dynamic-tiny, random-dynamic or random-dynamic-tiny (default demo); the "
+        "random and corner presets draw a different rig, board, encoding and scene set for "
+        "every --seed (corner: the ranges' hard ends combined); the dynamic ones render "
+        "moving coloured sequences (moving-toy, cloth, turning-metal) and the plane",
     )
     s.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     s.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
@@ -143,15 +145,17 @@ def build_parser(show_defaults: bool | Collection[str] = False) -> argparse.Argu
         "--frames",
         type=frame_indices,
         default=None,
-        help="render only these frames of the sheet's sequence: first-last and single "
+        help="render only these frames of the sequences (the sheet's; a dynamic preset's): "
+        "first-last and single "
         "indices, comma-separated, from 0 (e.g. 40-59 for frames 000040 to 000059 of the "
         "paper preset's 201); each equals the same frame of a full render (default: all)",
     )
     s.add_argument(
         "--scenes",
         default=None,
-        help="comma-separated scenes to render, of plane, statue, toy, sheet (with their "
-        "chromatic captures; default all); the calibration captures are always rendered",
+        help="comma-separated scenes to render, of plane, statue, toy, sheet (a dynamic "
+        "preset: plane, moving-toy, cloth, turning-metal), with their chromatic captures "
+        "(default all); the calibration captures are always rendered",
     )
     s.add_argument(
         "--parts",

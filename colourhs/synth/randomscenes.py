@@ -145,6 +145,34 @@ def _statue_material(d) -> Material:
     return Material(kd=1.0, diffuse="oren_nayar", sigma=d["sigma"])
 
 
+def _toy_materials(ty: dict) -> list[Material]:
+    """The toy's drawn plastic and metal (``ty``: the draw's ``toy`` entry)."""
+    plastic = Material(
+        kd=1.0,
+        specular="ggx",
+        ks=1.0,
+        roughness=ty["plastic_roughness"],
+        f0=ty["plastic_f0"],
+        tint="white",
+    )
+    metal = Material(
+        kd=0.05,
+        specular="ggx",
+        ks=1.0,
+        roughness=ty["metal_roughness"],
+        tint="fresnel",
+        f0_rgb=tuple(ty["metal_f0_rgb"]),
+    )
+    return [plastic, metal]
+
+
+def _sheet_material(sh: dict) -> Material:
+    """The sheet's drawn white-specular dielectric (``sh``: the draw's ``sheet`` entry)."""
+    return Material(
+        kd=1.0, specular="ggx", ks=1.0, roughness=sh["roughness"], f0=sh["f0"], tint="white"
+    )
+
+
 def _builders(desc: dict, geo: dict, statue_level: int) -> dict:
     st, ty, sh, wh = desc["statue"], desc["toy"], desc["sheet"], desc["white"]
 
@@ -153,28 +181,10 @@ def _builders(desc: dict, geo: dict, statue_level: int) -> dict:
         return sc.transformed(g, st["scale"], _yaw(st["yaw_deg"]), st["position"], st["origin"])
 
     def toy():
-        plastic = Material(
-            kd=1.0,
-            specular="ggx",
-            ks=1.0,
-            roughness=ty["plastic_roughness"],
-            f0=ty["plastic_f0"],
-            tint="white",
-        )
-        metal = Material(
-            kd=0.05,
-            specular="ggx",
-            ks=1.0,
-            roughness=ty["metal_roughness"],
-            tint="fresnel",
-            f0_rgb=tuple(ty["metal_f0_rgb"]),
-        )
-        g = sc.with_materials(_base_geometry("toy", statue_level), [plastic, metal])
+        g = sc.with_materials(_base_geometry("toy", statue_level), _toy_materials(ty))
         return sc.transformed(g, ty["scale"], _yaw(ty["yaw_deg"]), ty["position"], ty["origin"])
 
-    sheet_material = Material(
-        kd=1.0, specular="ggx", ks=1.0, roughness=sh["roughness"], f0=sh["f0"], tint="white"
-    )
+    sheet_material = _sheet_material(sh)
 
     def sheet(phase):
         return _sheet(sh, phase, sheet_material)

@@ -11,6 +11,14 @@ extensions of the format, the full rig model (``gt/rig_model.json``), the
 true board poses (``gt/board_poses.json``), the true target poses
 (``gt/geometric_poses.json``) and true chromaticity maps
 (``scenes/<scene>/gt/chromaticity.h5``).
+
+The ``dynamic`` presets (``dynamic``, ``dynamic-tiny``, ``random-dynamic``,
+``random-dynamic-tiny``) hold instead of the statue, toy and sheet the
+sequences of :mod:`colourhs.synth.dynamicscenes` (``moving-toy``, ``cloth``,
+``turning-metal``: multi-coloured objects that move or deform), each with
+chromatic captures of one frame (scene.json's ``chromatic_frame``), true
+chromaticity maps per frame (``scenes/<scene>/gt/chromaticity/<frame>.h5``)
+and, for the rigid ones, the true motion (``scenes/<scene>/gt/motion.json``).
 """
 
 from __future__ import annotations
@@ -93,7 +101,10 @@ class Preset:
     PNGs' (8 or 16); ``white_level`` the raw value of full scale, None for
     ``2**bit_depth - 1`` (4095 for 12-bit data in 16-bit PNGs).
     ``geometric_poses``: poses of the ChArUco target under ``geometric/``
-    (:mod:`colourhs.synth.geometric_target`).
+    (:mod:`colourhs.synth.geometric_target`). ``scene_set``: ``"static"`` (the
+    scenes ``plane``, ``statue``, ``toy`` and ``sheet``) or ``"dynamic"`` (``plane``
+    and the sequences of :mod:`colourhs.synth.dynamicscenes`, ``sheet_frames``
+    frames each).
     """
 
     name: str
@@ -111,6 +122,7 @@ class Preset:
     randomised: bool = False
     random_ranges: str = "random"
     geometric_poses: int = N_POSES
+    scene_set: str = "static"
 
 
 PRESETS = {
@@ -141,6 +153,18 @@ PRESETS["corner"] = replace(PRESETS["random"], name="corner", random_ranges="cor
 PRESETS["corner-tiny"] = replace(
     PRESETS["random-tiny"], name="corner-tiny", random_ranges="corner-tiny"
 )
+# Moving and deforming multi-coloured objects (colourhs.synth.dynamicscenes), 12
+# frames each, on the fixed rig (at the tiny and demo sizes) and on the random rigs.
+PRESETS["dynamic-tiny"] = replace(
+    PRESETS["tiny"], name="dynamic-tiny", sheet_frames=12, scene_set="dynamic"
+)
+PRESETS["dynamic"] = replace(PRESETS["demo"], name="dynamic", scene_set="dynamic")
+PRESETS["random-dynamic"] = replace(
+    PRESETS["random"], name="random-dynamic", sheet_frames=12, scene_set="dynamic"
+)
+PRESETS["random-dynamic-tiny"] = replace(
+    PRESETS["random-tiny"], name="random-dynamic-tiny", sheet_frames=12, scene_set="dynamic"
+)
 
 
 @dataclass(frozen=True)
@@ -148,7 +172,9 @@ class Content:
     """What a dataset's captures show, beyond the rig and the board poses.
 
     Builders are callables returning a :class:`~colourhs.synth.scenes.SceneGeometry`
-    (``sheet`` takes the phase in [0, 1]). ``mask_mode``: ``"exact"``
+    (``sheet`` takes the phase in [0, 1]); ``statue``, ``toy`` and ``sheet`` are None
+    in a dynamic preset, whose scenes are ``sequences``
+    (:class:`~colourhs.synth.dynamicscenes.Sequence`). ``mask_mode``: ``"exact"``
     (coverage >= 0.5), ``"none"`` (no ``masks/`` folder), ``"dilated"`` or
     ``"eroded"`` (by 1 px, 3x3). ``extra_gt``: more about the draw for
     ``gt/rig_model.json`` (key ``draw``). ``geometric``: the ChArUco target and its
@@ -163,10 +189,17 @@ class Content:
     scene_meta: dict = field(default_factory=lambda: SCENE_META)
     extra_gt: dict | None = None
     geometric: GeometricCaptures | None = None
+    sequences: tuple = ()
 
 
 def fixed_content(preset: Preset) -> Content:
-    """The scenes of the fixed presets (tiny, demo, paper)."""
+    """The scenes of the fixed presets (tiny, demo, paper; dynamic-tiny, dynamic)."""
+    if preset.scene_set == "dynamic":
+        from colourhs.synth.dynamicscenes import fixed_sequences, scene_meta
+
+        seqs = fixed_sequences(preset.sheet_frames)
+        meta = scene_meta(seqs, SCENE_META["plane"])
+        return Content(sc.white_reference, None, None, None, scene_meta=meta, sequences=seqs)
     return Content(
         white=sc.white_reference,
         statue=lambda: sc.statue(preset.statue_level),
@@ -252,6 +285,8 @@ def _jobs(preset: Preset, poses, parts, content: Content | None = None, frames=N
             )
         )
     for name, build in (("statue", content.statue), ("toy", content.toy)):
+        if build is None:
+            continue
         jobs.append(
             _Job(
                 build,
@@ -262,7 +297,7 @@ def _jobs(preset: Preset, poses, parts, content: Content | None = None, frames=N
                 gt_chroma=f"scenes/{name}/gt/chromaticity.h5" if "scenes" in parts else None,
             )
         )
-    if "scenes" in parts:
+    if "scenes" in parts and content.sheet is not None:
         n = preset.sheet_frames
         for f in range(n) if frames is None else frames:
             jobs.append(
@@ -273,6 +308,8 @@ def _jobs(preset: Preset, poses, parts, content: Content | None = None, frames=N
                     gt_mesh=f"scenes/sheet/gt/{f:06d}.ply",
                 )
             )
+    for seq in content.sequences:
+        jobs += _sequence_jobs(seq, parts, masks, frames)
     geometric = content.geometric
     if "geometric" in parts and geometric is not None:
         target = geometric.target
@@ -284,6 +321,29 @@ def _jobs(preset: Preset, poses, parts, content: Content | None = None, frames=N
                 )
             )
     return [j for j in jobs if j.frames or j.chromatic]
+
+
+def _sequence_jobs(seq, parts, masks: bool, frames=None) -> list[_Job]:
+    """The jobs of a dynamic preset's sequence: its ``frames`` (default all) and always
+    its chromatic frame, which the chromatic captures show (scene.json names it, so a
+    dataset of some frames stays valid); a frame's files equal a full render's."""
+    chosen = range(seq.frames) if frames is None else sorted({*frames, seq.chromatic_frame})
+    scenes = "scenes" in parts
+    out = []
+    for f in chosen:
+        chromatic = f == seq.chromatic_frame and "chromatic" in parts
+        rel = f"scenes/{seq.name}/{{}}/{f:06d}"
+        out.append(
+            _Job(
+                lambda f=f, build=seq.build: build(f),
+                (rel.format("frames"),) if scenes else (),
+                chromatic=f"chromatic/{seq.name}" if chromatic else None,
+                mask=rel.format("masks") if scenes and masks else None,
+                gt_mesh=rel.format("gt") + ".ply" if scenes else None,
+                gt_chroma=f"scenes/{seq.name}/gt/chromaticity/{f:06d}.h5" if scenes else None,
+            )
+        )
+    return out
 
 
 def _scene_of(job: _Job) -> str | None:
@@ -330,12 +390,14 @@ class RenderSelection:
         ``geometric_board``) and ``gt/`` are the same whatever the parts.
     scenes : render only these of ``plane``, ``statue``, ``toy``, ``sheet`` (their
         frames and chromatic captures); names. Default (None) all four: every
-        preset, fixed or randomised, has them.
+        preset, fixed or randomised, has them. A dynamic preset's scenes are
+        ``plane``, ``moving-toy``, ``cloth`` and ``turning-metal`` instead.
     frames : render only these frames of the sheet's sequence, indices in
         ``range(preset.sheet_frames)`` (e.g. ``range(40, 60)``). Default (None)
         all: the count is the preset's, not the rig's. A frame's shape (its phase
         is ``i / (sheet_frames - 1)``) and noise do not depend on which other
-        frames are rendered.
+        frames are rendered. In a dynamic preset: these frames of every
+        sequence, and always its chromatic frame.
     """
 
     parts: tuple[str, ...] = PARTS
@@ -386,7 +448,8 @@ def synthesise(
     out : dataset folder to create.
     preset : a name of :data:`PRESETS` (``"tiny"``, ``"demo"``, ``"paper"``,
         ``"random"``, ``"random-tiny"``, ``"random-tiny-lens"``, ``"corner"``,
-        ``"corner-tiny"``) or a :class:`Preset`.
+        ``"corner-tiny"``, ``"dynamic-tiny"``, ``"dynamic"``, ``"random-dynamic"``,
+        ``"random-dynamic-tiny"``) or a :class:`Preset`.
     seed : seed of every random choice (rig, poses, noise; with a randomised
         preset also the rig's design, board, encoding, masks and scenes).
     nuisances : effects to simulate (default: all on, :class:`Nuisances`). With a
@@ -411,11 +474,13 @@ def synthesise(
     unknown = set(parts) - set(PARTS)
     if unknown:
         raise ValueError(f"unknown parts {sorted(unknown)}; choose from {PARTS}")
-    if scenes is not None and set(scenes) - set(SCENE_META):
-        unknown = sorted(set(scenes) - set(SCENE_META))
-        raise ValueError(f"unknown scenes {unknown}; scenes: {', '.join(SCENE_META)}")
-    if frames is not None and ("scenes" not in parts or "sheet" not in (scenes or ("sheet",))):
-        raise ValueError("frames selects frames of the sheet, which is not rendered")
+    known, moving = _scene_names(p)
+    if scenes is not None and set(scenes) - set(known):
+        unknown = sorted(set(scenes) - set(known))
+        raise ValueError(f"unknown scenes {unknown}; scenes: {', '.join(known)}")
+    if frames is not None and ("scenes" not in parts or not set(moving) & set(scenes or moving)):
+        what = "the sheet, which is" if moving == ("sheet",) else ", ".join(moving) + ", none"
+        raise ValueError(f"frames selects frames of {what} not rendered")
     if out.exists() and not overwrite:
         raise FileExistsError(f"{out}: already exists (pass overwrite=True to replace it)")
     workers = (os.cpu_count() or 1) if workers is None else int(workers)
@@ -423,12 +488,13 @@ def synthesise(
     if p.randomised:
         from colourhs.synth.randomrig import RANGES_BY_NAME, describe, draw_random
 
+        ranges = RANGES_BY_NAME[p.random_ranges] if draw.ranges is None else draw.ranges
         d = draw_random(
             seed,
             p.width,
             p.height,
             nuis,
-            RANGES_BY_NAME[p.random_ranges] if draw.ranges is None else draw.ranges,
+            ranges,
             n_poses=p.n_poses,
             sheet_frames=p.sheet_frames,
             statue_level=p.statue_level,
@@ -453,6 +519,8 @@ def synthesise(
             SCENE_META,
             describe(d),
         )
+        if p.scene_set == "dynamic":
+            content = _random_dynamic(content, d, seed, ranges, p)
     else:
         rng = np.random.default_rng(seed)
         rig = make_rig(p.width, p.height, p.focal_px, rng, nuis)
@@ -475,6 +543,50 @@ def synthesise(
     return out
 
 
+def preset_chromatic_objects(preset: str | Preset) -> list[str]:
+    """The chromatic objects (but ``white``) of ``preset``'s datasets, known before one
+    is rendered (the workflow plans their chromaticity maps from them)."""
+    p = PRESETS[preset] if isinstance(preset, str) else preset
+    if p.scene_set == "dynamic":
+        from colourhs.synth.dynamicscenes import DYNAMIC_SCENES
+
+        return sorted(DYNAMIC_SCENES)  # each sequence is its own chromatic object
+    return sorted({m["chromatic"] for m in SCENE_META.values() if m["chromatic"]})
+
+
+def _scene_names(preset: Preset) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """The scenes of ``preset``'s datasets, and those of them whose frames
+    ``RenderSelection.frames`` selects."""
+    if preset.scene_set == "dynamic":
+        from colourhs.synth.dynamicscenes import DYNAMIC_SCENES
+
+        return ("plane", *DYNAMIC_SCENES), DYNAMIC_SCENES
+    if preset.scene_set != "static":
+        raise ValueError(f"preset {preset.name}: unknown scene_set {preset.scene_set!r}")
+    return tuple(SCENE_META), ("sheet",)
+
+
+def _random_dynamic(content: Content, d, seed: int, ranges, p: Preset) -> Content:
+    """A random draw's content with the dynamic sequences in place of the statue, toy
+    and sheet (:func:`colourhs.synth.dynamicscenes.random_sequences`; what they drew
+    under ``dynamic`` in ``gt/rig_model.json``'s ``draw``)."""
+    from colourhs.synth.dynamicscenes import random_sequences, scene_meta
+    from colourhs.synth.simulated_rig import jsonable
+
+    seqs = random_sequences(
+        seed, d.rig, d.description["scenes"], ranges, p.sheet_frames, p.statue_level
+    )
+    return replace(
+        content,
+        statue=None,
+        toy=None,
+        sheet=None,
+        scene_meta=scene_meta(seqs, SCENE_META["plane"]),
+        extra_gt=content.extra_gt | {"dynamic": jsonable({s.name: s.draw for s in seqs})},
+        sequences=seqs,
+    )
+
+
 def _frame_selection(preset: Preset, frames=None) -> tuple[int, ...] | None:
     """The sheet frames to render, checked: sorted unique indices in
     ``range(preset.sheet_frames)``, or None (all)."""
@@ -483,8 +595,9 @@ def _frame_selection(preset: Preset, frames=None) -> tuple[int, ...] | None:
     out = tuple(sorted({int(f) for f in frames}))
     bad = [f for f in out if not 0 <= f < preset.sheet_frames]
     if bad or not out:
+        what = "sheet has" if preset.scene_set == "static" else "sequences have"
         raise ValueError(
-            f"frames {bad or '(none)'}: the {preset.name} preset's sheet has frames "
+            f"frames {bad or '(none)'}: the {preset.name} preset's {what} frames "
             f"0-{preset.sheet_frames - 1}"
         )
     return out
@@ -519,6 +632,11 @@ def _write_dataset(root, rig, p, poses, content, seed, nuis, selection, workers)
             d = root / "scenes" / name
             d.mkdir(parents=True, exist_ok=True)
             (d / "scene.json").write_text(json.dumps(meta, indent=2))
+        for seq in content.sequences:
+            if seq.motion is not None and (scenes is None or seq.name in scenes):
+                path = root / "scenes" / seq.name / "gt" / "motion.json"
+                path.parent.mkdir(parents=True, exist_ok=True)
+                path.write_text(json.dumps(seq.motion.to_json(seq.frames), indent=1))
     jobs = _jobs(p, poses, parts, content, selection.frames)
     if scenes is not None:
         jobs = [j for j in jobs if _scene_of(j) in (None, *scenes)]

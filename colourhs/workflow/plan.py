@@ -215,9 +215,9 @@ class WorkflowPlan:
             objects = self._open(name, self.dataset_path(name)).chromatic_objects
             return [obj for obj in objects if obj != "white"]
         if self.synthetic(name):
-            from colourhs.synth.synthesise import SCENE_META
+            from colourhs.synth.synthesise import preset_chromatic_objects
 
-            return sorted({m["chromatic"] for m in SCENE_META.values() if m["chromatic"]})
+            return preset_chromatic_objects(self.synth_settings(name)["preset"])
         return []
 
     def selected_scenes(self, name: str) -> dict:

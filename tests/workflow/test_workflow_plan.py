@@ -328,6 +328,8 @@ def test_a_synthetic_dataset_waits_for_its_checkpoint(data, tmp_path, monkeypatc
         plan.reconstruction_targets("s")
     # Known before the run: the preset's objects.
     assert plan.chromatic_objects("s") == ["statue", "toy"]
+    moving = plan_of({"datasets": {"m": {"synth": {"preset": "random-dynamic-tiny"}}}})
+    assert moving.chromatic_objects("m") == ["cloth", "moving-toy", "turning-metal"]
     rendered = plan_of({"datasets": {"s": {"synth": {"preset": "demo"}}}}, wait=lambda n: str(data))
     assert len(rendered.reconstruction_targets("s")) == 3 * 5
 
