@@ -78,6 +78,7 @@ __all__ = [
     "OBJECT_THRESHOLD",
     "RATIO_PAIRS",
     "chromaticity_error",
+    "log_ratio_rms",
     "chromaticity_map",
     "chromaticity_maps",
     "chromaticity_ratios",
@@ -248,6 +249,27 @@ def chromaticity_error(estimate: np.ndarray, truth: np.ndarray) -> np.ndarray:
     t = normalise(truth)
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.linalg.norm(e - t, axis=-1) / np.linalg.norm(t, axis=-1)
+
+
+def log_ratio_rms(estimate: np.ndarray, truth: np.ndarray) -> float:
+    """RMS of the log ratios of two chromaticity maps over the pixels where both are known:
+    per pixel and channel ``log(p_est / p_gt)``, less the pixel's mean over the channels
+    (what a common scale of the triplet does, which eq. 12 cannot measure), squared and
+    averaged over channels and pixels. 0 for maps equal up to a scale per pixel; NaN
+    where no pixel is known in both.
+
+    Parameters
+    ----------
+    estimate, truth : ndarray, shape (H, W, 3)
+        NaN (or <= 0) where unknown.
+    """
+    e, t = np.asarray(estimate, np.float64), np.asarray(truth, np.float64)
+    ok = np.all(np.isfinite(e) & np.isfinite(t) & (e > 0) & (t > 0), axis=-1)
+    if not ok.any():
+        return float("nan")
+    d = np.log(e[ok]) - np.log(t[ok])
+    d -= d.mean(axis=1, keepdims=True)
+    return float(np.sqrt(np.mean(d**2)))
 
 
 # --------------------------------------------------------------------------------------------

@@ -331,6 +331,23 @@ def _chromaticity(args) -> int:
     return 0
 
 
+def _track_chromaticity(args) -> int:
+    from colourhs.calibration.chromaticity_tracking import track_chromaticity
+
+    info = track_chromaticity(
+        _dataset(args, [args.scene]),
+        args.scene,
+        args.frame,
+        args.calibrated,
+        args.out,
+        neighbour_h5=args.neighbour,
+    )
+    for cam, share in json.loads(info["tracked"]).items():
+        print(f"{cam}: a p for {share:.1%} as many pixels as the calibrated map")
+    print(f"wrote {args.out}")
+    return 0
+
+
 def check_reconstruct_params(params: dict) -> None:
     """Tuning options of ``reconstruct`` against the ranges of the workflow's config
     schema (``reconstruction.params`` in workflow/schemas/config.schema.yaml, the one
@@ -478,6 +495,9 @@ def _figures(args) -> int:
         args.gt,
         _pairs(args.animate, "--animate"),
         coloured=_pairs(args.coloured, "--coloured"),
+        chromaticity=_pairs(args.chromaticity, "--chromaticity"),
+        gt_chromaticity=_pairs(args.gt_chromaticity, "--gt-chromaticity"),
+        calibrated_chromaticity=args.calibrated_chromaticity,
     )
     print(f"wrote {len(written)} figures into {args.out}")
     return 0

@@ -39,6 +39,7 @@ from colourhs.cli.commands import (  # noqa: F401 (imported from here by users)
     _report,
     _run,
     _synth,
+    _track_chromaticity,
     _validate,
     frame_indices,
 )
@@ -319,6 +320,27 @@ def build_parser(show_defaults: bool | Collection[str] = False) -> argparse.Argu
     _rig_argument(c)
     c.set_defaults(func=_chromaticity)
 
+    tc = _command(
+        sub, "track-chromaticity", "a moving object's chromaticity maps in one frame (HDF5)"
+    )
+    _frame_arguments(tc)
+    tc.add_argument("out", type=Path, help="HDF5 file to write (the chromaticity maps' layout)")
+    tc.add_argument(
+        "--calibrated",
+        type=Path,
+        required=True,
+        help="the object's calibrated maps (colourhs chromaticity), of the chromatic frame",
+    )
+    tc.add_argument(
+        "--neighbour",
+        type=Path,
+        default=None,
+        help="this command's file of the next frame towards the chromatic frame (every "
+        "frame but the chromatic one)",
+    )
+    _rig_argument(tc)
+    tc.set_defaults(func=_track_chromaticity)
+
     rc = _command(sub, "reconstruct", "depth and normals of one frame (ML or Bayesian HS)")
     _frame_arguments(rc)
     rc.add_argument("out", type=Path, help="depth HDF5 to write")
@@ -417,6 +439,22 @@ def build_parser(show_defaults: bool | Collection[str] = False) -> argparse.Argu
     fg.add_argument("--gt", type=Path, default=None, help="ground-truth mesh PLY")
     fg.add_argument("--coloured", nargs="*", default=[], help="VARIANT=error-coloured mesh ...")
     fg.add_argument("--animate", nargs="*", default=[], help="FRAME=mesh.ply ... (dynamic scene)")
+    fg.add_argument(
+        "--chromaticity",
+        nargs="*",
+        default=[],
+        help="FRAME=tracked chromaticity .h5 ... (colourhs track-chromaticity, a moving "
+        "coloured object): its animation and drift plot",
+    )
+    fg.add_argument(
+        "--gt-chromaticity", nargs="*", default=[], help="FRAME=true chromaticity .h5 ..."
+    )
+    fg.add_argument(
+        "--calibrated-chromaticity",
+        type=Path,
+        default=None,
+        help="the object's calibrated maps, for the drift plot's unchanged-map line",
+    )
     fg.set_defaults(func=_figures)
 
     rp = _command(sub, "report", "the evaluation report (index.html)")
@@ -474,7 +512,8 @@ def build_parser(show_defaults: bool | Collection[str] = False) -> argparse.Argu
     r.add_argument(
         "--variants",
         default=None,
-        help="comma-separated variant ids (default: vh,ml_full,bayes_nocalib,bayes_ph,bayes_full)",
+        help="comma-separated variant ids (default: vh,ml_full,bayes_nocalib,bayes_ph,bayes_full, "
+        "and bayes_dyn where a scene is a sequence of a chromatic object)",
     )
     r.add_argument(
         "--scenes", default=None, help="comma-separated scenes to reconstruct (default: all)"
@@ -509,6 +548,7 @@ INPUTS = {
     "crosstalk": ("dataset", "rig", "poses"),
     "photometric": ("dataset", "rig", "poses", "crosstalk"),
     "chromaticity": ("dataset", "rig"),
+    "track-chromaticity": ("dataset", "rig", "calibrated", "neighbour"),
     "reconstruct": (
         "dataset",
         "rig",
@@ -523,7 +563,16 @@ INPUTS = {
     "mesh": ("depth", "hull", "same_as"),
     "evaluate": ("depth", "mesh", "gt", "same_as"),
     "metrics": ("json",),
-    "figures": ("depth", "mesh", "gt", "coloured", "animate"),
+    "figures": (
+        "depth",
+        "mesh",
+        "gt",
+        "coloured",
+        "animate",
+        "chromaticity",
+        "gt_chromaticity",
+        "calibrated_chromaticity",
+    ),
     "report": ("metrics", "calibration", "config", "dataset", "rig", "calib"),
 }
 
@@ -539,6 +588,10 @@ INPUT_KINDS = {
     "noise": "json",
     "photometric": "hdf5",
     "chromaticity": "hdf5",
+    "calibrated": "hdf5",
+    "neighbour": "hdf5",
+    "gt_chromaticity": "hdf5",
+    "calibrated_chromaticity": "hdf5",
     "depth": "depth",
     "config": "yaml",
     "json": "json",
@@ -561,7 +614,14 @@ POSITIONAL = {
     "photometric:poses",
 }
 #: Input arguments given as KEY=PATH (a variant's or a frame's file), per subcommand.
-KEY_PATHS = {"figures:depth", "figures:mesh", "figures:coloured", "figures:animate"}
+KEY_PATHS = {
+    "figures:depth",
+    "figures:mesh",
+    "figures:coloured",
+    "figures:animate",
+    "figures:chromaticity",
+    "figures:gt_chromaticity",
+}
 #: Inputs that may be folders: the dataset, report --calibration (figures) and --calib.
 FOLDER_INPUTS = ("dataset", "calibration", "calib")
 

@@ -85,7 +85,11 @@ def load_frame(
 
     ``noise_json`` (:func:`colourhs.calibration.noise.calibrate_noise`) gives the images'
     noise variance; without it the noise model is estimated from the frame's
-    own images (:func:`colourhs.calibration.noise.estimate_noise`).
+    own images (:func:`colourhs.calibration.noise.estimate_noise`). A chromaticity
+    file that carries a 1-sigma of log p per camera (``sigma/<camera>``: a tracked
+    map, :mod:`colourhs.calibration.chromaticity_tracking`) widens that variance by
+    ``(i sigma)^2`` per channel: eq. 3 divides each intensity by its p, so a relative
+    error of p is one of the intensity (beyond the paper).
     """
     ds = dataset_of(dataset_dir, scenes=[scene])
     rig = ds.rig
@@ -119,11 +123,13 @@ def load_frame(
             ratio_sigma = np.array(
                 [sigmas.get(f"{ka}~{kb}", sigmas.get(f"{kb}~{ka}", np.nan)) for ka, kb in keys]
             )
-    chroma = None
+    chroma = chroma_sigma = None
     if chromaticity_h5:
         note_read(chromaticity_h5)
         with h5py.File(chromaticity_h5) as f:
             chroma = np.stack([f[cam][()].transpose(2, 0, 1) for cam in rig.camera_names])
+            if all(f"sigma/{cam}" in f for cam in rig.camera_names):
+                chroma_sigma = np.stack([f[f"sigma/{cam}"][()] for cam in rig.camera_names])
     for extra in (crosstalk_json, photometric_h5, chromaticity_h5, noise_json):
         if extra:
             inputs.append(Path(extra))
@@ -137,6 +143,9 @@ def load_frame(
             variance.append(NoiseModel({cam: gain}, {cam: offset}).variance(cam, rgb))
         else:
             variance.append(model.variance(cam, rgb))
+    variance = np.stack(variance).transpose(0, 3, 1, 2).astype(np.float32)
+    if chroma_sigma is not None:  # (C, H, W): the same relative error in every channel
+        variance += (images * np.nan_to_num(chroma_sigma, nan=0.0)[:, None]) ** 2
     return Frame(
         rig,
         images,
@@ -144,7 +153,7 @@ def load_frame(
         np.stack(sils) if sils else None,
         mu,
         None if chroma is None else chroma.astype(np.float32),
-        np.stack(variance).transpose(0, 3, 1, 2).astype(np.float32),
+        variance,
         inputs,
         ratio_sigma,
     )

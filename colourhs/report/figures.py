@@ -449,6 +449,9 @@ def scene_figures(
     animation: Mapping[str, str | Path] | None = None,
     fps: float = 8,
     coloured: Mapping[str, str | Path] | None = None,
+    chromaticity: Mapping[str, str | Path] | None = None,
+    gt_chromaticity: Mapping[str, str | Path] | None = None,
+    calibrated_chromaticity: str | Path | None = None,
 ) -> list[Path]:
     """A scene's figures, variants side by side (the Snakemake rule's function).
 
@@ -469,7 +472,12 @@ def scene_figures(
     its metrics JSON beside it), ``hausdorff.png``: those meshes rendered, recoloured
     on one scale (viridis, 0 to the median of the variants' 95th percentiles, as
     :func:`shared_scale_images`; distances recovered from the colours by
-    :func:`colourhs.common.colours.colour_values`) with its colour bar.
+    :func:`colourhs.common.colours.colour_values`) with its colour bar; with
+    ``chromaticity`` (frame -> tracked chromaticity file of a moving coloured
+    object), ``chromaticity.gif`` (the reference camera's map over the frames) and
+    ``chromaticity_drift.png`` (its sigma, share tracked and, with
+    ``gt_chromaticity``, its error and that of ``calibrated_chromaticity`` used
+    unchanged; :mod:`colourhs.report.tracking`).
 
     Shows bars over the variants' maps, the renders and the animation's frames, and
     logs a line at INFO before each error or sigma figure (:mod:`colourhs.common.progress`).
@@ -484,6 +492,9 @@ def scene_figures(
     animation : frame -> mesh PLY, in frame order, or None.
     fps : frames per second of the animation.
     coloured : variant -> error-coloured mesh PLY, or None.
+    chromaticity, gt_chromaticity : frame -> tracked / true chromaticity file, in frame
+        order, or None.
+    calibrated_chromaticity : the object's calibrated maps, or None.
 
     Returns
     -------
@@ -585,4 +596,17 @@ def scene_figures(
         plys = bar(animation.values(), "figures: animation", n, unit="frame")
         frames = (render(ply) for ply in plys)  # one at a time: a long sequence at full size
         written.append(write_animation(frames, out / "animation.gif", fps=fps, labels=labels))
+    if chromaticity:
+        from colourhs.report.tracking import (
+            chromaticity_animation,
+            chromaticity_drift,
+            chromaticity_drift_figure,
+        )
+
+        stage(log, "figures: chromaticity over the sequence")
+        camera = getattr(cam, "camera", None)
+        gif = out / "chromaticity.gif"
+        written.append(chromaticity_animation(chromaticity, gif, camera, fps=fps))
+        drift = chromaticity_drift(chromaticity, gt_chromaticity, calibrated_chromaticity)
+        written.append(chromaticity_drift_figure(drift, out / "chromaticity_drift.png"))
     return written

@@ -74,7 +74,7 @@ from colourhs.report.tables import (
     summarise_metrics,
 )
 from colourhs.report.view3d import scene_views
-from colourhs.workflow.variants import VARIANT_LABELS, VARIANT_ORDER
+from colourhs.workflow.variants import VARIANT_LABELS, VARIANT_ORDER, VARIANTS
 
 log = logging.getLogger(__name__)
 
@@ -366,10 +366,14 @@ def _same_as_note(metrics: pd.DataFrame, scene: str) -> str:
     if not pairs:
         return ""
     text = "; ".join(f"<code>{_e(v)}</code> is <code>{_e(o)}</code>" for v, o in pairs)
-    return (
-        f'<p class="note">{text} on this scene: it has no chromatic object, so the '
-        "chromaticity calibration has nothing to change; computed once and copied.</p>"
+    untracked = all(VARIANTS.get(o, {}).get("chromaticity") for _, o in pairs)
+    why = (
+        "its chromaticity does not move (no sequence of a chromatic object), so carrying "
+        "it from frame to frame has nothing to change"
+        if untracked
+        else "it has no chromatic object, so the chromaticity calibration has nothing to change"
     )
+    return f'<p class="note">{text} on this scene: {why}; computed once and copied.</p>'
 
 
 def _e(s) -> str:

@@ -47,6 +47,9 @@ PHOTOMETRIC_PNG = "results/{name}/calib/photometric.png"
 CHROMATICITY = "results/{name}/calib/chromaticity/{object}.h5"
 CHROMATICITY_PNG = "results/{name}/calib/chromaticity/{object}.png"
 
+#: A frame's chromaticity maps, carried from the chromatic frame (rule
+#: track_chromaticity; variant bayes_dyn reads them).
+TRACKED_CHROMATICITY = "results/{name}/{scene}/chromaticity/{frame}.h5"
 #: A frame's visual hull mesh (rule visual_hull).
 HULL = "results/{name}/{scene}/hull/{frame}.ply"
 #: A variant's depth file of a frame (rule reconstruct_frame; visual_hull for vh).
@@ -92,6 +95,7 @@ LOGS = {
     "noise_model": "logs/calib/{name}/noise.log",
     "photometric_maps": "logs/calib/{name}/photometric.log",
     "chromaticity_map": "logs/calib/{name}/chromaticity/{object}.log",
+    "track_chromaticity": "logs/calib/{name}/{scene}/chromaticity/{frame}.log",
     "visual_hull": "logs/surfaces/{name}/{scene}/hull/{frame}.log",
     "reconstruct_frame": "logs/reconstruct/{name}/{scene}/{variant}/{frame}.log",
     "frame_mesh": "logs/surfaces/{name}/{scene}/{variant}/mesh/{frame}.log",
@@ -122,6 +126,7 @@ BENCHMARKS = {
     "noise_model": _benchmark("noise_model", "{name}"),
     "photometric_maps": _benchmark("photometric_maps", "{name}"),
     "chromaticity_map": _benchmark("chromaticity_map", "{name}/{object}"),
+    "track_chromaticity": _benchmark("track_chromaticity", "{name}/{scene}/{frame}"),
     "visual_hull": _benchmark("visual_hull", "{name}/{scene}/{frame}"),
     "reconstruct_frame": _benchmark("reconstruct_frame", "{name}/{scene}/{variant}/{frame}"),
     "frame_mesh": _benchmark("frame_mesh", "{name}/{scene}/{variant}/{frame}"),

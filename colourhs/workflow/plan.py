@@ -41,9 +41,15 @@ from colourhs.workflow.paths import (
     REPORT,
     RIG,
     SYNTH_DATASET,
+    TRACKED_CHROMATICITY,
     fill,
 )
-from colourhs.workflow.variants import HS_VARIANT_PATTERN, VARIANTS, same_as  # noqa: F401 (rules)
+from colourhs.workflow.variants import (  # noqa: F401 (rules)
+    HS_VARIANT_PATTERN,
+    PAPER_VARIANTS,
+    VARIANTS,
+    same_as,
+)
 
 
 class MalformedDatasetError(ValueError):
@@ -367,12 +373,21 @@ class WorkflowPlan:
 
     # ---------------------------------------------------------------- reconstruction
 
-    def variants(self) -> list[str]:
-        """The config's variants (null: every one, in the paper's order)."""
-        return self.config["reconstruction"]["variants"] or list(VARIANTS)
+    def variants(self, name: str) -> list[str]:
+        """The config's variants; null: the paper's, in its order, and ``bayes_dyn`` where
+        a selected scene of the dataset carries its chromaticity frame to frame
+        (:meth:`tracks_chromaticity`; elsewhere it would only copy ``bayes_full``)."""
+        chosen = self.config["reconstruction"]["variants"]
+        if chosen:
+            return list(chosen)
+        moving = any(self.tracks_chromaticity(name, s) for s in self.selected_scenes(name))
+        return list(VARIANTS) if moving else list(PAPER_VARIANTS)
 
-    def variant_calibration(self, name: str, scene: str, variant: str) -> dict:
-        """Calibration files a variant reads (inputs, so reruns follow their changes)."""
+    def variant_calibration(
+        self, name: str, scene: str, variant: str, frame: str | None = None
+    ) -> dict:
+        """Calibration files a variant reads (inputs, so reruns follow their changes); a
+        tracked chromaticity (``bayes_dyn`` on a moving scene) is the frame's own."""
         v = VARIANTS[variant]
         out = {} if v["method"] == "vh" else {"noise": fill(NOISE, name=name)}
         if v["photometric"]:
@@ -382,12 +397,45 @@ class WorkflowPlan:
         obj = self.layout(name).scene(scene).chromatic
         if v["chromaticity"] and obj:
             out["chromaticity"] = fill(CHROMATICITY, name=name, object=obj)
+        if v.get("tracked") and self.tracks_chromaticity(name, scene):
+            if frame is None:
+                raise ValueError(f"{variant} on {scene}: its chromaticity is the frame's")
+            out["chromaticity"] = fill(TRACKED_CHROMATICITY, name=name, scene=scene, frame=frame)
         return out
 
-    def reconstruct_options(self, name: str, scene: str, variant: str) -> str:
+    def tracks_chromaticity(self, name: str, scene: str) -> bool:
+        """Whether a scene's chromaticity is carried frame to frame (a chromatic object
+        in a sequence of several frames: :func:`colourhs.workflow.variants.same_as`)."""
+        sc = self.layout(name).scene(scene)
+        return bool(sc.chromatic) and len(sc.frames) > 1
+
+    def tracking_inputs(self, name: str, scene: str, frame: str) -> dict:
+        """What ``colourhs track-chromaticity`` reads for a frame: the rig.json and
+        scene.json, the images of the frame, of its neighbour towards the chromatic
+        frame and of the chromatic frame, the object's calibrated maps and the
+        neighbour's tracked maps (none for the chromatic frame: the chain starts there)."""
+        from colourhs.calibration.chromaticity_tracking import tracking_neighbour
+
+        ds = self.layout(name)
+        sc = ds.scene(scene)
+        neighbour = tracking_neighbour(sc.frames, sc.chromatic_frame, frame)
+        frames = dict.fromkeys(f for f in (frame, neighbour, sc.chromatic_frame) if f)
+        cams = ds.rig.camera_names
+        images = [ds.frame_image(scene, f, c) for f in frames for c in cams]
+        out = {
+            "images": self._scene_files(name, scene) + _paths(images),
+            "calibrated": fill(CHROMATICITY, name=name, object=sc.chromatic),
+        }
+        if neighbour is not None:
+            out["neighbour"] = fill(TRACKED_CHROMATICITY, name=name, scene=scene, frame=neighbour)
+        return out
+
+    def reconstruct_options(
+        self, name: str, scene: str, variant: str, frame: str | None = None
+    ) -> str:
         """Command-line options of ``colourhs reconstruct`` (plain values)."""
         opts = [f"--method {VARIANTS[variant]['method']}"]
-        for key, path in self.variant_calibration(name, scene, variant).items():
+        for key, path in self.variant_calibration(name, scene, variant, frame).items():
             opts.append(f"--{key} {shlex.quote(path)}")
         return " ".join(opts + [cli_options(self.config["reconstruction"]["params"])])
 
@@ -405,7 +453,11 @@ class WorkflowPlan:
         eval: the metrics JSON, coloured: the error-coloured mesh). On a scene without a
         chromatic object bayes_full equals bayes_ph: computed once, copied.
         """
-        other = same_as(variant, bool(self.layout(name).scene(scene).chromatic))
+        other = same_as(
+            variant,
+            bool(self.layout(name).scene(scene).chromatic),
+            self.tracks_chromaticity(name, scene),
+        )
         if other is None:
             return []
         return [self._frame_result(kind, name, scene, other, frame)]
@@ -431,7 +483,7 @@ class WorkflowPlan:
         return [
             self._frame_result(kind, name, s, v, f)
             for s, scene in self.selected_scenes(name).items()
-            for v in self.variants()
+            for v in self.variants(name)
             for f in scene.frames
         ]
 
@@ -445,17 +497,20 @@ class WorkflowPlan:
 
     # ---------------------------------------------------------------- report
 
-    def animation_variant(self) -> str:
-        """The variant animated for a dynamic scene: the last of the configured ones."""
-        return self.variants()[-1]
+    def animation_variant(self, name: str) -> str:
+        """The variant animated for a dynamic scene: the last of the dataset's."""
+        return self.variants(name)[-1]
 
     def figure_inputs(self, name: str, scene: str) -> dict:
         """Depth files and meshes of a scene's first frame per variant, its ground truth,
-        the animated variant's meshes of every frame (dynamic scenes) and, with ground
-        truth, the first frame's error-coloured meshes and the metrics JSON beside each
-        (``scale``: its colour scale's top)."""
+        the animated variant's meshes of every frame (dynamic scenes), with ground
+        truth the first frame's error-coloured meshes and the metrics JSON beside each
+        (``scale``: its colour scale's top) and, where the scene's chromaticity is
+        tracked and ``bayes_dyn`` is among the variants, every frame's tracked maps
+        (``chromaticity``), the object's calibrated maps and the dataset's true maps
+        per frame where it has them (``gt_chromaticity``)."""
         frames = self.layout(name).scene(scene).frames
-        f0, variants = frames[0], self.variants()
+        f0, variants = frames[0], self.variants(name)
 
         def first(kind: str) -> list[str]:
             return [self._frame_result(kind, name, scene, v, f0) for v in variants]
@@ -470,14 +525,27 @@ class WorkflowPlan:
             "scale": first("eval") if gt else [],
         }
         if len(frames) > 1:
-            a = self.animation_variant()
+            a = self.animation_variant(name)
             out["animation"] = [self._frame_result("mesh", name, scene, a, f) for f in frames]
+        out |= {"chromaticity": [], "calibrated_chromaticity": [], "gt_chromaticity": []}
+        tracked = any(VARIANTS[v].get("tracked") for v in variants)
+        if tracked and self.tracks_chromaticity(name, scene):
+            ds, obj = self.layout(name), self.layout(name).scene(scene).chromatic
+            out["chromaticity"] = [
+                fill(TRACKED_CHROMATICITY, name=name, scene=scene, frame=f) for f in frames
+            ]
+            out["calibrated_chromaticity"] = [fill(CHROMATICITY, name=name, object=obj)]
+            truth = [
+                Path(ds.root) / "scenes" / scene / "gt" / "chromaticity" / f"{f}.h5" for f in frames
+            ]
+            if all(p.is_file() for p in truth):
+                out["gt_chromaticity"] = _paths(truth)
         return out
 
     def figure_options(self, name: str, scene: str) -> str:
         """``colourhs figures`` options: VARIANT=path pairs (plain strings)."""
         inp = self.figure_inputs(name, scene)
-        frames, variants = self.layout(name).scene(scene).frames, self.variants()
+        frames, variants = self.layout(name).scene(scene).frames, self.variants(name)
         opts = ["--depth"] + [f"{v}={p}" for v, p in zip(variants, inp["depth"], strict=True)]
         opts += ["--mesh"] + [f"{v}={p}" for v, p in zip(variants, inp["mesh"], strict=True)]
         if inp["gt"]:
@@ -486,6 +554,12 @@ class WorkflowPlan:
         if inp["animation"]:
             opts += ["--animate"]
             opts += [f"{f}={p}" for f, p in zip(frames, inp["animation"], strict=True)]
+        for key in ("chromaticity", "gt_chromaticity"):
+            if inp[key]:
+                opts += ["--" + key.replace("_", "-")]
+                opts += [f"{f}={p}" for f, p in zip(frames, inp[key], strict=True)]
+        if inp["calibrated_chromaticity"]:
+            opts += ["--calibrated-chromaticity", inp["calibrated_chromaticity"][0]]
         return shlex.join(opts)
 
     def report_inputs(self, name: str) -> dict:
@@ -503,7 +577,7 @@ class WorkflowPlan:
         views = [
             self._frame_result("coloured", name, s, v, meta.frames[0])
             for s, meta in scenes.items()
-            for v in self.variants()
+            for v in self.variants(name)
         ]
         return {
             "metrics": fill(METRICS, name=name),

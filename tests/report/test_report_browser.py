@@ -275,7 +275,9 @@ def test_report_reads_at_width_and_stands_alone(tmp_path, width):
         assert all(r["weight"] < 600 and not r["before"] for r in rows if not r["best"])
         # the folder stands alone: every image loaded, every link a file inside it
         assert page["broken"] == []  # every <img> loaded, those of hidden tabs too
-        assert page["images"] == 2 + n_scenes * (15 + (n_frames > 1))  # + animation
+        # 5 wide figures, a depth and a normal map per variant, the animation
+        per_scene = 5 + 2 * len(VARIANT_ORDER) + (n_frames > 1)
+        assert page["images"] == 2 + n_scenes * per_scene
         assert _outside(page["links"], pages[k].parent) == []
         assert any("/assets/" in link for link in page["links"])  # the calibration figures
         # one scene shown: its Figure 7 full width, not a ~100 px tile; the other

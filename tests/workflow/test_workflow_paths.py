@@ -11,6 +11,7 @@ its wildcards and reads and passes on results only at the templates.
 from __future__ import annotations
 
 import ast
+import json
 import re
 import subprocess
 import sys
@@ -201,11 +202,14 @@ def _jobs(text: str) -> list[dict]:
 @pytest.fixture(scope="module")
 def dry_run(tmp_path_factory) -> list[dict]:
     """Every job of a dataset given by path (its rig calibrated from its geometric/
-    captures, meshes and depth ranges from the visual hull) and the rendering of a
-    synthetic one (asked for by its folder: the default target waits for it before it
-    plans the others' reconstructions)."""
+    captures, a coloured sequence's chromaticity tracked, meshes and depth ranges from
+    the visual hull) and the rendering of a synthetic one (asked for by its folder: the
+    default target waits for it before it plans the others' reconstructions)."""
     root = tmp_path_factory.mktemp("paths")
     data = add_geometric(make_dataset(root / "my data"))
+    # A moving coloured sequence: its chromaticity tracked frame to frame (bayes_dyn).
+    wave = {"dynamic": True, "chromatic": "slinky", "chromatic_frame": "000001"}
+    (data / "scenes/wave/scene.json").write_text(json.dumps(wave))
     config = root / "config.yaml"
     # The rig calibrated from geometric/ (rule calibrate_rig; every stage reads it).
     calibrated = {"path": str(data), "calibration": {"calibrate_rig": True}}

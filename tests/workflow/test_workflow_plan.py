@@ -7,6 +7,7 @@ else), with a config validated as the Snakefile does (the schema's defaults set)
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import shutil
@@ -388,7 +389,7 @@ def test_rules_run_the_python_that_runs_snakemake(data, tmp_path, monkeypatch):
     config.write_text(yaml.safe_dump({"datasets": {"d": {"path": str(data)}}}))
     with quiet_workflow(tmp_path, [config]) as (workflow, rules):
         workflow.list_rules()
-    assert len(rules.getvalue().split()) == 17  # the workflow was read: 16 rules and all
+    assert len(rules.getvalue().split()) == 18  # the workflow was read: 17 rules and all
     assert shell('printf %s "$COLOURHS_PYTHON"', read=True) == python
 
 
@@ -431,3 +432,57 @@ def test_schema_refuses_a_spline_spacing_under_one_pixel(data):
     with pytest.raises(Exception, match="less than the minimum of 1") as err:
         plan_of(bad)
     assert "spline_px" in str(err.value)
+
+
+def test_bayes_dyn_reads_each_frames_tracked_chromaticity(data, tmp_path):
+    """bayes_dyn (beyond the paper): on a sequence with a chromatic object each frame's
+    tracked maps (rule track_chromaticity, in frame order from the chromatic frame:
+    each frame reads its neighbour's); on a static scene it is bayes_full's copy, on a
+    white one bayes_ph's."""
+    moving = shutil.copytree(data, tmp_path / "moving")
+    meta = {"dynamic": True, "chromatic": "slinky", "chromatic_frame": "000001"}
+    (moving / "scenes/wave/scene.json").write_text(json.dumps(meta))
+    plan = plan_of({"datasets": {"d": {"path": str(moving)}}})
+    assert plan.tracks_chromaticity("d", "wave") and not plan.tracks_chromaticity("d", "toy")
+    tracked = "results/d/wave/chromaticity/{}.h5"
+    calib = plan.variant_calibration("d", "wave", "bayes_dyn", "000000")
+    assert calib["chromaticity"] == tracked.format("000000")
+    assert plan.variant_calibration("d", "wave", "bayes_full")["chromaticity"] == (
+        "results/d/calib/chromaticity/slinky.h5"
+    )
+    assert f"--chromaticity {tracked.format('000000')}" in plan.reconstruct_options(
+        "d", "wave", "bayes_dyn", "000000"
+    )
+    assert plan.same_result("d", "wave", "bayes_dyn", "000000", "depth") == []
+    assert plan.same_result("d", "toy", "bayes_dyn", "000000", "depth") == [
+        "results/d/toy/bayes_full/depth/000000.h5"
+    ]
+    first = plan.tracking_inputs("d", "wave", "000000")
+    assert first["neighbour"] == tracked.format("000001")
+    assert first["calibrated"] == "results/d/calib/chromaticity/slinky.h5"
+    images = [
+        str(moving / f"scenes/wave/frames/{f}/cam{i}.png")
+        for f in ("000000", "000001")
+        for i in (1, 2, 3)
+    ]
+    assert first["images"] == [
+        str(moving / "rig.json"),
+        str(moving / "scenes/wave/scene.json"),
+        *images,
+    ]
+    assert "neighbour" not in plan.tracking_inputs("d", "wave", "000001")
+    # The report: every frame's tracked maps (variants null: bayes_dyn is among them).
+    assert plan.variants("d")[-1] == "bayes_dyn"
+    figures = plan.figure_inputs("d", "wave")
+    assert figures["chromaticity"] == [tracked.format(f) for f in ("000000", "000001")]
+    assert figures["calibrated_chromaticity"] == ["results/d/calib/chromaticity/slinky.h5"]
+    assert figures["gt_chromaticity"] == []  # the dataset has no true maps per frame
+    assert "--chromaticity 000000=results/d/wave/chromaticity/000000.h5" in (
+        plan.figure_options("d", "wave")
+    )
+    assert plan.figure_inputs("d", "toy")["chromaticity"] == []
+    white = plan_of({"datasets": {"d": {"path": str(data)}}})
+    assert "bayes_dyn" not in white.variants("d")  # nothing moves: it would only copy
+    assert white.same_result("d", "wave", "bayes_dyn", "000001", "depth") == [
+        "results/d/wave/bayes_ph/depth/000001.h5"
+    ]

@@ -141,3 +141,35 @@ rule chromaticity_map:
     shell:
         '"$COLOURHS_PYTHON" -m colourhs chromaticity {params.dataset:q} {params.rig} {wildcards.object} {output.h5:q} '
         "--figure {output.png:q} {params.options} > {log:q} 2>&1"
+
+
+# Beyond the paper: a moving object's chromaticity carried from its chromatic frame
+# to each frame of the sequence, in frame order (each frame reads its neighbour's
+# maps towards the chromatic frame: a changed frame reruns it and those after it).
+rule track_chromaticity:
+    input:
+        unpack(lambda w: tracking_inputs(w.name, w.scene, w.frame)),
+    output:
+        TRACKED_CHROMATICITY,
+    log:
+        LOGS["track_chromaticity"],
+    benchmark:
+        BENCHMARKS["track_chromaticity"]
+    wildcard_constraints:
+        frame="[0-9]{6}",
+    threads: 1
+    resources:
+        mem_mb=1500,
+        runtime=5,
+    params:
+        dataset=lambda w: dataset_path(w.name),
+        rig=lambda w: rig_option(w.name),
+        neighbour=lambda w, input: (
+            f"--neighbour {shlex.quote(str(input.neighbour))}"
+            if "neighbour" in input.keys()
+            else ""
+        ),
+    shell:
+        '"$COLOURHS_PYTHON" -m colourhs track-chromaticity {params.dataset:q} {params.rig} '
+        "{wildcards.scene} {wildcards.frame} {output:q} --calibrated {input.calibrated:q} "
+        "{params.neighbour} > {log:q} 2>&1"

@@ -35,6 +35,7 @@ from colourhs.workflow.paths import (
     RIG,
     RIG_REPORT,
     SYNTH_DATASET,
+    TRACKED_CHROMATICITY,
     VH_DEPTH,
 )
 from colourhs.workflow.plan import (
@@ -75,6 +76,7 @@ photometric_options = PLAN.photometric_options
 calibration_targets = PLAN.calibration_targets
 frame_inputs = PLAN.frame_inputs
 variant_calibration = PLAN.variant_calibration
+tracking_inputs = PLAN.tracking_inputs
 reconstruction_hull = PLAN.reconstruction_hull
 reconstruct_options = PLAN.reconstruct_options
 same_result = PLAN.same_result

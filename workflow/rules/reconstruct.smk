@@ -4,7 +4,9 @@
 rule reconstruct_frame:
     input:
         images=lambda w: frame_inputs(w.name, w.scene, w.frame),
-        calib=lambda w: variant_calibration(w.name, w.scene, w.variant).values(),
+        calib=lambda w: variant_calibration(
+            w.name, w.scene, w.variant, w.frame
+        ).values(),
         hull=lambda w: reconstruction_hull(w.name, w.scene, w.frame),
         same=lambda w: same_result(w.name, w.scene, w.variant, w.frame, "depth"),
     output:
@@ -30,7 +32,7 @@ rule reconstruct_frame:
     params:
         dataset=lambda w: dataset_path(w.name),
         rig=lambda w: rig_option(w.name),
-        options=lambda w: reconstruct_options(w.name, w.scene, w.variant),
+        options=lambda w: reconstruct_options(w.name, w.scene, w.variant, w.frame),
         hull=lambda w, input: (
             f"--hull {shlex.quote(str(input.hull))}" if input.hull else ""
         ),

@@ -1,0 +1,335 @@
+"""Chromaticity that follows the surface through a sequence (beyond the paper).
+
+The paper calibrates the surface chromaticity p (eqs. 9-12) per camera pixel from
+chromatic captures of an object in one pose, and names dense surface point tracking,
+carrying that calibration to each point's new position, as the way to reconstruct
+moving multi-coloured objects (its conclusion). Here each camera's map is carried
+from the chromatic frame c (scene.json's ``chromatic_frame``) through the sequence,
+one frame at a time in each direction, so that frame f's map depends on its
+neighbour towards c only:
+
+1. Prediction: each pixel keeps its point's pixel in frame c (``position``); the dense
+   optical flow from frame f's image to its neighbour's (OpenCV's DIS on one 8-bit
+   channel, :func:`flow_image`) carries the neighbour's positions to frame f; where
+   it leaves what the neighbour tracked, the pixel takes the neighbour's position at
+   itself (no motion), or else its own pixel (:func:`predict_positions`).
+2. Colour: the prediction is then moved, within :data:`SEARCH_PX`, to the pixel of
+   frame c whose image colour (:func:`image_colour`: the channels over their sum, all
+   lights on) best matches the pixel's own in frame f, with a small preference for
+   the prediction (:data:`PROXIMITY`). Flow fails where the surface has no texture
+   (a uniform patch, a metal under moving highlights) but the colour does not: within
+   a uniform patch any match has the right p, and at a patch edge the colour picks
+   the side. Every frame is matched to frame c itself, so the drift of the chained
+   flow is re-anchored at every step, not only where the object shows the chromatic
+   pose again.
+3. A pixel whose best match still differs by more than :data:`COLOUR_TOL` is left
+   unknown (NaN, as the calibration leaves a pixel it cannot measure): a surface that
+   frame c did not show, or shading that changed its colour too much.
+4. p is sampled once from the calibrated map at the position (nearest: no colour is
+   mixed across a patch edge, and no blur accumulates); its 1-sigma of log p
+   (``sigma``) is the match's relative colour residual, ``|q_f - q_c| / |q_c|``.
+
+A static scene, or the chromatic frame itself, keeps the calibrated map unchanged
+(position the pixel itself, sigma 0): ``bayes_dyn`` there equals ``bayes_full``.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import h5py
+import numpy as np
+
+from colourhs.capture import Dataset, dataset_of, read_image
+from colourhs.common.files import atomic_output, note_read
+from colourhs.common.progress import bar, stage
+
+log = logging.getLogger(__name__)
+
+__all__ = [
+    "COLOUR_TOL",
+    "PROXIMITY",
+    "SEARCH_PX",
+    "TrackedMap",
+    "calibrated_as_tracked",
+    "colour_match",
+    "dense_flow",
+    "flow_image",
+    "image_colour",
+    "predict_positions",
+    "read_tracked",
+    "track_camera",
+    "track_chromaticity",
+    "tracking_neighbour",
+]
+
+SEARCH_PX = 3
+"""Radius of the colour search around the flow's prediction, pixels: the flow errs by
+less than a pixel on a textured surface, and where it fails (no texture) the search
+needs only reach a patch's other side; three pixels, at any image size."""
+
+COLOUR_TOL = 0.05
+"""Largest distance between a pixel's colour and its match's in the chromatic frame
+(:func:`image_colour`: the channels over their sum) that keeps its p: the same surface
+seen again under the same lights differs by a few hundredths as its shading changes,
+two patches of the calibrated colours by tenths."""
+
+PROXIMITY = 5e-4
+"""Preference for the flow's prediction: the squared colour distance one pixel of
+displacement costs, so that among equally good colours (a uniform patch) the match
+stays where the flow put it; at :data:`SEARCH_PX` it costs less than a fifth of
+:data:`COLOUR_TOL` squared."""
+
+
+@dataclass(frozen=True)
+class TrackedMap:
+    """One camera's chromaticity in one frame.
+
+    Attributes
+    ----------
+    p : (H, W, 3) float32, (p_R, p_G, p_B) summing to 3, NaN where unknown.
+    position : (H, W, 2) float32, each pixel's point as a pixel (x, y) of the chromatic
+        frame, NaN where not tracked.
+    position_sigma : (H, W) float32, how far the colour match moved the flow's
+        prediction, pixels (0 in the chromatic frame).
+    sigma : (H, W) float32, 1-sigma of log p: the match's relative colour residual.
+    """
+
+    p: np.ndarray
+    position: np.ndarray
+    position_sigma: np.ndarray
+    sigma: np.ndarray
+
+
+def flow_image(rgb: np.ndarray) -> np.ndarray:
+    """An image (H, W, 3), linear, as the 8-bit single channel the flow reads: the
+    square root of the channels' mean (shot noise even, highlights compressed),
+    scaled so that its 99.9th percentile is 255 (the exposure of any rig)."""
+    g = np.sqrt(np.clip(np.asarray(rgb, np.float32).mean(axis=-1), 0.0, None))
+    top = float(np.percentile(g, 99.9)) or 1.0
+    return np.clip(np.round(g * (255.0 / top)), 0, 255).astype(np.uint8)
+
+
+def dense_flow(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Dense optical flow (H, W, 2) from 8-bit image ``a`` to ``b``: ``a(x) ~ b(x + flow(x))``
+    (OpenCV's DIS, its medium preset), pixels."""
+    dis = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_MEDIUM)
+    return dis.calc(a, b, None)
+
+
+def _grid(shape) -> tuple[np.ndarray, np.ndarray]:
+    h, w = shape[:2]
+    return np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
+
+
+def _remap(values: np.ndarray, x: np.ndarray, y: np.ndarray, nearest=False) -> np.ndarray:
+    """``values`` (H, W) or (H, W, C) sampled at (x, y), NaN outside; bilinear where the four
+    neighbours are known, else the nearest (an edge of the known region keeps its value)."""
+    v = np.asarray(values, np.float32)
+    v = v[..., None] if v.ndim == 2 else v
+    x = np.nan_to_num(x, nan=-1e6).astype(np.float32)
+    y = np.nan_to_num(y, nan=-1e6).astype(np.float32)
+    out = []
+    for k in range(v.shape[-1]):
+        near = cv2.remap(v[..., k], x, y, cv2.INTER_NEAREST, borderValue=np.nan)
+        if nearest:
+            out.append(near)
+            continue
+        lin = cv2.remap(v[..., k], x, y, cv2.INTER_LINEAR, borderValue=np.nan)
+        out.append(np.where(np.isfinite(lin), lin, near))
+    out = np.stack(out, axis=-1)
+    return out[..., 0] if np.ndim(values) == 2 else out
+
+
+def image_colour(rgb: np.ndarray) -> np.ndarray:
+    """An image's colour (H, W, 3): each pixel's channels over their sum (NaN where it
+    is dark), smoothed by a Gaussian of 1 pixel against the noise."""
+    rgb = np.clip(np.asarray(rgb, np.float32), 0.0, None)
+    total = rgb.sum(axis=-1, keepdims=True)
+    lit = total > 1e-3 * float(np.percentile(total, 99.9) or 1.0)
+    q = np.where(lit, rgb / np.where(lit, total, 1.0), 0.0).astype(np.float32)
+    q = cv2.GaussianBlur(q, (0, 0), 1.0)
+    q[~lit[..., 0]] = np.nan
+    return q
+
+
+def predict_positions(neighbour: TrackedMap, forward: np.ndarray) -> np.ndarray:
+    """Positions in the chromatic frame (H, W, 2) predicted for a frame whose flow to its
+    neighbour frame is ``forward``: the neighbour's where the flow sends each pixel; where
+    that is unknown the neighbour's at the pixel itself (no motion), and where that is
+    unknown too the pixel itself (a surface the neighbour lost may be found again)."""
+    gx, gy = _grid(forward.shape)
+    moved = _remap(neighbour.position, gx + forward[..., 0], gy + forward[..., 1])
+    moved = np.where(np.isfinite(moved), moved, neighbour.position)
+    return np.where(np.isfinite(moved), moved, np.stack([gx, gy], axis=-1)).astype(np.float32)
+
+
+def colour_match(
+    predicted: np.ndarray, colour: np.ndarray, anchor_colour: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Step 2 of the module: per pixel, the position within :data:`SEARCH_PX` of
+    ``predicted`` whose colour in the chromatic frame (``anchor_colour``) best matches
+    the pixel's ``colour``, and the match's colour distance (NaN where none)."""
+    best = np.full(colour.shape[:2], np.inf, np.float32)
+    out = np.full_like(predicted, np.nan)
+    r = int(SEARCH_PX)
+    for dy in range(-r, r + 1):
+        for dx in range(-r, r + 1):
+            cand = predicted + np.array([dx, dy], np.float32)
+            seen = _remap(anchor_colour, cand[..., 0], cand[..., 1], nearest=True)
+            cost = np.sum((colour - seen) ** 2, axis=-1) + PROXIMITY * (dx * dx + dy * dy)
+            better = cost < best  # False where NaN
+            best[better] = cost[better]
+            out[better] = cand[better]
+    found = np.isfinite(best)
+    distance = np.where(found, np.sqrt(np.where(found, best, 0.0)), np.nan)
+    return out, distance.astype(np.float32)
+
+
+def calibrated_as_tracked(calibrated: np.ndarray) -> TrackedMap:
+    """The chromatic frame's map: the calibrated one, each pixel at itself, sigma 0."""
+    gx, gy = _grid(calibrated.shape)
+    known = np.all(np.isfinite(calibrated), axis=-1)
+    position = np.where(known[..., None], np.stack([gx, gy], axis=-1), np.nan)
+    zero = np.where(known, 0.0, np.nan).astype(np.float32)
+    return TrackedMap(calibrated.astype(np.float32), position.astype(np.float32), zero, zero)
+
+
+def track_camera(
+    calibrated: np.ndarray,
+    neighbour: TrackedMap,
+    frame_rgb: np.ndarray,
+    neighbour_rgb: np.ndarray,
+    anchor_rgb: np.ndarray,
+) -> TrackedMap:
+    """One camera's map in a frame from its neighbour's (steps 1-4 of the module).
+
+    Parameters
+    ----------
+    calibrated : (H, W, 3) the calibrated map of the chromatic frame.
+    neighbour : the neighbour frame's map (towards the chromatic frame).
+    frame_rgb, neighbour_rgb, anchor_rgb : (H, W, 3) linear images (all lights on) of
+        the frame, of its neighbour and of the chromatic frame.
+    """
+    forward = dense_flow(flow_image(frame_rgb), flow_image(neighbour_rgb))
+    predicted = predict_positions(neighbour, forward)
+    colour, anchor = image_colour(frame_rgb), image_colour(anchor_rgb)
+    position, distance = colour_match(predicted, colour, anchor)
+    x, y = position[..., 0], position[..., 1]
+    seen = _remap(anchor, x, y, nearest=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        sigma = np.linalg.norm(colour - seen, axis=-1) / np.linalg.norm(seen, axis=-1)
+    p = _remap(calibrated, x, y, nearest=True)
+    lost = ~(distance <= COLOUR_TOL) | ~np.all(np.isfinite(p), axis=-1) | ~np.isfinite(sigma)
+    p[lost] = np.nan
+    position[lost] = np.nan
+    moved = np.linalg.norm(position - predicted, axis=-1)
+    moved[lost] = np.nan
+    sigma[lost] = np.nan
+    return TrackedMap(
+        p.astype(np.float32), position, moved.astype(np.float32), sigma.astype(np.float32)
+    )
+
+
+def tracking_neighbour(frames: tuple[str, ...], chromatic_frame: str, frame: str) -> str | None:
+    """The frame whose map ``frame``'s is carried from: the next one towards the chromatic
+    frame; None for the chromatic frame itself."""
+    i, c = frames.index(frame), frames.index(chromatic_frame)
+    return None if i == c else frames[i - 1 if i > c else i + 1]
+
+
+def read_tracked(path: str | Path, camera: str) -> TrackedMap:
+    """One camera's :class:`TrackedMap` from a file of :func:`track_chromaticity`."""
+    note_read(path)
+    with h5py.File(path) as f:
+        return TrackedMap(
+            f[camera][()],
+            f[f"position/{camera}"][()],
+            f[f"position_sigma/{camera}"][()],
+            f[f"sigma/{camera}"][()],
+        )
+
+
+def track_chromaticity(
+    dataset: str | Path | Dataset,
+    scene: str,
+    frame: str,
+    calibrated_h5: str | Path,
+    out_h5: str | Path,
+    neighbour_h5: str | Path | None = None,
+) -> dict:
+    """Write a frame's chromaticity maps, carried from the chromatic frame (module docstring).
+
+    Parameters
+    ----------
+    dataset : the dataset folder, or a Dataset (:func:`colourhs.capture.dataset_of`).
+    scene, frame : the scene (with a chromatic object) and the frame.
+    calibrated_h5 : the object's calibrated maps (``colourhs chromaticity``).
+    out_h5 : the file to write: per camera ``<camera>`` (H, W, 3) p as the calibrated
+        maps (so ``colourhs reconstruct --chromaticity`` reads it), ``position/<camera>``,
+        ``position_sigma/<camera>`` and ``sigma/<camera>`` (:class:`TrackedMap`); attributes
+        ``scene``, ``frame``, ``chromatic_frame``, ``neighbour`` and ``tracked`` (JSON:
+        camera -> the frame's pixels with a p over the calibrated map's).
+    neighbour_h5 : the neighbour frame's file (:func:`tracking_neighbour`); required but
+        for the chromatic frame.
+
+    Returns
+    -------
+    dict : the file's attributes.
+
+    Raises
+    ------
+    ValueError
+        A scene without a chromatic object, or a neighbour file missing or given where
+        there is none.
+    """
+    ds = dataset_of(dataset, scenes=[scene])
+    sc = ds.scene(scene)
+    if not sc.chromatic:
+        raise ValueError(f"scene {scene!r} has no chromatic object: nothing to track")
+    c = sc.chromatic_frame
+    neighbour = tracking_neighbour(sc.frames, c, frame)
+    if (neighbour is None) != (neighbour_h5 is None):
+        need = f"the map of frame {neighbour} (neighbour_h5)" if neighbour else "no neighbour"
+        raise ValueError(f"{scene}/{frame}: tracking from chromatic frame {c} needs {need}")
+    note_read(calibrated_h5)
+    maps, tracked = {}, {}
+
+    def image(f: str, cam: str) -> np.ndarray:
+        return read_image(ds.frame_image(scene, f, cam), ds.rig.image)[0]
+
+    with h5py.File(calibrated_h5) as h:
+        calibrated = {cam: h[cam][()] for cam in ds.rig.camera_names}
+    for cam in bar(ds.rig.camera_names, f"chromaticity {scene}/{frame}", unit="camera"):
+        if neighbour is None:
+            maps[cam] = calibrated_as_tracked(calibrated[cam])
+        else:
+            maps[cam] = track_camera(
+                calibrated[cam],
+                read_tracked(neighbour_h5, cam),
+                image(frame, cam),
+                image(neighbour, cam),
+                image(c, cam),
+            )
+        known = np.all(np.isfinite(calibrated[cam]), axis=-1).sum()
+        tracked[cam] = float(np.all(np.isfinite(maps[cam].p), axis=-1).sum() / max(known, 1))
+    attrs = {
+        "scene": scene,
+        "frame": frame,
+        "chromatic_frame": c,
+        "neighbour": neighbour or "",
+        "tracked": json.dumps(tracked),
+    }
+    stage(log, f"chromaticity {scene}/{frame}: writing {Path(out_h5).name}")
+    with atomic_output(out_h5) as tmp, h5py.File(tmp, "w") as f:
+        for cam, m in maps.items():
+            f[cam] = m.p
+            f[f"position/{cam}"] = m.position
+            f[f"position_sigma/{cam}"] = m.position_sigma
+            f[f"sigma/{cam}"] = m.sigma
+        f.attrs.update(attrs)
+    return attrs
