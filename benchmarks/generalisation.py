@@ -62,7 +62,7 @@ import pandas as pd
 from colourhs.cli.commands import frame_indices
 from colourhs.common.metrics_csv import DROP_COLUMNS, GAUSSIAN_WITHIN, SIGMA_MULTIPLES
 from colourhs.common.progress import show_progress
-from colourhs.workflow.variants import VARIANTS
+from colourhs.workflow.variants import PAPER_VARIANTS as VARIANTS  # bayes_dyn: no sequence
 
 HERE = Path(__file__).parent
 #: The accuracy targets, per set: (scene, variant, metric) -> upper bounds on (the median
