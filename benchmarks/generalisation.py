@@ -1,7 +1,8 @@
 """Accuracy on randomised rigs: every nuisance on, every calibration from the pipeline.
 
 Run: ``.venv/bin/python benchmarks/generalisation.py [--seeds 0-7] [--preset random]
-[--sheet-frames 2] [--keep DIR]``.
+[--sheet-frames 2] [--scenes plane,statue] [--calibrate-rig | --reference-world]
+[--keep DIR]``.
 
 For every seed it renders ``colourhs synth --preset random --seed N`` (a
 different rig and scene set each time, ranges in
@@ -14,7 +15,39 @@ with the paper's ablation (``vh``, ``ml_full``, ``bayes_nocalib``,
 ``bayes_ph``, ``bayes_full``, the workflow's calibration files per variant)
 and compares each depth map with the ground truth rendered into the
 reference camera. Nothing in the pipeline sees the seed, the preset or the
-``gt/`` folder.
+``gt/`` folder. ``--scenes`` renders and measures only those scenes (their files
+are those of a full render; the calibration stages run on what is rendered).
+
+``--calibrate-rig`` (issue 37: a rig owner's calibrated rig.json against the
+true one) calibrates the three cameras from the dataset's ``geometric/``
+ChArUco captures first (:func:`colourhs.calibration.geometric.calibrate_rig`,
+world on the reference camera, merged into the true rig.json, which is kept as
+``gt/rig_true.json``) and puts the result in place of ``rig.json``, so every
+stage (marker poses, cross-talk, noise, photometric, chromaticity,
+reconstruction) runs on it, as a rig owner's run would. The ground truth is
+in the true world, the depth maps in the calibrated rig's, and the two frames
+differ by a rigid map that no capture can fix (the gauge: the calibration's
+world is its reference camera's frame; its scale is measured, from the
+target's square length, and its error counts). The truth is moved into the
+calibrated world by the map under which the calibrated cameras project the
+rig's working volume where the true cameras do (:func:`gauge_transforms`,
+``projection``): a reconstruction from the calibrated rig is the true surface
+under that map up to what the calibrated projections get wrong, which is the
+calibration's error the comparison is after. Rendering the moved mesh through
+the depth file's camera (the calibrated reference camera) then measures the
+error along the calibrated camera's own rays. Fitting the gauge to the camera
+poses instead (``cameras``: :func:`colourhs.calibration.geometric.world_transform`,
+as :func:`~colourhs.calibration.geometric.merge_rig` carries world positions
+over) or to the reference camera's pose (``reference``) instead charges the
+reconstruction with the poses' errors along what the views cannot tell apart
+(a principal point against a tilt of the camera): errors that leave every
+projection in place and so move the whole reconstruction with the cameras.
+Their depth figures are reported beside (``--gauge`` picks the main one).
+``--reference-world`` is the control: the true rig moved rigidly into its
+reference camera's frame (the calibrated rig's world, without its errors), the
+same gauges; what it changes against the true rig is the pipeline's own
+dependence on the world frame and on the smallest change of its input, not a
+calibration's error.
 
 Writes to ``benchmarks/results/`` (``--tag`` suffixes each name):
 
@@ -27,7 +60,17 @@ Writes to ``benchmarks/results/`` (``--tag`` suffixes each name):
   ``sigma_within_1/2/3``: share of pixels with ``|error| <= k sigma``; empty
   without ``depth_sigma``, e.g. ``vh``), and per seed the calibration errors
   (mu RMS log error, worst and median map, and the worst of mu = 1
-  uncalibrated; chromaticity median) and the rig's drawn settings.
+  uncalibrated; chromaticity median) and the rig's drawn settings. The
+  ``rig`` column says which rig.json the stages ran on (``true``,
+  ``calibrated`` or ``reference-world``; the set of the latter two is named
+  ``<preset>, calibrated rig`` or ``<preset>, true rig in reference world``,
+  so that the summaries keep them apart), ``gauge`` the gauge of the depth
+  figures (empty for the true rig); with ``--calibrate-rig`` also the
+  geometric calibration's figures per seed (:func:`calibrated_rig`:
+  reprojection RMS, the worst camera's errors against the true rig from
+  :func:`colourhs.evaluation.rig_errors.rig_errors`, the reference camera's,
+  the gauge fit) and, with either option, the other gauges' depth median,
+  signed median and RMS (``depth_median_mm_cameras`` etc.).
 - ``generalisation_summary.json``: per set (the ``set`` column; ``all`` for
   tables without it), per scene x variant and metric the median over the
   set's rigs and the worst rig, the accuracy targets beside them with ``met``
@@ -205,8 +248,190 @@ def calibration_errors(data: Path, files: dict) -> dict:
     return out
 
 
-def evaluate_variant(data, scene, frames, variant, files, chromatic, work) -> dict:
+def moved_mesh(mesh, A: np.ndarray, b: np.ndarray) -> tuple:
+    """A mesh (vertices, triangles, normals) under the rigid map ``X' = A X + b``."""
+    vertices, triangles, normals = mesh
+    return vertices @ A.T + b, triangles, normals @ A.T
+
+
+def rig_cameras(rig_json: Path) -> list:
+    """A rig.json's cameras (:class:`colourhs.capture.Camera`), in its order."""
+    from colourhs.capture import load_rig
+
+    return list(load_rig(rig_json).cameras)
+
+
+def working_points(cameras, size: tuple[int, int]) -> np.ndarray:
+    """World points (N, 3) where the rig works, every one seen by every camera.
+
+    A grid of the reference camera's image (80 % of its width and height, 9 x 7
+    pixels) at five z-depths from 0.85 to 1.15 times the rig's fixation point's:
+    the volume the scenes and the ChArUco target's poses fill.
+    """
+    from colourhs.capture.rig import cameras_fixation_point
+    from colourhs.common.geometry import normalised_coordinates, project
+
+    ref = cameras[0]
+    w, h = size
+    z0 = float((ref.R @ cameras_fixation_point(cameras) + ref.t)[2])
+    uv = np.stack(
+        np.meshgrid(np.linspace(0.1, 0.9, 9) * (w - 1), np.linspace(0.1, 0.9, 7) * (h - 1)),
+        axis=-1,
+    ).reshape(-1, 2)
+    xy = normalised_coordinates(uv, ref.K, ref.dist)
+    pts = []
+    for z in z0 * np.linspace(0.85, 1.15, 5):
+        xc = np.column_stack([xy * z, np.full(len(xy), z)])
+        pts.append((xc - ref.t) @ ref.R)  # camera -> world: R^T (x_c - t)
+    X = np.concatenate(pts)
+    seen = np.ones(len(X), bool)
+    for c in cameras:
+        p = project(X, c.K, c.dist, c.R, c.t)
+        seen &= np.all(np.isfinite(p), axis=1) & (p[:, 0] >= 0) & (p[:, 0] <= w - 1)
+        seen &= (p[:, 1] >= 0) & (p[:, 1] <= h - 1)
+    return X[seen]
+
+
+def gauge_transforms(true_json: Path, cal_json: Path) -> tuple[dict, dict]:
+    """The rigid maps ``X_cal = A X_true + b`` from the true world into a calibrated rig's.
+
+    A calibration fixes its own world (the reference camera's frame), which the
+    true world's is not: its cameras must be compared with the truth in one frame.
+    Three choices of that frame (the gauge), each a rigid map (the scale is the
+    calibration's own, from the target's square length, and its error counts):
+
+    - ``projection``: the map under which the calibrated cameras project the points of
+      the rig's working volume (:func:`working_points`) where the true cameras do,
+      least squares over every camera's pixels. A reconstruction from the calibrated
+      rig lands on the true surface moved by this map, up to what the calibrated
+      projections get wrong there; the calibration fitted exactly those projections
+      (of the target's poses in that volume), so this is the frame its
+      reconstructions are in and what is left is the calibration's error.
+    - ``cameras``: :func:`colourhs.calibration.geometric.world_transform`, the fit of
+      the three camera poses (rotations' chordal mean, centres by least squares), as
+      :func:`~colourhs.calibration.geometric.merge_rig` carries world positions over.
+    - ``reference``: the calibrated reference camera's frame on the true one's (the
+      calibration's own gauge: its ``world="reference"``).
+
+    Returns
+    -------
+    gauges : dict
+        name -> (A, b), ``projection`` first.
+    fit : dict
+        ``gauge_projection_rms_px`` (the projection fit's RMS pixel disagreement over
+        the cameras and points; 0 where the rigs agree), ``gauge_points``.
+    """
+    from scipy.optimize import least_squares
+    from scipy.spatial.transform import Rotation
+
+    from colourhs.calibration.geometric import world_transform
+    from colourhs.common.geometry import project
+
+    true, cal = rig_cameras(true_json), rig_cameras(cal_json)
+    rig = json.loads(true_json.read_text())
+    size = (rig["image"]["width"], rig["image"]["height"])
+    entries = [{"name": c.name, "R": c.R, "t": c.t} for c in true]
+    A, b, _, _ = world_transform(entries, {c.name: c.R for c in cal}, {c.name: c.t for c in cal})
+    gauges = {"cameras": (A, b)}
+    R0, t0, Rc, tc = true[0].R, true[0].t, cal[0].R, cal[0].t
+    gauges["reference"] = (Rc.T @ R0, Rc.T @ (t0 - tc))  # R_c X' + t_c = R_0 X + t_0
+    X = working_points(true, size)
+    target = [project(X, c.K, c.dist, c.R, c.t) for c in true]
+
+    def residuals(x):
+        Xc = X @ Rotation.from_rotvec(x[:3]).as_matrix().T + x[3:]
+        return np.concatenate(
+            [
+                (project(Xc, c.K, c.dist, c.R, c.t) - u).ravel()
+                for c, u in zip(cal, target, strict=True)
+            ]
+        )
+
+    x0 = np.concatenate([Rotation.from_matrix(A).as_rotvec(), b])
+    sol = least_squares(residuals, x0, method="lm", xtol=1e-12, ftol=1e-12)
+    A_p = Rotation.from_rotvec(sol.x[:3]).as_matrix()
+    rms = float(np.sqrt(np.mean(np.sum(sol.fun.reshape(-1, 2) ** 2, axis=1))))
+    gauges = {"projection": (A_p, sol.x[3:])} | gauges
+    return gauges, {"gauge_projection_rms_px": rms, "gauge_points": len(X)}
+
+
+#: The set name's suffix per rig other than the true one (``run_seed``'s ``rig_source``).
+RIG_SETS = {"calibrated": "calibrated rig", "reference-world": "true rig in reference world"}
+#: The calibrated rig's figures in the per-seed table (a seed's figure: its worst camera).
+RIG_FIGURES = ("f_rel", "pp_px", "field_px", "rotation_deg", "centre_mm")
+
+
+def calibrated_rig(data: Path, root: Path) -> tuple[dict, dict]:
+    """Calibrate ``data``'s cameras from its ``geometric/`` captures and put the result
+    in place of its rig.json, as a rig owner's run would; the true rig.json is kept as
+    ``gt/rig_true.json`` (the pipeline never reads ``gt/``) and is the merge's base
+    (lights, boards, image encoding).
+
+    Returns
+    -------
+    gauges : dict
+        :func:`gauge_transforms` (true world -> the calibrated rig's).
+    figures : dict
+        ``rig_rms_px`` (the calibration's reprojection RMS), ``rig_<figure>`` per
+        :data:`RIG_FIGURES` (:func:`colourhs.evaluation.rig_errors.rig_errors` against
+        the true rig, the worst camera), ``rig_ref_pp_px`` and ``rig_ref_f_rel`` (the
+        reference camera's: the depth maps' rays), the projection gauge's fit, the
+        merge's fit of the true cameras (``rig_world_rotation_rms_deg``,
+        ``rig_world_centre_rms_mm``) and ``rig_calib_s``.
+    """
+    from colourhs.calibration.geometric import calibrate_rig
+    from colourhs.evaluation.rig_errors import rig_errors
+
+    t0 = time.time()
+    true_json, cal_json = data / "gt" / "rig_true.json", root / "rig_calibrated.json"
+    shutil.copyfile(data / "rig.json", true_json)
+    report = calibrate_rig(data, cal_json, base_rig=true_json, report_json=root / "rig_report.json")
+    seconds = time.time() - t0
+    shutil.copyfile(cal_json, data / "rig.json")
+    true, cal = rig_cameras(true_json), rig_cameras(cal_json)
+    rig = json.loads(true_json.read_text())
+    errors = rig_errors(true, cal, (rig["image"]["width"], rig["image"]["height"]))
+    figures = {"rig_rms_px": report["rms_px"]}
+    figures |= {f"rig_{k}": max(e[k] for e in errors.values()) for k in RIG_FIGURES}
+    figures["rig_ref_pp_px"] = errors[true[0].name]["pp_px"]
+    figures["rig_ref_f_rel"] = errors[true[0].name]["f_rel"]
+    gauges, fit = gauge_transforms(true_json, cal_json)
+    figures |= fit
+    figures["rig_world_rotation_rms_deg"] = report["old_world"]["rotation_rms_deg"]
+    figures["rig_world_centre_rms_mm"] = report["old_world"]["centre_rms_mm"]
+    return gauges, figures | {"rig_calib_s": seconds}
+
+
+def true_rig_in_reference_world(data: Path) -> tuple[dict, dict]:
+    """Put ``data``'s true rig.json, moved rigidly into its reference camera's frame (the
+    world a calibration takes), in place of its rig.json (the true one kept as
+    ``gt/rig_true.json``): the control of :func:`calibrated_rig`, its world without its
+    errors. Returns :func:`gauge_transforms` and its fit (a projection RMS of 0)."""
+    true_json = data / "gt" / "rig_true.json"
+    shutil.copyfile(data / "rig.json", true_json)
+    rig = json.loads(true_json.read_text())
+    R0, t0 = (np.asarray(rig["cameras"][0][k], float) for k in ("R", "t"))
+    for entry in rig["cameras"]:  # X_new = R0 X + t0: x_c = R R0^T (X_new - t0) + t
+        R = np.asarray(entry["R"], float) @ R0.T
+        entry["t"] = (np.asarray(entry["t"], float) - R @ t0).tolist()
+        entry["R"] = R.tolist()
+    light = rig.get("chromatic_light", {})
+    if "position" in light:
+        light["position"] = (R0 @ np.asarray(light["position"], float) + t0).tolist()
+    (data / "rig.json").write_text(json.dumps(rig, indent=1))
+    return gauge_transforms(true_json, data / "rig.json")
+
+
+def evaluate_variant(data, scene, frames, variant, files, chromatic, work, gauges=None) -> dict:
     """Depth maps of one scene x variant over its frames, pooled against the ground truth.
+
+    ``gauges`` (name -> (A, b), the rigid map ``X = A X_true + b`` from the true world
+    into the dataset rig's; :func:`gauge_transforms`) places the ground-truth mesh in the
+    frame of a rig in a world of its own (``--calibrate-rig``, ``--reference-world``):
+    the first entry gives the figures below, every other one its
+    ``depth_median_mm_<name>``, ``depth_signed_median_mm_<name>`` and
+    ``depth_rms_mm_<name>`` beside them. None (the default): the rig is the true one,
+    the mesh is used as it is.
 
     Returns
     -------
@@ -233,6 +458,9 @@ def evaluate_variant(data, scene, frames, variant, files, chromatic, work) -> di
 
     rig = load_rig(data)
     size = (rig.image.width, rig.image.height)
+    gauges = dict(gauges or {})
+    primary = next(iter(gauges), None)
+    extra = {name: [] for name in list(gauges)[1:]}  # name -> frames' finite signed errors
     errs, angs, truth = [], [], 0
     sigma_errs, sigmas, defects = [], [], []
     lost = dict.fromkeys(DROP_COLUMNS, 0.0)
@@ -245,7 +473,8 @@ def evaluate_variant(data, scene, frames, variant, files, chromatic, work) -> di
             method = "ml" if variant.startswith("ml") else "bayes"
             calibration = CalibrationFiles(**variant_files(variant, files, chromatic))
             reconstruct_frame(data, scene, frame, h5, method, calibration)
-        gt = load_mesh(data / "scenes" / scene / "gt" / f"{frame}.ply")
+        mesh = load_mesh(data / "scenes" / scene / "gt" / f"{frame}.ply")
+        gt = mesh if primary is None else moved_mesh(mesh, *gauges[primary])
         try:
             depth = read_depth(h5)
         except ValueError as exc:  # nothing reconstructed: every truth pixel lost
@@ -257,6 +486,9 @@ def evaluate_variant(data, scene, frames, variant, files, chromatic, work) -> di
                 lost["dropped_other"] += n  # its reasons are in a file read_depth refuses
             continue
         err, ang, m = depth_errors(depth, *gt, *size)
+        for name, pooled in extra.items():
+            e = depth_errors(depth, *moved_mesh(mesh, *gauges[name]), *size)[0]
+            pooled.append(e[np.isfinite(e)])
         defects.append((depth.params or {}).get("reciprocity_defect_deg"))
         ok = np.isfinite(err)
         errs.append(err[ok])
@@ -283,6 +515,10 @@ def evaluate_variant(data, scene, frames, variant, files, chromatic, work) -> di
     s |= {c: None if v is None or not truth else v / truth for c, v in lost.items()}
     known = [d for d in defects if d is not None]
     s["reciprocity_defect_deg"] = float(np.median(known)) if known else None
+    for name, pooled in extra.items():
+        g = depth_summary(np.concatenate([empty, *pooled]), empty, truth)
+        for k in ("depth_median_mm", "depth_signed_median_mm", "depth_rms_mm"):
+            s[f"{k}_{name}"] = g[k]
     return s | {"seconds": time.time() - t0}
 
 
@@ -306,15 +542,25 @@ def run_seed(
     keep: Path | None,
     variants=tuple(VARIANTS),
     light_offset_m: tuple[float, float] | None = None,
+    scenes=None,
+    rig_source: str = "true",
+    gauge: str = "projection",
 ) -> pd.DataFrame:
     """One rig of ``preset`` (seed ``seed``): render, calibrate, reconstruct and measure
-    every scene with each variant; ``light_offset_m`` replaces the preset's range of
-    the lights' offset from the lenses (the set is then named after it)."""
+    every scene (or those of ``scenes``) with each variant; ``light_offset_m`` replaces
+    the preset's range of the lights' offset from the lenses (the set is then named
+    after it). ``rig_source``: ``"true"``, the true rig.json; ``"calibrated"``, every
+    stage runs on the rig calibrated from the dataset's ``geometric/`` captures
+    (:func:`calibrated_rig`); ``"reference-world"``, on the true rig moved into its
+    reference camera's frame (:func:`true_rig_in_reference_world`, the control); the
+    set's name says which. Other than the true rig, each is compared with the truth in
+    the gauge ``gauge`` (:func:`gauge_transforms`; the others' depth figures beside
+    it)."""
     from dataclasses import replace
 
     from colourhs.capture import open_dataset
     from colourhs.synth.randomranges import RANGES_BY_NAME
-    from colourhs.synth.synthesise import PRESETS, DrawOverrides, synthesise
+    from colourhs.synth.synthesise import PRESETS, DrawOverrides, RenderSelection, synthesise
 
     ranges, name = None, preset
     if light_offset_m is not None:
@@ -325,10 +571,24 @@ def run_seed(
     root = Path(tempfile.mkdtemp(prefix=f"colourhs-gen-{seed}-"))
     try:
         t0 = time.time()
-        data = synthesise(root / "data", preset, seed=seed, draw=DrawOverrides(ranges=ranges))
+        # Only the scenes measured (their files are those of a full render).
+        selection = RenderSelection(scenes=None if scenes is None else tuple(scenes))
+        overrides = DrawOverrides(ranges=ranges)
+        data = synthesise(root / "data", preset, seed=seed, draw=overrides, selection=selection)
         t_render = time.time() - t0
+        gauges, rig_figures = None, {}
+        if rig_source != "true":
+            if rig_source == "calibrated":
+                gauges, rig_figures = calibrated_rig(data, root)
+            elif rig_source == "reference-world":
+                gauges, rig_figures = true_rig_in_reference_world(data)
+            else:
+                raise ValueError(f"rig_source {rig_source!r}: true, calibrated or reference-world")
+            gauges = {gauge: gauges[gauge]} | gauges  # the figures' own first
+            name = f"{name}, {RIG_SETS[rig_source]}"
+        t0 = time.time()
         files = calibrate(data, root / "calib")
-        t_calib = time.time() - t0 - t_render
+        t_calib = time.time() - t0
         cal = calibration_errors(data, files)
         ds = open_dataset(data, check_images=False)
         rig = ds.rig
@@ -340,11 +600,13 @@ def run_seed(
                 frames = [frames[i] for i in idx]
             for variant in variants:
                 m = evaluate_variant(
-                    data, scene, frames, variant, files, sc.chromatic, root / "work"
+                    data, scene, frames, variant, files, sc.chromatic, root / "work", gauges
                 )
                 rows.append(
                     {
                         "set": name,
+                        "rig": rig_source,
+                        "gauge": None if gauges is None else gauge,
                         "seed": seed,
                         "scene": scene,
                         "variant": variant,
@@ -355,7 +617,7 @@ def run_seed(
                 print(f"seed {seed} {scene:7s} {variant:14s} {_line(m)}", flush=True)
         table = pd.DataFrame(rows)
         draw = json.loads((data / "gt" / "rig_model.json").read_text()).get("draw", {})
-        for k, v in cal.items():
+        for k, v in (cal | rig_figures).items():
             table[k] = v
         table["bit_depth"] = rig.image.bit_depth
         table["white_level"] = rig.image.white_level  # 4095: 12-bit data in 16-bit PNGs
@@ -729,6 +991,31 @@ def main(argv=None) -> dict:
         help="variants to run (default all; the summary's ablation order needs all)",
     )
     p.add_argument(
+        "--scenes",
+        default=None,
+        help="scenes to render and measure, e.g. plane,statue (default all)",
+    )
+    p.add_argument(
+        "--calibrate-rig",
+        action="store_true",
+        help="run every stage on the rig calibrated from the geometric/ captures "
+        "(calibrate-rig, the true rig.json its base) instead of the true one",
+    )
+    p.add_argument(
+        "--reference-world",
+        action="store_true",
+        help="the control of --calibrate-rig: run every stage on the true rig moved into its "
+        "reference camera's frame (the calibrated rig's world, without its errors)",
+    )
+    p.add_argument(
+        "--gauge",
+        default="projection",
+        choices=("projection", "cameras", "reference"),
+        help="with --calibrate-rig or --reference-world: the map of the true world into the rig's "
+        "that the depth figures are taken in (gauge_transforms; default projection), the "
+        "others beside them",
+    )
+    p.add_argument(
         "--summarise",
         type=Path,
         nargs="+",
@@ -744,6 +1031,11 @@ def main(argv=None) -> dict:
         if args.preset not in PRESETS or not PRESETS[args.preset].randomised:
             randomised = ", ".join(k for k, v in PRESETS.items() if v.randomised)
             p.error(f"--preset {args.preset}: not a randomised preset ({randomised})")
+    if args.calibrate_rig and args.reference_world:
+        p.error("--calibrate-rig and --reference-world: one rig at a time")
+    source = "true"
+    if args.calibrate_rig or args.reference_world:
+        source = "calibrated" if args.calibrate_rig else "reference-world"
     offset = None
     if args.light_offset_mm is not None:
         ends = [float(v) * 1e-3 for v in args.light_offset_mm.split(",")]
@@ -764,6 +1056,9 @@ def main(argv=None) -> dict:
                     args.keep,
                     args.variants.split(","),
                     offset,
+                    None if args.scenes is None else args.scenes.split(","),
+                    source,
+                    args.gauge,
                 )
             )
             pd.concat(tables).to_csv(csv, index=False)  # after every seed: a partial run counts

@@ -28,11 +28,9 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
-from types import SimpleNamespace
 
-import numpy as np
 import pandas as pd
-from generalisation import seeds_in_temp
+from generalisation import rig_cameras, seeds_in_temp
 
 from colourhs.cli.commands import frame_indices
 
@@ -57,21 +55,6 @@ TARGETS = {
 }
 
 
-def _cameras(rig_json: Path) -> list:
-    """rig.json's cameras as (name, K, dist, R, t) records, arrays."""
-    rig = json.loads(rig_json.read_text())
-    return [
-        SimpleNamespace(
-            name=c["name"],
-            K=np.asarray(c["K"], float),
-            dist=np.asarray(c.get("dist", [0.0] * 5), float),
-            R=np.asarray(c["R"], float),
-            t=np.asarray(c["t"], float),
-        )
-        for c in rig["cameras"]
-    ]
-
-
 def run_seed(seed: int, preset: str, root: Path, poses: int | None = None) -> list[dict]:
     """Render, calibrate and compare one seed's rig; one row per camera. ``poses``: the
     number of target poses (default the preset's)."""
@@ -89,7 +72,7 @@ def run_seed(seed: int, preset: str, root: Path, poses: int | None = None) -> li
     calibrate_rig(data, out, report_json=report)
     rig = json.loads((data / "rig.json").read_text())
     size = (rig["image"]["width"], rig["image"]["height"])
-    errors = rig_errors(_cameras(data / "rig.json"), _cameras(out), size)
+    errors = rig_errors(rig_cameras(data / "rig.json"), rig_cameras(out), size)
     cams = json.loads(report.read_text()).get("cameras", {})
     rows = []
     for name, e in errors.items():
