@@ -64,6 +64,7 @@ __all__ = [
     "read_tracked",
     "track_camera",
     "track_chromaticity",
+    "track_sequence",
     "tracking_neighbour",
 ]
 
@@ -333,3 +334,29 @@ def track_chromaticity(
             f[f"sigma/{cam}"] = m.sigma
         f.attrs.update(attrs)
     return attrs
+
+
+def tracking_order(frames: tuple[str, ...], chromatic_frame: str) -> list[str]:
+    """The frames in an order where each follows its neighbour (:func:`tracking_neighbour`):
+    the chromatic frame, the later frames, then the earlier ones backwards."""
+    c = frames.index(chromatic_frame)
+    return [frames[c], *frames[c + 1 :], *frames[:c][::-1]]
+
+
+def track_sequence(
+    dataset: str | Path | Dataset, scene: str, calibrated_h5: str | Path, out_dir: str | Path
+) -> dict[str, Path]:
+    """Every frame's maps of a scene (:func:`track_chromaticity` in :func:`tracking_order`),
+    written as ``out_dir/<frame>.h5`` (the workflow runs one frame per job instead).
+
+    Returns
+    -------
+    dict : frame -> file, in the scene's frame order.
+    """
+    ds = dataset_of(dataset, scenes=[scene])
+    sc = ds.scene(scene)
+    out = {f: Path(out_dir) / f"{f}.h5" for f in sc.frames}
+    for f in tracking_order(sc.frames, sc.chromatic_frame):
+        neighbour = tracking_neighbour(sc.frames, sc.chromatic_frame, f)
+        track_chromaticity(ds, scene, f, calibrated_h5, out[f], neighbour and out[neighbour])
+    return out

@@ -12,6 +12,7 @@ from colourhs.calibration.chromaticity_tracking import (
     calibrated_as_tracked,
     track_camera,
     tracking_neighbour,
+    tracking_order,
 )
 
 H, W = 120, 160
@@ -113,6 +114,11 @@ def test_a_colour_the_chromatic_frame_does_not_show_is_left_unknown():
 
 def test_the_neighbour_is_the_next_frame_towards_the_chromatic_frame():
     frames = ("000000", "000001", "000002", "000003")
+    order = tracking_order(frames, "000001")
+    assert order == ["000001", "000002", "000003", "000000"]
+    assert all(
+        tracking_neighbour(frames, "000001", f) in (None, *order[:i]) for i, f in enumerate(order)
+    )
     assert tracking_neighbour(frames, "000001", "000001") is None
     assert tracking_neighbour(frames, "000001", "000000") == "000001"
     assert tracking_neighbour(frames, "000001", "000003") == "000002"
