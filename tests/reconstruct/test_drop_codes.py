@@ -49,3 +49,16 @@ def test_each_pixel_gets_its_first_cause_or_its_last_stage():
     ]
     assert code.dtype == np.uint8 and (code[ok] == 0).all() and (code[~ok] > 0).all()
     assert code[0] == _code("outside")
+
+
+def test_the_depth_search_of_no_surface_returns_what_it_was_given():
+    """A frame whose every pixel was dropped before the refinement leaves it no surface:
+    the depth search (beyond the paper) then has nothing to walk and returns the control
+    points unchanged (it once raised on the empty list of surfaces)."""
+    from types import SimpleNamespace
+
+    from colourhs.reconstruct.bayes.valley import depth_search
+
+    c = np.zeros(0)
+    out, factors, sigma = depth_search(SimpleNamespace(n=0), c)
+    assert out is c and factors.shape == (0,) and sigma.shape == (0,)

@@ -100,6 +100,8 @@ def depth_search(
     ``SEARCH_FITS`` LM steps).
     """
     n = problem.n
+    if n == 0:  # nothing left to refine (every pixel dropped before): nothing to search
+        return c, np.ones(0), np.zeros(0)
     sc = problem.scale(c)
     mine = [problem.ctrl_surface == k for k in range(n)]
     pixels = [problem.graph.surface == k for k in range(n)]
