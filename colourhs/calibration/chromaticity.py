@@ -33,10 +33,10 @@ Masking (NaN in the maps)
 A pixel is NaN where
 
 * it is off the object: outside the silhouette ``scenes/<scene>/masks/<frame>/<camera>.png``
-  (first frame) of the first scene, by name, whose scene.json names this chromatic object and
-  that has masks; without such a scene, where the mean of the object's three matching-channel
-  intensities is below ``object_threshold`` (default 0.02 of full scale: the rig has no ambient
-  light, so the background reads black);
+  (the chromatic frame's) of the first scene, by name, whose scene.json names this
+  chromatic object and that has masks; without such a scene, where the mean of the
+  object's three matching-channel intensities is below ``object_threshold`` (default 0.02
+  of full scale: the rig has no ambient light, so the background reads black);
 * it is too dark to measure: the matching channel of any of the three object captures, or of
   the three white captures, is below ``min_signal`` (default 0.01 of full scale; with the
   synthetic rig's 15000 e- full well the shot noise there is about 8 % of the signal, so the
@@ -279,12 +279,13 @@ def log_ratio_rms(estimate: np.ndarray, truth: np.ndarray) -> float:
 def object_silhouette(dataset: Dataset, obj: str, camera: str) -> Path | None:
     """The silhouette of chromatic object ``obj`` in ``camera``, or None.
 
-    The first frame's mask of the first scene (by name) whose scene.json names ``obj`` as its
-    chromatic object and that has masks.
+    The mask of the chromatic frame (scene.json's ``chromatic_frame``: the pose the
+    chromatic captures show; by default the first frame) of the first scene (by name)
+    whose scene.json names ``obj`` as its chromatic object and that has masks.
     """
     for name, scene in sorted(dataset.scenes.items()):
         if scene.chromatic == obj and scene.has_masks:
-            return dataset.mask_image(name, scene.frames[0], camera)
+            return dataset.mask_image(name, scene.chromatic_frame, camera)
     return None
 
 

@@ -289,15 +289,16 @@ class WorkflowPlan:
 
     def chromaticity_inputs(self, name: str, obj: str) -> list[str]:
         """What ``colourhs chromaticity`` reads: rig.json, the object's and the white
-        reference's captures, every scene.json (to find the object's scene) and the first
-        frame's masks of the scenes that show the object (its silhouette,
+        reference's captures, every scene.json (to find the object's scene) and the
+        chromatic frame's masks of the scenes that show the object (its silhouette,
         chromaticity.object_silhouette)."""
         ds = self.layout(name)
         out = self.chromatic_inputs(name, obj) + _paths(_chromatic_images(ds, "white"))
         out += _paths(_scene_jsons(ds))
         for s, scene in ds.scenes.items():
             if scene.chromatic == obj and scene.has_masks:
-                masks = [ds.mask_image(s, scene.frames[0], c) for c in ds.rig.camera_names]
+                frame = scene.chromatic_frame
+                masks = [ds.mask_image(s, frame, c) for c in ds.rig.camera_names]
                 out += _paths(masks)
         return out
 

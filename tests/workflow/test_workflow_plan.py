@@ -486,3 +486,22 @@ def test_bayes_dyn_reads_each_frames_tracked_chromaticity(data, tmp_path):
     assert white.same_result("d", "wave", "bayes_dyn", "000001", "depth") == [
         "results/d/wave/bayes_ph/depth/000001.h5"
     ]
+
+
+def test_a_chromatic_objects_silhouette_is_its_chromatic_frames_mask(data, tmp_path):
+    """The chromatic captures show the object in the chromatic frame's pose, so its
+    silhouette is that frame's mask (chromaticity.object_silhouette), which the rule
+    declares: not the first frame's."""
+    from colourhs.calibration.chromaticity import object_silhouette
+    from colourhs.capture import open_dataset
+
+    moving = shutil.copytree(data, tmp_path / "moving")
+    (moving / "scenes/toy/scene.json").write_text(json.dumps({"dynamic": False}))
+    wave = {"dynamic": True, "chromatic": "slinky", "chromatic_frame": "000001"}
+    (moving / "scenes/wave/scene.json").write_text(json.dumps(wave))
+    for f in ("000000", "000001"):
+        shutil.copytree(moving / "scenes/toy/masks/000000", moving / f"scenes/wave/masks/{f}")
+    mask = moving / "scenes/wave/masks/000001/cam2.png"
+    assert object_silhouette(open_dataset(moving), "slinky", "cam2") == mask
+    inputs = plan_of({"datasets": {"d": {"path": str(moving)}}}).chromaticity_inputs("d", "slinky")
+    assert str(mask) in inputs and str(moving / "scenes/wave/masks/000000/cam2.png") not in inputs
