@@ -18,7 +18,7 @@ reference camera. Nothing in the pipeline sees the seed, the preset or the
 ``gt/`` folder. ``--scenes`` renders and measures only those scenes (their files
 are those of a full render; the calibration stages run on what is rendered).
 
-``--calibrate-rig`` (issue 37: a rig owner's calibrated rig.json against the
+``--calibrate-rig`` (a rig owner's calibrated rig.json against the
 true one) calibrates the three cameras from the dataset's ``geometric/``
 ChArUco captures first (:func:`colourhs.calibration.geometric.calibrate_rig`,
 world on the reference camera, merged into the true rig.json, which is kept as

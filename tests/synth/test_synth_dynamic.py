@@ -1,4 +1,4 @@
-"""Dynamic multi-coloured scenes (issue 38, item 1): sequences in the capture format
+"""Dynamic multi-coloured scenes: sequences in the capture format
 whose chromaticity follows the surface, and scene.json's ``chromatic_frame``."""
 
 from __future__ import annotations
