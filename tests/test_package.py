@@ -144,7 +144,7 @@ def test_one_variant_table():
     # The reconstruction rule's variant wildcard is the table's HS variants, not a copy.
     from colourhs.workflow.variants import HS_VARIANT_PATTERN
 
-    assert HS_VARIANT_PATTERN == "ml_full|bayes_nocalib|bayes_ph|bayes_full"
+    assert HS_VARIANT_PATTERN == "ml_full|bayes_nocalib|bayes_ph|bayes_full|bayes_dyn"
     rules = (PACKAGE.parent / "workflow/rules/reconstruct.smk").read_text()
     assert "variant=HS_VARIANT_PATTERN," in rules and "bayes_nocalib|" not in rules
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import logging
 import os
 from collections.abc import Mapping
@@ -33,6 +34,8 @@ __all__ = [
     "shared_scale_images",
     "sigma_maps_figure",
     "write_animation",
+    "chromaticity_animation",
+    "chromaticity_drift_figure",
 ]
 
 
@@ -547,8 +550,6 @@ def scene_figures(
         renders[name] = render(ply)
     written.append(render_grid_figure(renders, out / "figure7.png", "shaded reconstructions"))
     if coloured:
-        import json
-
         import open3d as o3d
 
         from colourhs.common.colours import colour_values
@@ -597,11 +598,7 @@ def scene_figures(
         frames = (render(ply) for ply in plys)  # one at a time: a long sequence at full size
         written.append(write_animation(frames, out / "animation.gif", fps=fps, labels=labels))
     if chromaticity:
-        from colourhs.report.tracking import (
-            chromaticity_animation,
-            chromaticity_drift,
-            chromaticity_drift_figure,
-        )
+        from colourhs.report.tracking import chromaticity_drift
 
         stage(log, "figures: chromaticity over the sequence")
         camera = getattr(cam, "camera", None)
@@ -610,3 +607,66 @@ def scene_figures(
         drift = chromaticity_drift(chromaticity, gt_chromaticity, calibrated_chromaticity)
         written.append(chromaticity_drift_figure(drift, out / "chromaticity_drift.png"))
     return written
+
+
+def chromaticity_animation(
+    tracked: Mapping[str, str | Path], path: str | Path, camera: str | None = None, fps=8
+) -> Path:
+    """``chromaticity.gif``: one camera's tracked chromaticity map per frame
+    (:func:`colourhs.report.figures.chromaticity_rgb`, unknown black), each frame
+    labelled with its name, its place in the sequence and the share of the
+    calibrated pixels it still has a p for.
+
+    Parameters
+    ----------
+    tracked : frame -> tracked chromaticity file (``colourhs track-chromaticity``), in
+        frame order.
+    path : the GIF to write.
+    camera : the camera shown (default: each file's first).
+    """
+    from colourhs.report.tracking import tracked_maps
+
+    images, labels, n = [], [], len(tracked)
+    for i, (frame, h5) in enumerate(tracked.items()):
+        cam, f = tracked_maps(h5, camera)
+        with f:
+            p = f[cam][()]
+            share = json.loads(f.attrs.get("tracked", "{}")).get(cam)
+            anchor = f.attrs.get("chromatic_frame", "")
+        rgb = np.round(255 * chromaticity_rgb(p)).astype(np.uint8)
+        # Small maps are enlarged so that the label reads.
+        scale = max(1, int(np.ceil(320 / rgb.shape[1])))
+        images.append(np.repeat(np.repeat(rgb, scale, axis=0), scale, axis=1))
+        kept = "" if share is None else f", {share:.0%} tracked"
+        chromatic = " (chromatic)" if frame == anchor else ""
+        labels.append(f"{cam} frame {frame}{chromatic} ({i + 1}/{n}){kept}")
+    return write_animation(images, path, fps=fps, labels=labels)
+
+
+def chromaticity_drift_figure(drift: Mapping[str, Mapping[str, float]], path: str | Path) -> Path:
+    """``chromaticity_drift.png``: :func:`chromaticity_drift` over the frames: the
+    errors against the truth (where known) and the tracked maps' median sigma (log p),
+    with the share tracked on a second axis."""
+    frames = list(drift)
+    x = np.arange(len(frames))
+    fig, ax = plt.subplots(figsize=(6.4, 3.4))
+    for key, label, style in (
+        ("error", "tracked: RMS log-ratio error", "o-"),
+        ("static_error", "calibrated map unchanged (paper)", "s--"),
+        ("sigma", "tracked: median sigma of log p", "^:"),
+    ):
+        y = [drift[f].get(key, np.nan) for f in frames]
+        if np.isfinite(y).any():
+            ax.plot(x, y, style, label=label, markersize=4)
+    ax.set_xlabel("frame")
+    ax.set_ylabel("log p")
+    ax.set_xticks(x, frames, rotation=60, fontsize=7)
+    ax.set_ylim(bottom=0)
+    share = ax.twinx()
+    share.plot(x, [drift[f].get("tracked", np.nan) for f in frames], color="0.6", lw=1)
+    share.set_ylabel("share tracked", color="0.4")
+    share.set_ylim(0, 1.05)
+    ax.legend(fontsize=7, loc="upper left")
+    ax.set_title("chromaticity over the sequence")
+    fig.tight_layout()
+    return _save_png(fig, path)

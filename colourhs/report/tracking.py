@@ -1,7 +1,7 @@
 """A moving coloured object's chromaticity over its sequence, for the report (beyond
-the paper): the maps carried from the chromatic frame
-(:mod:`colourhs.calibration.chromaticity_tracking`) as an animation beside the
-depth animation, and their drift as a plot over the frames."""
+the paper): the drift of the maps carried from the chromatic frame
+(:mod:`colourhs.calibration.chromaticity_tracking`) over the frames, which
+:mod:`colourhs.report.figures` animates and plots."""
 
 from __future__ import annotations
 
@@ -14,51 +14,16 @@ import numpy as np
 
 from colourhs.calibration.chromaticity import log_ratio_rms
 from colourhs.common.files import note_read
-from colourhs.report.animation import write_animation
 
-__all__ = ["chromaticity_animation", "chromaticity_drift", "chromaticity_drift_figure"]
+__all__ = ["chromaticity_drift", "tracked_maps"]
 
 
-def _maps(path: str | Path, camera: str | None) -> tuple[str, h5py.File]:
+def tracked_maps(path: str | Path, camera: str | None) -> tuple[str, h5py.File]:
     """The camera shown (``camera``, else the file's first) and the open file."""
     note_read(path)
     f = h5py.File(path, "r")
     cams = [k for k, v in f.items() if isinstance(v, h5py.Dataset)]
     return (camera if camera in cams else cams[0]), f
-
-
-def chromaticity_animation(
-    tracked: Mapping[str, str | Path], path: str | Path, camera: str | None = None, fps=8
-) -> Path:
-    """``chromaticity.gif``: one camera's tracked chromaticity map per frame
-    (:func:`colourhs.report.figures.chromaticity_rgb`, unknown black), each frame
-    labelled with its name, its place in the sequence and the share of the
-    calibrated pixels it still has a p for.
-
-    Parameters
-    ----------
-    tracked : frame -> tracked chromaticity file (``colourhs track-chromaticity``), in
-        frame order.
-    path : the GIF to write.
-    camera : the camera shown (default: each file's first).
-    """
-    from colourhs.report.figures import chromaticity_rgb
-
-    images, labels, n = [], [], len(tracked)
-    for i, (frame, h5) in enumerate(tracked.items()):
-        cam, f = _maps(h5, camera)
-        with f:
-            p = f[cam][()]
-            share = json.loads(f.attrs.get("tracked", "{}")).get(cam)
-            anchor = f.attrs.get("chromatic_frame", "")
-        rgb = np.round(255 * chromaticity_rgb(p)).astype(np.uint8)
-        # Small maps are enlarged so that the label reads.
-        scale = max(1, int(np.ceil(320 / rgb.shape[1])))
-        images.append(np.repeat(np.repeat(rgb, scale, axis=0), scale, axis=1))
-        kept = "" if share is None else f", {share:.0%} tracked"
-        chromatic = " (chromatic)" if frame == anchor else ""
-        labels.append(f"{cam} frame {frame}{chromatic} ({i + 1}/{n}){kept}")
-    return write_animation(images, path, fps=fps, labels=labels)
 
 
 def chromaticity_drift(
@@ -98,36 +63,3 @@ def chromaticity_drift(
                 row["static_error"] = float(np.nanmean(errs))
         out[frame] = row
     return out
-
-
-def chromaticity_drift_figure(drift: Mapping[str, Mapping[str, float]], path: str | Path) -> Path:
-    """``chromaticity_drift.png``: :func:`chromaticity_drift` over the frames: the
-    errors against the truth (where known) and the tracked maps' median sigma (log p),
-    with the share tracked on a second axis."""
-    import matplotlib.pyplot as plt
-
-    from colourhs.report.figures import _save_png
-
-    frames = list(drift)
-    x = np.arange(len(frames))
-    fig, ax = plt.subplots(figsize=(6.4, 3.4))
-    for key, label, style in (
-        ("error", "tracked: RMS log-ratio error", "o-"),
-        ("static_error", "calibrated map unchanged (paper)", "s--"),
-        ("sigma", "tracked: median sigma of log p", "^:"),
-    ):
-        y = [drift[f].get(key, np.nan) for f in frames]
-        if np.isfinite(y).any():
-            ax.plot(x, y, style, label=label, markersize=4)
-    ax.set_xlabel("frame")
-    ax.set_ylabel("log p")
-    ax.set_xticks(x, frames, rotation=60, fontsize=7)
-    ax.set_ylim(bottom=0)
-    share = ax.twinx()
-    share.plot(x, [drift[f].get("tracked", np.nan) for f in frames], color="0.6", lw=1)
-    share.set_ylabel("share tracked", color="0.4")
-    share.set_ylim(0, 1.05)
-    ax.legend(fontsize=7, loc="upper left")
-    ax.set_title("chromaticity over the sequence")
-    fig.tight_layout()
-    return _save_png(fig, path)

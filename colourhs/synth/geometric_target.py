@@ -69,11 +69,8 @@ has 50 ids). On a small image the least count makes the target wider than
 SQUARES_ASPECT = 0.75
 """Squares down over squares across (the images' 4:3)."""
 
-N_POSES = 30
-"""Poses of a dataset (``Preset.geometric_poses``): the most of the capture format's 10
-to 30, as a rig owner should take; on the narrow fields of these rigs the principal
-point and the camera's rotation trade against each other, and fewer views leave
-both less certain (``benchmarks/geometric_random.py --poses``)."""
+N_POSES = 15
+"""Poses of a dataset (10 to 30 calibrate a camera; ``Preset.geometric_poses``)."""
 
 SLANT_DEG = 40.0
 """Largest slant of the target, degrees: wider than the photometric board's (25),

@@ -186,7 +186,7 @@ def test_whole_job_second_run_does_nothing_and_snakemake_reports_it(whole_job):
 def test_workflow_lint_is_clean(tmp_path):
     """Snakemake's linter finds nothing but the lint the project accepts: no rule
     declares a conda environment or container (``--sdm conda`` is not
-    supported, README), so it flags each of the 16 rules with a command."""
+    supported, README), so it flags each of the 17 rules with a command."""
     snakefile = str(PROJECT_ROOT / "Snakefile")
     config = str(PROJECT_ROOT / "config.yaml")
     done = subprocess.run(
@@ -208,9 +208,9 @@ def test_workflow_lint_is_clean(tmp_path):
     out = done.stdout + done.stderr
     assert done.returncode == 1, out[-2000:]  # 1: lints found
     rules = re.findall(r"^Lints for rule (\w+) ", out, re.M)
-    assert len(set(rules)) == len(rules) == 16 and "Lints for snakefile" not in out
+    assert len(set(rules)) == len(rules) == 17 and "Lints for snakefile" not in out
     no_software = "Specify a conda environment or container for each rule."
-    assert re.findall(r"^ +\* (.+):$", out, re.M) == [no_software] * 16, out[-2000:]
+    assert re.findall(r"^ +\* (.+):$", out, re.M) == [no_software] * 17, out[-2000:]
 
 
 def test_missing_dataset_stops_the_run_before_any_job(tmp_path):
@@ -605,7 +605,7 @@ def test_help_speaks_to_users_with_one_description_per_command():
     assert parser.description.startswith("Colour Helmholtz Stereopsis")
     assert "colourhs run DATASET" in parser.description
     assert not re.search(r":(func|mod):|``", parser.format_help())
-    assert len(commands) == 18
+    assert len(commands) == 19
     for name, p in commands.items():
         assert p.description and p.description[0].isupper(), name
         for a in p._actions:

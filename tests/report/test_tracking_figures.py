@@ -1,4 +1,5 @@
-"""colourhs.report.tracking: a moving coloured object's chromaticity in the report."""
+"""A moving coloured object's chromaticity in the report (colourhs.report.tracking and
+its figures in colourhs.report.figures)."""
 
 from __future__ import annotations
 
@@ -9,11 +10,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from colourhs.report.tracking import (
-    chromaticity_animation,
-    chromaticity_drift,
-    chromaticity_drift_figure,
-)
+from colourhs.report.figures import chromaticity_animation, chromaticity_drift_figure
+from colourhs.report.tracking import chromaticity_drift
 
 FRAMES = ("000000", "000001", "000002")
 

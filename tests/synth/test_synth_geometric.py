@@ -72,7 +72,7 @@ def test_poses_are_seen_by_two_cameras_and_reach_every_image_corner(preset):
     is strongest) and 8 or more corners in at least 6 poses."""
     rig = _rig(preset, 1)
     captures = gt.geometric_captures(rig, gt.N_POSES, seed=1)
-    assert len(captures.poses) == gt.N_POSES == 30
+    assert len(captures.poses) == gt.N_POSES == 15
     assert captures.names[:2] == ["pose00", "pose01"]
     X = charuco_corners(captures.target)
     cells = {cam.name: set() for cam in rig.cameras}
@@ -149,9 +149,9 @@ def test_fixed_presets_draw_their_board_poses_as_before(key):
 
 
 def test_tiny_dataset_has_its_geometric_captures(tiny_dataset):
-    """30 poses of every camera, the target in rig.json, the truth in gt/."""
+    """15 poses of every camera, the target in rig.json, the truth in gt/."""
     ds = open_dataset(tiny_dataset)
-    assert ds.geometric_poses == tuple(f"pose{k:02d}" for k in range(30))
+    assert ds.geometric_poses == tuple(f"pose{k:02d}" for k in range(15))
     image = ds.rig.image
     view = SimpleNamespace(cameras=ds.rig.cameras, width=image.width, height=image.height)
     assert ds.rig.geometric_board == gt.target_for_rig(view)
