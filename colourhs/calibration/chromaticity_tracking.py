@@ -8,24 +8,36 @@ from the chromatic frame c (scene.json's ``chromatic_frame``) through the sequen
 one frame at a time in each direction, so that frame f's map depends on its
 neighbour towards c only:
 
-1. Prediction: each pixel keeps its point's pixel in frame c (``position``); the dense
-   optical flow from frame f's image to its neighbour's (OpenCV's DIS on one 8-bit
-   channel, :func:`flow_image`) carries the neighbour's positions to frame f; where
-   it leaves what the neighbour tracked, the pixel takes the neighbour's position at
-   itself (no motion), or else its own pixel (:func:`predict_positions`).
-2. Colour: the prediction is then moved, within :data:`SEARCH_PX`, to the pixel of
-   frame c whose image colour (:func:`image_colour`: the channels over their sum, all
-   lights on) best matches the pixel's own in frame f, with a small preference for
-   the prediction (:data:`PROXIMITY`). Flow fails where the surface has no texture
-   (a uniform patch, a metal under moving highlights) but the colour does not: within
-   a uniform patch any match has the right p, and at a patch edge the colour picks
-   the side. Every frame is matched to frame c itself, so the drift of the chained
-   flow is re-anchored at every step, not only where the object shows the chromatic
-   pose again.
-3. A pixel whose best match still differs by more than :data:`COLOUR_TOL` is left
+1. Prediction: each pixel keeps its point's pixel in frame c (``position``); a dense
+   optical flow from frame f's image to its neighbour's carries the neighbour's
+   positions to frame f; where it leaves what the neighbour tracked, the pixel takes
+   the neighbour's position at itself (no motion), or else its own pixel
+   (:func:`predict_positions`). The flow is chosen per pixel among candidates
+   (:func:`prediction_flow`): OpenCV's DIS on the brightness (:func:`flow_image`),
+   which follows texture to a fraction of a pixel but also follows highlights as they
+   slide over a glossy surface; DIS at a coarse scale on the image's colour
+   (:func:`colour_flow`), which sees the surface's colour edges and not its shading;
+   and no motion. Each pixel takes the candidate whose colour, compared over a
+   window, best matches the neighbour's there (:func:`select_flow`).
+2. Shading: the image colour (:func:`image_colour`: the channels over their sum, all
+   lights on) is p times each band's shading, and the shading of each band changes as
+   the surface turns under its light. A smooth gain per band (:func:`shading_gain`,
+   log colour of frame f over that of frame c at the prediction, averaged over
+   :data:`GAIN_SIGMA_PX` without the pixels that disagree by more than
+   :data:`GAIN_OUTLIER`) is divided out of frame f's colour before it is compared with
+   frame c's: a colour edge moves by pixels, a shading change spreads over many.
+3. Colour: the prediction is then moved, within :data:`SEARCH_PX`, to the pixel of
+   frame c whose colour best matches the pixel's own (shading divided out) in frame
+   f, with a small preference for the prediction (:data:`PROXIMITY`). Flow fails
+   where the surface has no texture (a uniform patch, a metal under moving
+   highlights) but the colour does not: within a uniform patch any match has the
+   right p, and at a patch edge the colour picks the side. Every frame is matched to
+   frame c itself, so the drift of the chained flow is re-anchored at every step,
+   not only where the object shows the chromatic pose again.
+4. A pixel whose best match still differs by more than :data:`COLOUR_TOL` is left
    unknown (NaN, as the calibration leaves a pixel it cannot measure): a surface that
-   frame c did not show, or shading that changed its colour too much.
-4. p is sampled once from the calibrated map at the position (nearest: no colour is
+   frame c did not show, a highlight, or a wrong prediction.
+5. p is sampled once from the calibrated map at the position (nearest: no colour is
    mixed across a patch edge, and no blur accumulates); its 1-sigma of log p
    (``sigma``) is the match's relative colour residual, ``|q_f - q_c| / |q_c|``.
 
@@ -51,17 +63,26 @@ from colourhs.common.progress import bar, stage
 log = logging.getLogger(__name__)
 
 __all__ = [
+    "COLOUR_FLOW_WIDTH_PX",
     "COLOUR_TOL",
+    "GAIN_OUTLIER",
+    "GAIN_SIGMA_PX",
+    "GAIN_SUPPORT",
     "PROXIMITY",
     "SEARCH_PX",
+    "SELECT_WINDOW_PX",
     "TrackedMap",
     "calibrated_as_tracked",
     "colour_match",
     "dense_flow",
+    "colour_flow",
     "flow_image",
     "image_colour",
     "predict_positions",
+    "prediction_flow",
     "read_tracked",
+    "select_flow",
+    "shading_gain",
     "track_camera",
     "track_chromaticity",
     "track_sequence",
@@ -84,6 +105,32 @@ PROXIMITY = 5e-4
 displacement costs, so that among equally good colours (a uniform patch) the match
 stays where the flow put it; at :data:`SEARCH_PX` it costs less than a fifth of
 :data:`COLOUR_TOL` squared."""
+
+GAIN_SIGMA_PX = 5 * SEARCH_PX
+"""Scale of the shading gain (:func:`shading_gain`), pixels (a Gaussian's sigma): five
+search radii, so that the gain cannot mimic a colour edge displaced by up to
+:data:`SEARCH_PX` (which the colour match must see), at any image size."""
+
+GAIN_OUTLIER = 0.2
+"""Largest difference of log colour (:func:`shading_gain`) a pixel may have from the gain
+and still inform it: shading changes a band by a few tens of per cent from frame to
+frame, a wrong colour (another patch, a highlight) by far more."""
+
+GAIN_SUPPORT = 0.25
+"""Least share of the gain's Gaussian weight that the pixels informing it must hold for
+a gain to be set (else 0): a quarter of the neighbourhood agrees on the shading; a
+few pixels of mixed colour at patch edges do not."""
+
+SELECT_WINDOW_PX = 9
+"""Side of the window over which :func:`select_flow` compares the candidates' colours,
+pixels: a few pixels either side of a colour edge, so a window that straddles one
+tells a right displacement from a wrong one, at any image size."""
+
+COLOUR_FLOW_WIDTH_PX = 80
+"""Width of the finest pyramid level of :func:`colour_flow`'s DIS, pixels (an eighth of a
+640-pixel image, its patches of 16 pixels a fifth of that): the colour's edges, not its
+shading or highlights, at any image size; the brightness flow gives the fine detail
+where it is right."""
 
 
 @dataclass(frozen=True)
@@ -120,6 +167,89 @@ def dense_flow(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     (OpenCV's DIS, its medium preset), pixels."""
     dis = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_MEDIUM)
     return dis.calc(a, b, None)
+
+
+def colour_flow(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Dense flow (H, W, 2) from linear image ``a`` (H, W, 3) to ``b`` on their colour
+    (:func:`image_colour`): OpenCV's DIS, its finest level about
+    :data:`COLOUR_FLOW_WIDTH_PX` wide, on each band of the colour (as 8 bits), their
+    median per pixel. Shading and white light change the
+    brightness; the colour changes where the surface's colour does."""
+    qa, qb = image_colour(a), image_colour(b)
+    scale = max(0, round(np.log2(a.shape[1] / COLOUR_FLOW_WIDTH_PX)))
+    flows = []
+    for k in range(3):
+        dis = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_MEDIUM)
+        dis.setFinestScale(scale)
+        dis.setPatchSize(16)
+        dis.setPatchStride(4)
+        ia, ib = (np.clip(np.round(np.nan_to_num(q[..., k]) * 255), 0, 255) for q in (qa, qb))
+        flows.append(dis.calc(ia.astype(np.uint8), ib.astype(np.uint8), None))
+    return np.median(flows, axis=0).astype(np.float32)
+
+
+def select_flow(
+    candidates: list[np.ndarray], colour: np.ndarray, neighbour_colour: np.ndarray
+) -> np.ndarray:
+    """Per pixel, the candidate flow (each (H, W, 2), from this frame to its neighbour)
+    whose displaced neighbour colour best matches this frame's ``colour`` (each (H, W, 3),
+    :func:`image_colour`), the squared distance summed over a window of
+    :data:`SELECT_WINDOW_PX` (an unknown colour counts as the largest distance, 1); the
+    first candidate wins a tie."""
+    gx, gy = _grid(colour.shape)
+    win = (SELECT_WINDOW_PX, SELECT_WINDOW_PX)
+    costs = []
+    for flow in candidates:
+        seen = _remap(neighbour_colour, gx + flow[..., 0], gy + flow[..., 1])
+        cost = np.nan_to_num(np.sum((colour - seen) ** 2, axis=-1), nan=1.0)
+        costs.append(cv2.boxFilter(cost.astype(np.float32), -1, win))
+    best = np.argmin(np.stack(costs), axis=0)
+    return np.take_along_axis(np.stack(candidates), best[None, ..., None], axis=0)[0]
+
+
+def prediction_flow(frame_rgb: np.ndarray, neighbour_rgb: np.ndarray) -> np.ndarray:
+    """Step 1's flow (H, W, 2) from a frame's image to its neighbour's (linear, (H, W, 3)):
+    :func:`select_flow` among the colour flow (:func:`colour_flow`: first, so that it
+    wins where no colour tells them apart), the brightness flow (:func:`dense_flow` of
+    :func:`flow_image`) and no motion."""
+    candidates = [
+        colour_flow(frame_rgb, neighbour_rgb),
+        dense_flow(flow_image(frame_rgb), flow_image(neighbour_rgb)),
+        np.zeros(frame_rgb.shape[:2] + (2,), np.float32),
+    ]
+    return select_flow(candidates, image_colour(frame_rgb), image_colour(neighbour_rgb))
+
+
+def _masked_blur(values: np.ndarray, weight: np.ndarray, sigma: float) -> np.ndarray:
+    """Gaussian average (H, W, C) of ``values`` over the pixels where ``weight``; NaN
+    where they are less than :data:`GAIN_SUPPORT` of the Gaussian's weight (no value is
+    carried far from the pixels that give it)."""
+    num = cv2.GaussianBlur(np.where(weight[..., None], values, 0).astype(np.float32), (0, 0), sigma)
+    den = cv2.GaussianBlur(weight.astype(np.float32), (0, 0), sigma)[..., None]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(den >= GAIN_SUPPORT, num / den, np.nan)
+
+
+def shading_gain(
+    colour: np.ndarray, anchor_colour: np.ndarray, predicted: np.ndarray, iterations: int = 3
+) -> np.ndarray:
+    """Step 2 of the module: the smooth per-band gain (H, W, 3), log, of a frame's colour
+    over the chromatic frame's at the predicted positions (0 where nothing informs it).
+
+    The log ratio of the colours is averaged over :data:`GAIN_SIGMA_PX`, then again
+    without the pixels farther than :data:`GAIN_OUTLIER` from that average (another
+    patch, a highlight), ``iterations`` times in all.
+    """
+    seen = _remap(anchor_colour, predicted[..., 0], predicted[..., 1], nearest=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ratio = np.log(colour) - np.log(seen)
+    known = np.all(np.isfinite(ratio), axis=-1)
+    ratio = np.where(known[..., None], ratio, 0.0)
+    gain = np.zeros_like(ratio)
+    for _ in range(iterations):
+        near = known & (np.linalg.norm(ratio - gain, axis=-1) < GAIN_OUTLIER)
+        gain = np.nan_to_num(_masked_blur(ratio, near, GAIN_SIGMA_PX))
+    return gain.astype(np.float32)
 
 
 def _grid(shape) -> tuple[np.ndarray, np.ndarray]:
@@ -172,7 +302,7 @@ def predict_positions(neighbour: TrackedMap, forward: np.ndarray) -> np.ndarray:
 def colour_match(
     predicted: np.ndarray, colour: np.ndarray, anchor_colour: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Step 2 of the module: per pixel, the position within :data:`SEARCH_PX` of
+    """Step 3 of the module: per pixel, the position within :data:`SEARCH_PX` of
     ``predicted`` whose colour in the chromatic frame (``anchor_colour``) best matches
     the pixel's ``colour``, and the match's colour distance (NaN where none)."""
     best = np.full(colour.shape[:2], np.inf, np.float32)
@@ -207,7 +337,7 @@ def track_camera(
     neighbour_rgb: np.ndarray,
     anchor_rgb: np.ndarray,
 ) -> TrackedMap:
-    """One camera's map in a frame from its neighbour's (steps 1-4 of the module).
+    """One camera's map in a frame from its neighbour's (steps 1-5 of the module).
 
     Parameters
     ----------
@@ -216,9 +346,10 @@ def track_camera(
     frame_rgb, neighbour_rgb, anchor_rgb : (H, W, 3) linear images (all lights on) of
         the frame, of its neighbour and of the chromatic frame.
     """
-    forward = dense_flow(flow_image(frame_rgb), flow_image(neighbour_rgb))
-    predicted = predict_positions(neighbour, forward)
+    predicted = predict_positions(neighbour, prediction_flow(frame_rgb, neighbour_rgb))
     colour, anchor = image_colour(frame_rgb), image_colour(anchor_rgb)
+    colour = colour * np.exp(-shading_gain(colour, anchor, predicted))
+    colour /= colour.sum(axis=-1, keepdims=True)
     position, distance = colour_match(predicted, colour, anchor)
     x, y = position[..., 0], position[..., 1]
     seen = _remap(anchor, x, y, nearest=True)

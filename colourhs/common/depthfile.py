@@ -299,8 +299,9 @@ def read_depth(path: str | Path) -> DepthMap:
         Naming the file, when it or one of its datasets or attributes does not read
         (truncated, a corrupt chunk: which one, with h5py's reason), a required dataset
         or attribute is missing, a shape is wrong, ``dropped`` has a code or reason
-        this version does not know, or no pixel has a finite depth ("no reconstructed
-        pixels").
+        this version does not know, or the depth map has no pixel at all ("no
+        reconstructed pixels"). A map of the right shape without a single finite depth
+        reads: a frame where nothing was reconstructed is a result (coverage 0).
     """
     path = Path(path)
     note_read(path)
@@ -342,8 +343,6 @@ def read_depth(path: str | Path) -> DepthMap:
         params = json.loads(params) if isinstance(params, str | bytes) else {}
     except json.JSONDecodeError:
         params = {}
-    if not np.any(finite & (depth > 0)):
-        raise ValueError(f"{path}: no reconstructed pixels (depth is empty or all NaN)")
     return DepthMap(
         depth,
         normal,

@@ -58,6 +58,13 @@ The sigma columns are empty where the depth file has no ``depth_sigma`` or
 ``uncertain``, the ``dropped_*`` columns where it has no ``dropped`` (files
 written before them, the visual hull).
 
+A frame with nothing reconstructed has the empty mesh
+(:func:`colourhs.surfaces.poisson.frame_mesh`): it is scored, with a warning, as
+a reconstruction of nothing. Its accuracy, completeness and ``outside_share``
+are empty (the distance from nothing, or to nothing, is undefined, not 0 or
+infinite), ``hausdorff_samples`` is 0 and the per-pixel metrics come from its
+depth file as for any frame (``coverage`` 0 where it has no depth).
+
 Distances are point-to-surface distances from samples of one mesh to the
 closest point on the other's triangles (:func:`hausdorff`, the distances of
 MeshLab's Hausdorff filter, found by :func:`colourhs.common.raycast.closest_points`).
@@ -414,6 +421,8 @@ def evaluate_frame(
         (:func:`colourhs.common.depthfile.as_depth_map`: read once).
     mesh_ply : str or Path, optional
         The frame's Poisson mesh (``mesh/<frame>.ply``); None skips the Hausdorff metrics.
+        The empty mesh (nothing reconstructed) logs a warning and leaves accuracy,
+        completeness and ``outside_share`` empty, with ``hausdorff_samples`` 0.
     gt_ply : str or Path, optional
         GT mesh (``scenes/<scene>/gt/<frame>.ply``); None (a scene without ground
         truth) writes the metrics with empty (null) values.
@@ -424,7 +433,8 @@ def evaluate_frame(
     out_ply : str or Path, optional
         The reconstruction mesh coloured by each vertex's accuracy distance
         (:func:`colourhs.common.colours.value_colours`, viridis from 0 to
-        ``options.vmax_mm``); grey outside the seen region or without ground truth.
+        ``options.vmax_mm``); grey outside the seen region or without ground truth;
+        empty too (no vertices, no faces) where the mesh is.
     key : FrameKey
         Scene, frame and variant: identify the row in the metrics table.
     options : EvaluationOptions
@@ -449,7 +459,15 @@ def evaluate_frame(
     }
     info.update(_empty_metrics())
     info.update(uncertainty_summary(dm))  # needs no ground truth
-    mesh = load_mesh(mesh_ply) if mesh_ply is not None else None  # vertices, triangles, normals
+    # vertices, triangles, normals; the empty mesh: a frame with nothing reconstructed
+    mesh = load_mesh(mesh_ply, allow_empty=True) if mesh_ply is not None else None
+    empty = mesh is not None and len(mesh[1]) == 0
+    if empty:
+        log.warning(
+            "%s: its mesh %s is empty (nothing reconstructed): no accuracy or completeness",
+            dm.path,
+            mesh_ply,
+        )
     dist_v = None
     if gt_ply is not None:
         say(f"evaluate: casting {dm.camera}'s {dm.width} x {dm.height} pixel rays at the GT mesh")
@@ -459,7 +477,9 @@ def evaluate_frame(
         truth = depth_normal_maps(hits, dm)
         _, _, depth_metrics = depth_errors(dm, gv, gt_tri, gn, truth=truth)
         info.update(depth_metrics)
-        if mesh is not None:
+        if empty:
+            info["hausdorff_samples"] = 0  # no vertex to score
+        elif mesh is not None:
             v, tri, _ = mesh
             seen, pixel_mask, gt_points = seen_surface(
                 gv, gt_tri, dm, dm.width, dm.height, hits=hits

@@ -221,12 +221,17 @@ def depth_map_figure(depth_m: np.ndarray, path: str | Path, title: str = "") -> 
         Figure title.
 
     The colour range spans the 1st to 99th percentile of the finite depths
-    (so a few outliers do not wash out the map).
+    (so a few outliers do not wash out the map). A map without a finite depth (a
+    frame where nothing was reconstructed) is all background, its title marked
+    "(empty)".
     """
     depth_mm = np.asarray(depth_m, dtype=np.float64) * 1000.0
     if depth_mm.ndim != 2:
         raise ValueError(f"depth map must be 2-D (H, W), got shape {depth_mm.shape}")
-    lo, hi = np.percentile(_finite_or_raise(depth_mm, "depth map"), [1.0, 99.0])
+    finite = depth_mm[np.isfinite(depth_mm)]
+    if finite.size == 0:
+        title, finite = f"{title} (empty)".strip(), np.zeros(1)
+    lo, hi = np.percentile(finite, [1.0, 99.0])
     if hi <= lo:
         lo, hi = lo - 0.5, hi + 0.5
     return _scalar_map_figure(depth_mm, path, title, "viridis", lo, hi, "depth (mm)")
@@ -242,13 +247,14 @@ def normal_map_figure(normal: np.ndarray, path: str | Path, title: str = "") -> 
     path : str or Path
         PNG file to write (atomically).
     title : str
-        Figure title.
+        Figure title; marked "(empty)" where no pixel has a normal.
     """
     normal = np.asarray(normal, dtype=np.float64)
     if normal.ndim != 3 or normal.shape[2] != 3:
         raise ValueError(f"normal map must be (H, W, 3), got shape {normal.shape}")
     valid = np.all(np.isfinite(normal), axis=-1)
-    _finite_or_raise(normal[valid], "normal map")
+    if not valid.any():
+        title = f"{title} (empty)".strip()
     rgb = np.clip((np.nan_to_num(normal) + 1.0) / 2.0, 0.0, 1.0)
     rgb[~valid] = BACKGROUND
     h, w = valid.shape
@@ -484,6 +490,8 @@ def scene_figures(
 
     Shows bars over the variants' maps, the renders and the animation's frames, and
     logs a line at INFO before each error or sigma figure (:mod:`colourhs.common.progress`).
+    The empty mesh (a frame with nothing reconstructed) is a blank tile or animation
+    frame, its title or label ending in "(empty)".
 
     Parameters
     ----------
@@ -504,7 +512,7 @@ def scene_figures(
     The PNG/GIF files written.
     """
     from colourhs.common.depthfile import as_depth_map
-    from colourhs.common.ply import load_mesh
+    from colourhs.common.ply import is_empty_mesh, load_mesh
     from colourhs.evaluation.depth_errors import depth_errors
 
     out = Path(out_dir)
@@ -540,14 +548,17 @@ def scene_figures(
         written.append(sigma_maps_figure(sigma_mm, out / "depth_sigma.png", top_mm))
 
     def render(ply):
-        v, t, _ = load_mesh(ply)
+        v, t, _ = load_mesh(ply, allow_empty=True)  # the empty mesh: a blank tile
         return shaded_render(v, t, cam.K, cam.R, cam.t, cam.width, cam.height, dist=cam.dist)
+
+    def titled(name, ply):  # a blank tile says why
+        return f"{name} (empty)" if is_empty_mesh(ply) else name
 
     if cam is None:
         raise ValueError("scene_figures: no depth files given")
     plys = ({"ground truth": gt_ply} if gt is not None else {}) | dict(meshes)
     for name, ply in bar(plys.items(), "figures: shaded renders", len(plys), unit="mesh"):
-        renders[name] = render(ply)
+        renders[titled(name, ply)] = render(ply)
     written.append(render_grid_figure(renders, out / "figure7.png", "shaded reconstructions"))
     if coloured:
         import open3d as o3d
@@ -558,6 +569,10 @@ def scene_figures(
         meshes_mm = {}  # variant -> (vertices, triangles, distance per vertex in mm)
         for variant, ply in coloured.items():
             note_read(ply)
+            if is_empty_mesh(ply):  # nothing reconstructed (open3d would report a failed read)
+                v, t, _ = load_mesh(ply, allow_empty=True)
+                meshes_mm[f"{variant} (empty)"] = (v, t, np.zeros(0))
+                continue
             mesh = o3d.io.read_triangle_mesh(str(ply))
             v, t = np.asarray(mesh.vertices), np.asarray(mesh.triangles)
             meta = Path(ply).with_suffix(".json")
@@ -591,7 +606,7 @@ def scene_figures(
         # The animated variant from the results contract's path (<variant>/mesh/<frame>.ply).
         n = len(animation)
         labels = [
-            f"{Path(p).parent.parent.name}  frame {f} ({i + 1}/{n})"
+            titled(f"{Path(p).parent.parent.name}  frame {f} ({i + 1}/{n})", p)
             for i, (f, p) in enumerate(animation.items())
         ]
         plys = bar(animation.values(), "figures: animation", n, unit="frame")

@@ -56,13 +56,16 @@ def shaded_render(
     Returns
     -------
     ndarray of uint8, shape (height, width, 3)
-        The render, white where no ray hits the mesh.
+        The render, white where no ray hits the mesh: all white for a mesh without
+        triangles (the empty mesh of a frame with nothing reconstructed).
     """
     from colourhs.capture import Camera
     from colourhs.common.raycast import cast_pixels
 
     vertices = np.asarray(vertices, dtype=np.float64)
-    triangles = np.asarray(triangles, dtype=np.int64)
+    triangles = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+    if len(triangles) == 0:  # nothing to hit: the background alone
+        return np.full((height, width, 3), np.round(np.multiply(BACKGROUND, 255.0)), np.uint8)
     camera = Camera(
         name="render",
         K=np.asarray(K, float),

@@ -8,19 +8,24 @@ base64. :func:`mesh_payload` reads an error-coloured PLY, simplifies it to at
 most ``max_triangles`` (:func:`simplify`: open3d's vertex clustering, then its
 quadric decimation, vertex colours kept) and packs it; :func:`scene_views`
 does so for the first frame of every variant of a scene (results contract:
-``<variant>/eval/<frame>.ply``).
+``<variant>/eval/<frame>.ply``), leaving out, with a warning, a variant whose
+mesh is the empty mesh (nothing reconstructed: nothing to turn and look at).
 """
 
 from __future__ import annotations
 
 import base64
+import logging
 from pathlib import Path
 
 import numpy as np
 
 from colourhs.common.files import note_read
+from colourhs.common.ply import is_empty_mesh
 from colourhs.common.progress import bar
 from colourhs.report.provenance import result_files
+
+log = logging.getLogger(__name__)
 
 __all__ = ["MAX_TRIANGLES", "mesh_payload", "pack_mesh", "scene_views", "simplify"]
 
@@ -113,12 +118,21 @@ def simplify(mesh, max_triangles: int = MAX_TRIANGLES):
 
 def mesh_payload(
     ply: str | Path, max_triangles: int = MAX_TRIANGLES, rotation: np.ndarray | None = None
-) -> dict:
+) -> dict | None:
     """:func:`pack_mesh` of the PLY mesh ``ply`` (vertex colours kept), simplified to
-    at most ``max_triangles`` triangles (:func:`simplify`)."""
+    at most ``max_triangles`` triangles (:func:`simplify`); None for the empty mesh
+    (:func:`colourhs.common.ply.is_empty_mesh`: nothing reconstructed).
+
+    Raises
+    ------
+    ValueError
+        When ``ply`` is not a PLY file or has vertices but no faces.
+    """
     import open3d as o3d
 
     note_read(ply)
+    if is_empty_mesh(ply):
+        return None
     mesh = o3d.io.read_triangle_mesh(str(ply))
     if not mesh.has_triangles():
         raise ValueError(f"{ply}: not a triangle mesh (no faces read)")
@@ -137,11 +151,16 @@ def scene_views(
 ) -> dict[str, dict]:
     """Variant -> :func:`mesh_payload` of its first frame's error-coloured mesh
     (``<variant>/eval/<frame>.ply``), variants in the paper's order; {} when none.
-    A bar over the meshes (:func:`colourhs.common.progress.bar`)."""
+    A variant whose mesh is empty (nothing reconstructed) is left out, with a
+    warning. A bar over the meshes (:func:`colourhs.common.progress.bar`)."""
     files = result_files(results_dir, scene)
     plys = {v: k["error-coloured mesh"][0] for v, k in files.items() if k["error-coloured mesh"]}
     label = f"report: 3D views of {scene}"
-    return {
-        v: mesh_payload(ply, max_triangles, rotation)
-        for v, ply in bar(plys.items(), label, len(plys), unit="mesh")
-    }
+    views = {}
+    for v, ply in bar(plys.items(), label, len(plys), unit="mesh"):
+        payload = mesh_payload(ply, max_triangles, rotation)
+        if payload is None:
+            log.warning("%s: empty mesh (nothing reconstructed): no 3D view of %s", ply, v)
+        else:
+            views[v] = payload
+    return views

@@ -17,7 +17,11 @@ does the same in four small steps, each a pure function over numpy arrays:
 
 :func:`frame_mesh` (the Snakemake rule's function) reads a results-contract
 depth file and writes ``mesh/<frame>.ply`` (world frame, metres, with vertex
-normals). Lengths are metres throughout.
+normals). A frame with no surface to mesh (fewer than :data:`MIN_POINTS` pixels
+with a depth and a normal, or nothing left after the crop) gets the empty mesh
+(:mod:`colourhs.common.ply`), with a warning: in a sequence, one frame without
+a reconstruction is a result, not a failure of the whole run. Lengths are
+metres throughout.
 """
 
 from __future__ import annotations
@@ -59,6 +63,8 @@ CROP_VOXELS = 2.0
 HULL_MARGIN = 0.5
 #: open3d's default ratio of the Poisson octree's cube to the points' bounding box.
 POISSON_SCALE = 1.1
+#: Fewest oriented points Poisson reconstruction is run on; fewer give the empty mesh.
+MIN_POINTS = 4
 
 
 class TriMesh(NamedTuple):
@@ -227,8 +233,10 @@ def poisson_mesh(
         Vertices (metres), triangles and unit vertex normals (outward).
     """
     points = np.asarray(points, float)
-    if len(points) < 4:
-        raise ValueError(f"Poisson reconstruction needs at least 4 points, got {len(points)}")
+    if len(points) < MIN_POINTS:
+        raise ValueError(
+            f"Poisson reconstruction needs at least {MIN_POINTS} points, got {len(points)}"
+        )
     pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
     pcd.normals = o3d.utility.Vector3dVector(np.asarray(normals, float))
     with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
@@ -274,6 +282,19 @@ def crop_to_data(mesh: TriMesh, data_points: np.ndarray, max_dist_m: float) -> T
     index = np.cumsum(used) - 1
     out = _to_o3d(np.asarray(mesh.vertices)[used], index[tri])
     return _with_normals(out)
+
+
+def _empty_mesh(out_ply: str | Path, info: dict, reason: str) -> dict:
+    """Write the empty mesh (no vertices, no faces) of a frame with no surface.
+
+    Logs a warning naming the depth file and ``reason``; returns ``info`` with
+    ``empty`` True, ``reason`` and zero vertices and triangles.
+    """
+    log.warning(
+        "%s: no surface to mesh, writing the empty mesh %s: %s", info["depth_h5"], out_ply, reason
+    )
+    write_ply(out_ply, np.zeros((0, 3)), np.zeros((0, 3), np.int32), np.zeros((0, 3)))
+    return info | {"vertices": 0, "triangles": 0, "empty": True, "reason": reason}
 
 
 def frame_mesh(
@@ -325,21 +346,42 @@ def frame_mesh(
     -------
     dict
         Counts (points, hull points, vertices, triangles), the spacing, radius,
-        crop distance and voxel in metres, and the seconds taken.
+        crop distance and voxel in metres (None where not reached), the seconds
+        taken, ``empty`` and ``reason``. ``empty`` is True when the frame has no
+        surface to mesh: fewer than :data:`MIN_POINTS` pixels with a depth and a
+        normal, or nothing left after the crop. ``out_ply`` is then the empty mesh
+        (a valid PLY with no vertices and no faces), ``reason`` says why (None
+        otherwise), the vertex and triangle counts are 0, and a warning naming the
+        depth file is logged.
 
     Raises
     ------
     ValueError
-        (naming the file) for an unreadable or empty depth map, or an empty mesh
-        after cropping; ``out_ply`` is then not written.
+        Naming the file, for a depth file that does not read
+        (:func:`colourhs.common.depthfile.read_depth`); ``out_ply`` is then not
+        written.
     """
     t0 = time.perf_counter()
     say = partial(stage, log, start=t0)
     dm = as_depth_map(depth_h5)
     say(f"mesh: oriented points of {Path(dm.path).name}")
     points, normals = oriented_points(dm)
-    if len(points) < 4:
-        raise ValueError(f"{dm.path}: only {len(points)} pixels with depth and normal")
+    info = {
+        "depth_h5": dm.path,
+        "hull_ply": None if hull_ply is None else str(hull_ply),
+        "points": int(len(points)),
+        "hull_points": 0,
+        "vertices": 0,
+        "triangles": 0,
+        "spacing_m": None,
+        "hull_radius_m": None,
+        "crop_dist_m": None,
+        "poisson_depth": int(poisson_depth),
+        "poisson_voxel_m": None,
+    }
+    if len(points) < MIN_POINTS:
+        why = f"only {len(points)} pixels with depth and normal (Poisson needs {MIN_POINTS})"
+        return _empty_mesh(out_ply, info, why) | {"seconds": time.perf_counter() - t0}
     spacing = point_spacing(points)
     radius = HULL_RADIUS_SPACINGS * spacing if hull_radius_m is None else float(hull_radius_m)
     n_hull = 0
@@ -361,20 +403,21 @@ def frame_mesh(
     crop = max(CROP_SPACINGS * spacing, CROP_VOXELS * voxel) if crop_dist_m is None else crop_dist_m
     say(f"mesh: cropping {len(mesh.triangles)} triangles to the data")
     mesh = crop_to_data(mesh, points, crop)
-    if len(mesh.triangles) == 0:
-        raise ValueError(f"{dm.path}: Poisson mesh is empty after cropping to the data")
-    write_ply(out_ply, mesh.vertices, mesh.triangles, mesh.normals)
-    return {
-        "depth_h5": dm.path,
-        "hull_ply": None if hull_ply is None else str(hull_ply),
-        "points": int(len(points)),
+    info |= {
         "hull_points": n_hull,
-        "vertices": int(len(mesh.vertices)),
-        "triangles": int(len(mesh.triangles)),
         "spacing_m": spacing,
         "hull_radius_m": radius if hull_ply is not None else None,
         "crop_dist_m": float(crop),
-        "poisson_depth": int(poisson_depth),
         "poisson_voxel_m": voxel,
+    }
+    if len(mesh.triangles) == 0:
+        why = f"the Poisson mesh is empty after cropping to the data ({crop:.3g} m)"
+        return _empty_mesh(out_ply, info, why) | {"seconds": time.perf_counter() - t0}
+    write_ply(out_ply, mesh.vertices, mesh.triangles, mesh.normals)
+    return info | {
+        "vertices": int(len(mesh.vertices)),
+        "triangles": int(len(mesh.triangles)),
+        "empty": False,
+        "reason": None,
         "seconds": time.perf_counter() - t0,
     }

@@ -7,7 +7,7 @@ import open3d as o3d
 import pytest
 
 from colourhs.capture import CaptureFormatError
-from colourhs.common.ply import load_mesh, write_ply
+from colourhs.common.ply import is_empty_mesh, load_mesh, write_ply
 
 
 def _sphere():
@@ -51,3 +51,37 @@ def test_mismatched_columns_are_an_error_and_write_nothing(tmp_path):
     with pytest.raises(ValueError, match="vertices but"):
         write_ply(tmp_path / "bad.ply", v, t, n[:-1])
     assert list(tmp_path.iterdir()) == []
+
+
+def test_empty_mesh_round_trips(tmp_path):
+    """The empty mesh (a frame with nothing reconstructed): a header and no data.
+    open3d reads it back as 0 vertices and 0 faces (while reporting a failed read, as
+    it does for a file that is not a PLY), so load_mesh reads its header."""
+    empty = np.zeros((0, 3))
+    path = write_ply(tmp_path / "e.ply", empty, np.zeros((0, 3), np.int32), empty, empty)
+    data = path.read_bytes()
+    assert data.endswith(b"end_header\n")  # nothing after the header
+    assert b"element vertex 0\n" in data and b"element face 0\n" in data
+    mesh = o3d.io.read_triangle_mesh(str(path))
+    assert len(mesh.vertices) == 0 and len(mesh.triangles) == 0
+    assert is_empty_mesh(path)
+    v, t, n = load_mesh(path, allow_empty=True)
+    assert v.shape == t.shape == n.shape == (0, 3)
+    assert v.dtype == n.dtype == np.float64 and np.issubdtype(t.dtype, np.integer)
+    with pytest.raises(CaptureFormatError, match="no faces"):
+        load_mesh(path)  # the default: a mesh must have a surface (ground truth, hull)
+    # allow_empty changes nothing else: a mesh loads, a point cloud and a file that is
+    # not a PLY are still errors
+    sv, st, sn = _sphere()
+    sphere = write_ply(tmp_path / "s.ply", sv, st, sn)
+    assert not is_empty_mesh(sphere)
+    assert np.array_equal(load_mesh(sphere, allow_empty=True)[1], st)
+    cloud = write_ply(tmp_path / "p.ply", sv)
+    assert not is_empty_mesh(cloud)
+    with pytest.raises(CaptureFormatError, match="no faces"):
+        load_mesh(cloud, allow_empty=True)
+    (tmp_path / "x.ply").write_bytes(b"not a mesh\n")
+    with pytest.raises(CaptureFormatError, match="not a PLY file"):
+        load_mesh(tmp_path / "x.ply", allow_empty=True)
+    with pytest.raises(CaptureFormatError, match="no faces"):
+        load_mesh(tmp_path / "x.ply")

@@ -3,7 +3,9 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import logging
 
 import numpy as np
 import open3d as o3d
@@ -15,7 +17,7 @@ from colourhs.capture import Camera
 from colourhs.common.depthfile import DepthResult, read_depth, write_depth
 from colourhs.common.geometry import look_at, project
 from colourhs.common.metrics_csv import DROP_COLUMNS, EXTRA_COLUMNS, GAUSSIAN_WITHIN
-from colourhs.common.ply import load_mesh, write_ply
+from colourhs.common.ply import is_empty_mesh, load_mesh, write_ply
 from colourhs.common.raycast import (
     cast_pixels,
     closest_on_triangles,
@@ -35,6 +37,7 @@ from colourhs.evaluation.accuracy import (
     visible_vertices,
 )
 from colourhs.evaluation.depth_errors import sigma_summary, uncertainty_summary
+from colourhs.surfaces.poisson import frame_mesh
 
 W, H = 128, 96
 
@@ -492,3 +495,56 @@ def test_evaluate_frame_sigma_columns(tmp_path):
     assert read.loc["c", "expected_depth_error_mm"] == pytest.approx(expected, abs=1e-6)
     assert read.loc["c", ["sigma_within_1", "depth_sigma_median_mm"]].isna().all()
     assert read.loc["vh", list(SIGMA_COLUMNS[1:])].isna().all()
+
+
+def test_evaluate_frame_of_the_empty_mesh(tmp_path, caplog):
+    """A frame with nothing reconstructed (its depth: 3 pixels beside the sphere, too
+    few to mesh) scores as such, without an error: coverage 0, no accuracy or
+    completeness (undefined, not 0), 0 vertices scored and an empty coloured mesh,
+    with a warning naming the depth file. So does a depth map without any depth."""
+    cam = make_camera()
+    gv, gt, gn = sphere(0.1, 40)
+    gt_ply = write_ply(tmp_path / "gt.ply", gv, gt, gn)
+    gd, _ = render_depth_normals(gv, gt, gn, cam, W, H)
+    depth = np.full((H, W), np.nan)
+    depth[0, :3] = 0.8  # in a corner, off the sphere
+    assert not np.isfinite(gd[0, :3]).any()
+    h5 = _depth_map(tmp_path, "corner", depth, np.broadcast_to([0.0, 0.0, -1.0], (H, W, 3)), cam)
+    mesh_ply = tmp_path / "mesh.ply"
+    assert frame_mesh(h5, mesh_ply)["empty"] and is_empty_mesh(mesh_ply)
+    out = tmp_path / "m"
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="colourhs"):
+        info = evaluate_frame(
+            h5, mesh_ply, gt_ply, out / "a.json", out / "a.ply", key=FrameKey("s", "000001", "b")
+        )
+    assert json.loads((out / "a.json").read_text()) == pytest.approx(info)
+    assert info["coverage"] == 0.0 and info["truth_pixels"] == np.isfinite(gd).sum() > 3000
+    assert info["hausdorff_samples"] == 0 and info["mesh_vertices"] == 0
+    accuracy = [f"hausdorff_{k}_mm" for k in ("rms", "mean", "max", "median")]
+    completeness = [f"completeness_{k}" for k in ("rms_mm", "mean_mm", "max_mm", "samples")]
+    depth = ["depth_median_mm", "depth_rms_mm", "depth_p95_mm", "depth_signed_median_mm"]
+    undefined = [*accuracy, *completeness, "outside_share", *depth, "normal_median_deg"]
+    assert {c: info[c] for c in undefined} == dict.fromkeys(undefined)
+    assert is_empty_mesh(out / "a.ply")  # the coloured mesh: empty too
+    assert load_mesh(out / "a.ply", allow_empty=True)[0].shape == (0, 3)
+    warnings = [r for r in caplog.records if r.levelno == logging.WARNING]
+    assert [r.name for r in warnings] == ["colourhs.evaluation.accuracy"]
+    assert str(h5) in warnings[0].getMessage() and "empty" in warnings[0].getMessage()
+    # A depth map without a single depth (read_depth refuses such a file: given as the
+    # DepthMap), with and without ground truth.
+    none = dataclasses.replace(read_depth(h5), depth=np.full((H, W), np.nan, np.float32))
+    key = FrameKey("s", "000002", "b")
+    nan = evaluate_frame(none, mesh_ply, gt_ply, out / "b.json", out / "b.ply", key=key)
+    assert nan["coverage"] == 0.0 and nan["depth_median_mm"] is None
+    assert nan["hausdorff_samples"] == 0 and nan["hausdorff_rms_mm"] is None
+    blind = evaluate_frame(none, mesh_ply, None, tmp_path / "c.json", tmp_path / "c.ply")
+    assert blind["coverage"] is None and blind["hausdorff_samples"] is None
+    assert blind["mesh_vertices"] == 0 and is_empty_mesh(tmp_path / "c.ply")
+    # metrics.csv: the frames' rows say it (coverage 0, no vertex scored, accuracy empty)
+    metrics_table(sorted(out.glob("*.json")), tmp_path / "metrics.csv")
+    read = pd.read_csv(tmp_path / "metrics.csv")
+    assert list(read["coverage"]) == [0.0, 0.0] and list(read["hausdorff_samples"]) == [0, 0]
+    assert (
+        read[["hausdorff_rms_mm", "completeness_rms_mm", "depth_median_mm"]].isna().all(axis=None)
+    )

@@ -28,6 +28,22 @@ K = np.array([[F, 0.0, (W - 1) / 2], [0.0, F, (H - 1) / 2], [0.0, 0.0, 1.0]])
 RADIUS, DISTANCE = 0.1, 0.5
 
 
+def _seen_sphere():
+    """A 30-step sphere (vertices, faces, vertex normals), a camera 0.5 m in front of
+    it, and its true depth and normal maps as that camera sees them (and where it
+    does)."""
+    from colourhs.capture import Camera
+    from colourhs.common.geometry import look_at, vertex_normals
+    from colourhs.common.raycast import render_depth_normals
+
+    v, f = _sphere(30)
+    R, t = look_at(np.array([0.0, 0.0, -0.5]), np.zeros(3))
+    cam = Camera("cam1", K, np.zeros(5), R, t, "red", np.zeros(3))
+    n = vertex_normals(v, f)
+    gd, gn = render_depth_normals(v, f, n, cam, W, H)
+    return v, f, n, cam, gd, gn, np.isfinite(gd)
+
+
 def _sphere(resolution: int = 60):
     mesh = o3d.geometry.TriangleMesh.create_sphere(radius=RADIUS, resolution=resolution)
     return np.asarray(mesh.vertices), np.asarray(mesh.triangles)
@@ -105,12 +121,15 @@ def test_map_figures_write_png_and_refuse_all_nan(tmp_path, shape):
         # Wide images give wide figures and tall ones tall (a colour bar and title add a margin).
         assert (ratio > 1.5) if aspect > 1 else (ratio < 0.7)
     assert not list(tmp_path.glob(".*"))  # no temporary files left
+    # A frame with nothing reconstructed: all background, no error.
     nan = np.full(shape, np.nan)
-    with pytest.raises(ValueError, match="no finite values"):
-        depth_map_figure(nan, tmp_path / "x.png")
-    with pytest.raises(ValueError, match="no finite values"):
-        normal_map_figure(np.full(shape + (3,), np.nan), tmp_path / "x.png")
-    assert not (tmp_path / "x.png").exists()
+    for png in (
+        depth_map_figure(nan, tmp_path / "x.png", "bayes_dyn"),
+        normal_map_figure(np.full(shape + (3,), np.nan), tmp_path / "y.png", "bayes_dyn"),
+    ):
+        img = cv2.imread(str(png))
+        centre = img[img.shape[0] // 2, img.shape[1] // 2].astype(int)
+        assert np.ptp(centre) == 0 and centre[0] > 200  # background grey-white
 
 
 def test_normal_map_colours(tmp_path):
@@ -352,19 +371,11 @@ def test_scene_figures_sigma_map_without_ground_truth(tmp_path):
     """A scene without ground truth has no error maps but its sigma map, on its own
     scale (the one variant's 95th percentile: 2 mm, so the 1 mm left half has the
     scale's middle colour)."""
-    from colourhs.capture import Camera
     from colourhs.common.depthfile import DepthResult, write_depth
-    from colourhs.common.geometry import look_at, vertex_normals
     from colourhs.common.ply import write_ply
-    from colourhs.common.raycast import render_depth_normals
     from colourhs.report.figures import scene_figures
 
-    v, f = _sphere(30)
-    n = vertex_normals(v, f)
-    R, t = look_at(np.array([0.0, 0.0, -0.5]), np.zeros(3))
-    cam = Camera("cam1", K, np.zeros(5), R, t, "red", np.zeros(3))
-    gd, gn = render_depth_normals(v, f, n, cam, W, H)
-    ok = np.isfinite(gd)
+    v, f, n, cam, gd, gn, ok = _seen_sphere()
     sigma = np.where(np.arange(W) < W // 2, 1e-3, 2e-3) * np.ones((H, 1))
     res = DepthResult(
         gd.astype(np.float32),
@@ -392,3 +403,70 @@ def test_scene_figures_sigma_map_without_ground_truth(tmp_path):
     for at, mm in ((0.3, 1.0), (0.7, 2.0)):  # left and right of the sphere's middle
         want = value_colours(np.array([mm]), 0.0, 2.0, "inferno")[0] * 255
         np.testing.assert_allclose(row[panel[int(at * len(panel))]], want, atol=3)
+
+
+def test_shaded_render_of_the_empty_mesh_is_blank():
+    """The empty mesh (a frame with nothing reconstructed): the background alone."""
+    empty = np.zeros((0, 3))
+    for rgb in (None, np.zeros((0, 3), np.uint8)):
+        img = shaded_render(empty, np.zeros((0, 3), int), K, np.eye(3), np.ones(3), W, H, rgb)
+        assert img.shape == (H, W, 3) and img.dtype == np.uint8 and np.all(img == 255)
+
+
+def test_scene_figures_show_the_empty_mesh_as_a_blank_tile(tmp_path, monkeypatch):
+    """A variant whose mesh is the empty mesh: a blank tile titled "(empty)" in Figure 7
+    and hausdorff.png (whose scale is then the other variant's: its 2 mm), and a blank
+    animation frame labelled so; no error."""
+    import json
+
+    from colourhs.common.depthfile import DepthResult, write_depth
+    from colourhs.common.ply import write_ply
+    from colourhs.report import figures
+
+    shown = {}  # figure -> what it was given
+
+    def grid(tiles, path, *args, **kw):
+        shown[path.name] = (dict(tiles), args)
+        return render_grid_figure(tiles, path, *args, **kw)
+
+    def animate(images, path, fps, labels):
+        shown[path.name] = (list(images), labels)
+        return write_animation(shown[path.name][0], path, fps, labels)
+
+    monkeypatch.setattr(figures, "render_grid_figure", grid)
+    monkeypatch.setattr(figures, "write_animation", animate)
+    v, f, n, cam, gd, gn, ok = _seen_sphere()
+    res = DepthResult(gd.astype(np.float32), gn.astype(np.float32), ok.astype(np.float32), ok, {})
+    write_depth(tmp_path / "d.h5", res, cam, {"method": "test"})
+    empty, no_faces = np.zeros((0, 3)), np.zeros((0, 3), np.int32)
+    mesh, coloured = {}, {}
+    for variant, frame in (("vh", "000000"), ("bayes_dyn", "000000"), ("bayes_dyn", "000001")):
+        (tmp_path / variant / "mesh").mkdir(parents=True, exist_ok=True)
+        (tmp_path / variant / "eval").mkdir(exist_ok=True)
+        path, eval_ply = (tmp_path / variant / d / f"{frame}.ply" for d in ("mesh", "eval"))
+        if (variant, frame) == ("bayes_dyn", "000000"):
+            write_ply(path, empty, no_faces, empty)
+            write_ply(eval_ply, empty, no_faces, empty, colours=empty)
+        else:
+            write_ply(path, v, f, n)
+            write_ply(eval_ply, v, f, n, colours=value_colours(np.full(len(v), 2.0), 0.0, 4.0))
+        eval_ply.with_suffix(".json").write_text(json.dumps({"colour_vmax_mm": 4.0}))
+        mesh.setdefault(variant, path)
+        coloured.setdefault(variant, eval_ply)
+    depths = {"vh": tmp_path / "d.h5", "bayes_dyn": tmp_path / "d.h5"}
+    frames = {p.stem: p for p in sorted((tmp_path / "bayes_dyn" / "mesh").glob("*.ply"))}
+    written = figures.scene_figures(
+        tmp_path / "figs", depths, mesh, animation=frames, coloured=coloured
+    )
+    assert {"figure7.png", "hausdorff.png", "animation.gif"} <= {p.name for p in written}
+    assert all(p.exists() for p in written)
+    for name in ("figure7.png", "hausdorff.png"):
+        tiles, args = shown[name]
+        assert list(tiles) == ["vh", "bayes_dyn (empty)"]
+        assert np.all(tiles["bayes_dyn (empty)"] == 255)
+        assert np.any(tiles["vh"] < 255, axis=-1).sum() > 500  # the sphere
+    scale = shown["hausdorff.png"][1][2]
+    assert scale[2] == pytest.approx(2.0, abs=4.0 / 255)  # vh's 2 mm, to a colour step
+    images, labels = shown["animation.gif"]
+    assert labels == ["bayes_dyn  frame 000000 (1/2) (empty)", "bayes_dyn  frame 000001 (2/2)"]
+    assert np.all(images[0] == 255) and np.any(images[1] < 255)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import base64
+import logging
 
 import numpy as np
 import open3d as o3d
@@ -76,3 +77,27 @@ def test_simplify_large_noisy_mesh_fits_the_budget_and_keeps_the_shape():
     assert np.abs(r - 0.05).max() < 1.5e-3  # measured 0.6 mm (the chords of 1000 triangles)
     assert np.abs(np.asarray(small.vertex_colors) - [0.2, 0.6, 0.4]).max() < 1e-6
     assert simplify(sphere, 10**6) is sphere
+
+
+def test_scene_views_leave_out_the_empty_mesh(tmp_path, caplog):
+    """A variant whose first frame has nothing reconstructed (the empty mesh) has no 3D
+    view, with a warning naming the file; a file that is no mesh at all still raises."""
+    sphere = o3d.geometry.TriangleMesh.create_sphere(0.05, resolution=10)
+    verts, tris = np.asarray(sphere.vertices), np.asarray(sphere.triangles)
+    empty = np.zeros((0, 3))
+    for v in ("vh", "bayes_full"):
+        (tmp_path / "seq" / v / "eval").mkdir(parents=True)
+    write_ply(tmp_path / "seq" / "vh" / "eval" / "000000.ply", verts, tris, colours=verts * 0)
+    blank = tmp_path / "seq" / "bayes_full" / "eval" / "000000.ply"
+    write_ply(blank, empty, np.zeros((0, 3), int), empty, colours=empty)
+    assert mesh_payload(blank) is None
+    with caplog.at_level(logging.WARNING, logger="colourhs"):
+        views = scene_views(tmp_path, "seq")
+    assert list(views) == ["vh"] and views["vh"]["nt"] == len(tris)
+    warnings = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+    assert len(warnings) == 1 and str(blank) in warnings[0] and "bayes_full" in warnings[0]
+    (tmp_path / "junk.ply").write_bytes(b"\x00" * 64)
+    with pytest.raises(ValueError, match="not a PLY file"):
+        mesh_payload(tmp_path / "junk.ply")
+    with pytest.raises(ValueError, match="no faces"):
+        mesh_payload(write_ply(tmp_path / "cloud.ply", verts))

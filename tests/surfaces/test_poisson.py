@@ -3,6 +3,8 @@ known geometry."""
 
 from __future__ import annotations
 
+import logging
+
 import h5py
 import numpy as np
 import open3d as o3d
@@ -12,7 +14,7 @@ from scipy.spatial import cKDTree
 from colourhs.capture import Camera
 from colourhs.common.depthfile import DepthResult, read_depth, write_depth
 from colourhs.common.geometry import backproject, look_at, pixel_grid, ray_plane_intersection
-from colourhs.common.ply import load_mesh, write_ply
+from colourhs.common.ply import is_empty_mesh, load_mesh, write_ply
 from colourhs.surfaces.poisson import (
     add_hull_points,
     crop_to_data,
@@ -100,9 +102,7 @@ def corrupt_chunk(path, name: str) -> None:
     path.write_bytes(bytes(data))
 
 
-@pytest.mark.parametrize(
-    "case", ["all_nan", "empty", "no_normal", "bad_normal_shape", "corrupt_chunk"]
-)
+@pytest.mark.parametrize("case", ["empty", "no_normal", "bad_normal_shape", "corrupt_chunk"])
 def test_bad_depth_files_are_refused_by_name(tmp_path, case):
     """A ValueError naming the file and what is wrong. ``corrupt_chunk``:
     a dataset whose bytes are damaged mid-file raised h5py's OSError ("Can't
@@ -126,7 +126,6 @@ def test_bad_depth_files_are_refused_by_name(tmp_path, case):
             f.attrs.update(camera="cam1", K=cam.K, R=cam.R, t=cam.t)
     out = tmp_path / "mesh.ply"
     expected = {
-        "all_nan": "no reconstructed pixels",
         "empty": "no reconstructed pixels",
         "no_normal": "missing dataset 'normal'",
         "bad_normal_shape": "'normal' has shape",
@@ -224,6 +223,7 @@ def test_frame_mesh_writes_a_sphere_ply_and_the_hull_helps(tmp_path):
         out = tmp_path / "mesh" / f"{hull_ply is None}.ply"
         info = frame_mesh(h5, out, hull_ply=hull_ply, poisson_depth=7)
         assert info["points"] == np.isfinite(z).sum() == len(points)
+        assert info["empty"] is False and info["reason"] is None
         assert (info["hull_points"] > 0) == (hull_ply is not None)
         v, t, n = load_mesh(out)
         assert len(t) == info["triangles"] and len(v) == info["vertices"]
@@ -234,3 +234,41 @@ def test_frame_mesh_writes_a_sphere_ply_and_the_hull_helps(tmp_path):
     rms = {k: np.sqrt(np.mean(e**2)) for k, e in errors.items()}
     assert rms[True] < 0.3e-3 and np.abs(errors[True]).max() < 3e-3
     assert rms[True] < rms[False] and np.abs(errors[True]).max() < np.abs(errors[False]).max()
+
+
+@pytest.mark.parametrize("case", ["all_nan", "three_pixels", "no_normal", "cropped_away"])
+def test_frame_without_a_surface_gets_the_empty_mesh(tmp_path, caplog, case):
+    """A frame with no surface to mesh is a result, not an error: the empty mesh (a
+    valid PLY with no vertices and no faces), ``empty`` and why in the returned
+    dict, and a warning naming the depth file. ``all_nan``: a depth file without a
+    single depth (the reconstruction's output for a frame it lost entirely);
+    ``cropped_away``: a whole plane whose Poisson surface a 1 nm crop removes."""
+    cam = make_camera()
+    z, _ = plane_depth(cam, np.zeros(3), np.array([0.0, 0.0, 1.0]))
+    normal = np.broadcast_to([0.0, 0.0, -1.0], (H, W, 3)).copy()
+    if case in ("three_pixels", "all_nan"):
+        z[:] = np.nan
+    if case == "three_pixels":
+        z[0, :3] = 0.8
+    if case == "no_normal":
+        normal[:] = np.nan
+    h5 = write_depth_file(tmp_path / f"{case}.h5", cam, z, normal)
+    out = tmp_path / "mesh" / f"{case}.ply"
+    crop = 1e-9 if case == "cropped_away" else None
+    with caplog.at_level(logging.WARNING, logger="colourhs"):
+        info = frame_mesh(h5, out, poisson_depth=6, crop_dist_m=crop)
+    points = {"all_nan": 0, "three_pixels": 3, "no_normal": 0, "cropped_away": H * W}[case]
+    assert info["empty"] is True and info["points"] == points
+    assert info["vertices"] == info["triangles"] == info["hull_points"] == 0
+    if case == "cropped_away":
+        assert info["reason"].startswith("the Poisson mesh is empty after cropping")
+        assert info["crop_dist_m"] == 1e-9 and info["spacing_m"] > 0
+    else:
+        assert info["reason"] == f"only {points} pixels with depth and normal (Poisson needs 4)"
+        assert info["spacing_m"] is None and info["crop_dist_m"] is None
+    assert is_empty_mesh(out) and o3d.io.read_triangle_mesh(str(out)).is_empty()
+    v, t, n = load_mesh(out, allow_empty=True)
+    assert v.shape == t.shape == n.shape == (0, 3)
+    warnings = [r for r in caplog.records if r.levelno == logging.WARNING]
+    assert len(warnings) == 1 and warnings[0].name == "colourhs.surfaces.poisson"
+    assert str(h5) in warnings[0].getMessage() and info["reason"] in warnings[0].getMessage()
