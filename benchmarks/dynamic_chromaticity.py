@@ -1,7 +1,8 @@
 """Moving coloured objects: what a chromaticity map calibrated in one pose costs.
 
 Run: ``.venv/bin/python benchmarks/dynamic_chromaticity.py [--preset random-dynamic-tiny]
-[--seeds 0-3] [--frames 0-11/2] [--raw-truth] [--tracked] [--keep DIR] [--tag SUFFIX]``.
+[--seeds 0-3] [--frames 0-11/2] [--evaluate 0,5,11] [--raw-truth] [--tracked] [--keep DIR]
+[--tag SUFFIX]``.
 
 Why: the paper calibrates the surface chromaticity p (eq. 4, Section III-D) per
 camera pixel from chromatic captures of the object in one pose, and the
@@ -258,9 +259,12 @@ def run_seed(
     frames: tuple[int, ...] | None = None,
     variants=VARIANTS,
     keep: Path | None = None,
+    evaluate: tuple[int, ...] | None = None,
 ) -> list[dict]:
-    """One seed of ``preset``: render (no geometric captures), calibrate, then every
-    selected frame of every dynamic chromatic sequence with each variant; rows."""
+    """One seed of ``preset``: render (no geometric captures; ``frames``: only those),
+    calibrate, then every frame of every dynamic chromatic sequence (``evaluate``: only
+    those indices and the chromatic frame; a tracked map still follows every rendered
+    frame) with each variant; rows."""
     from colourhs.capture import open_dataset
     from colourhs.synth.synthesise import RenderSelection, synthesise
 
@@ -281,6 +285,8 @@ def run_seed(
         maps = {v.name: v.source(data, scene, files) for v in variants if v.source is not None}
         chroma_index = sc.frames.index(sc.chromatic_frame)
         for i, frame in enumerate(sc.frames):
+            if evaluate is not None and int(frame) not in evaluate and i != chroma_index:
+                continue
             truth = data / "scenes" / scene / "gt" / "chromaticity" / f"{frame}.h5"
             for v in variants:
                 map_h5 = None if v.source is None else maps[v.name].get(frame)
@@ -485,6 +491,13 @@ def main(argv=None) -> dict:
         "chromatic frame always (default all)",
     )
     p.add_argument(
+        "--evaluate",
+        default=None,
+        help="reconstruct and score only these frames (as --frames) and each sequence's "
+        "chromatic frame, rendering all that --frames selects (a tracked map follows "
+        "every rendered frame; default all)",
+    )
+    p.add_argument(
         "--raw-truth",
         action="store_true",
         help="also bayes_full_true_raw: the true chromaticity not normalised to sum 3",
@@ -512,13 +525,15 @@ def main(argv=None) -> dict:
             dynamic = ", ".join(k for k, v in PRESETS.items() if v.scene_set == "dynamic")
             p.error(f"--preset {args.preset}: not a dynamic preset ({dynamic})")
         show_progress()
-        frames = select_frames(args.frames)
+        frames, evaluate = select_frames(args.frames), select_frames(args.evaluate)
         variants = VARIANTS + ((RAW_TRUTH,) if args.raw_truth else ())
         variants += (tracked_variant(tracked_source),) if args.tracked else ()
         rows = seeds_in_temp(
             frame_indices(args.seeds),
             "colourhs-dynchroma",
-            lambda seed, root: run_seed(seed, args.preset, root, frames, variants, args.keep),
+            lambda seed, root: run_seed(
+                seed, args.preset, root, frames, variants, args.keep, evaluate
+            ),
             csv,
         )
         table = pd.DataFrame(rows)
