@@ -173,8 +173,8 @@ def colour_flow(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Dense flow (H, W, 2) from linear image ``a`` (H, W, 3) to ``b`` on their colour
     (:func:`image_colour`): OpenCV's DIS, its finest level about
     :data:`COLOUR_FLOW_WIDTH_PX` wide, on each band of the colour (as 8 bits), their
-    median per pixel. Shading and white light change the
-    brightness; the colour changes where the surface's colour does."""
+    median per pixel. Shading and white light change the brightness; the colour
+    changes where the surface's colour does."""
     qa, qb = image_colour(a), image_colour(b)
     scale = max(0, round(np.log2(a.shape[1] / COLOUR_FLOW_WIDTH_PX)))
     flows = []
