@@ -76,7 +76,8 @@ median over seeds and the worst seed. Run times per seed (render, calibration,
 reconstruction) are in both.
 
 A tiny preset (160x120) takes minutes per seed on 2 cores; ``random-dynamic``
-(640x480) far longer (subsample with ``--frames``).
+(640x480) far longer: score fewer frames with ``--evaluate`` (``--frames`` renders
+fewer, and a tracked map then crosses each gap in one step).
 """
 
 from __future__ import annotations
