@@ -97,7 +97,7 @@ import pandas as pd
 HERE = Path(__file__).parent
 sys.path.insert(0, str(HERE))
 
-from generalisation import calibrate, evaluate_variant, seeds_in_temp  # noqa: E402
+from generalisation import calibrate, evaluate_variant, figure, seeds_in_temp  # noqa: E402
 
 #: A map source: (dataset, scene, calibration files by name) -> {frame: chromaticity h5};
 #: its frames those of the scene that it has a map for.
@@ -229,8 +229,10 @@ def failed_frame(exc: Exception, seconds: float) -> dict:
 
 
 def _line(m: dict) -> str:
+    """One scene x frame x variant's figures as a progress line (``-`` where none)."""
+
     def f(key, fmt):
-        return "-" if m.get(key) is None else format(m[key], fmt)
+        return figure(m, key, fmt)
 
     return (
         f"depth {f('depth_median_mm', '.3f')} mm (signed {f('depth_signed_median_mm', '+.3f')}) "

@@ -522,11 +522,16 @@ def evaluate_variant(data, scene, frames, variant, files, chromatic, work, gauge
     return s | {"seconds": time.time() - t0}
 
 
+def figure(m: dict, key: str, fmt: str) -> str:
+    """``m[key]`` formatted with ``fmt`` for a progress line; ``-`` where it is missing."""
+    return "-" if m.get(key) is None else format(m[key], fmt)
+
+
 def _line(m: dict) -> str:
     """One scene x variant's figures as a progress line (``-`` where there are none)."""
 
     def f(key, fmt):
-        return "-" if m.get(key) is None else format(m[key], fmt)
+        return figure(m, key, fmt)
 
     return (
         f"depth {f('depth_median_mm', '.3f')} mm (signed {f('depth_signed_median_mm', '+.3f')}) "
