@@ -145,17 +145,19 @@ def numpy_data_term(
     :class:`~colourhs.reconstruct.dataterm.Prepared` images, ``numpy.linalg.eigh``
     of W^T W in float64. No numba, no float32 arithmetic, no attempt at speed.
     A hypothesis is valid where every sample lies inside its image and is usable
-    (positive), W has rank 2 at least, and the normal faces every light by more
-    than ``MIN_FACING_COS``.
+    (positive), every p is known (a camera's own, else, where its footprint has
+    none and ``prepared.borrow``, the reference pixel's: the rays leave a
+    camera's centre), W has rank 2 at least, and the normal faces every light by
+    more than ``MIN_FACING_COS``.
 
     Returns
     -------
     cost : (N, K) float32, ``INVALID_COST`` where invalid.
     normal : (N, K, 3) float32 unit normals towards the reference camera, 0 where invalid.
     """
-    from colourhs.reconstruct.dataterm import INVALID_COST, MIN_FACING_COS
+    from colourhs.reconstruct.dataterm import ALL_UNKNOWN, INVALID_COST, MIN_FACING_COS
 
-    pair_cams, _ = pairs
+    pair_cams, pair_ch = pairs
     rays = np.asarray(rays, float)
     z = np.asarray(depths, float)
     X = np.asarray(c_ref, float) + rays[:, None, :] * z[None, :, None]  # (N, K, 3)
@@ -164,12 +166,30 @@ def numpy_data_term(
     for cam, S in zip(cameras, prepared.S, strict=True):
         samples.append(sample_bilinear(S, project(X, cam.K, cam.dist, cam.R, cam.t)))
         ok &= np.all(np.isfinite(samples[-1]), axis=-1)  # NaN outside the image
+    p_ref = np.full((len(rays), 1, 3), -1.0)  # the reference pixel's p, where known
+    at = [i for i, c in enumerate(cameras) if np.linalg.norm(c.centre - c_ref) < 1e-9]
+    if prepared.use_p and prepared.borrow and at:
+        cam = cameras[at[0]]
+        uv = project(np.asarray(c_ref, float) + rays, cam.K, cam.dist, cam.R, cam.t)
+        p_ref[:, 0] = sample_bilinear(prepared.P[at[0]], uv)[:, :3]
     Wm = np.zeros(X.shape[:2] + (3, 3))
     for p, (a, b) in enumerate(pair_cams):
         ja, jb = prepared.slots[p]
         Ja, Jb = samples[a][..., ja], samples[b][..., jb]
         ok &= (Ja > 0) & (Jb > 0)
-        pp = samples[a][..., ns + ja] * samples[b][..., ns + jb] if prepared.use_p else 1.0
+        if prepared.use_p:
+            # A p unknown over the whole footprint (J = mu i undivided there) is the
+            # reference's; a footprint that mixes known and unknown p is invalid.
+            pa, pb = samples[a][..., ns + ja], samples[b][..., ns + jb]
+            qa, qb = p_ref[..., pair_ch[p, 0]], p_ref[..., pair_ch[p, 1]]
+            ea = np.where(pa > 0, pa, np.where(pa < ALL_UNKNOWN, qa, 0.0))
+            eb = np.where(pb > 0, pb, np.where(pb < ALL_UNKNOWN, qb, 0.0))
+            ok &= (ea > 0) & (eb > 0)
+            Ja = np.where(pa > 0, Ja, Ja / np.where(ea > 0, ea, 1.0))
+            Jb = np.where(pb > 0, Jb, Jb / np.where(eb > 0, eb, 1.0))
+            pp = ea * eb
+        else:
+            pp = 1.0
         Wm[..., p, :] = constraint_vector(
             X, cameras[a].light_centre, cameras[b].light_centre, Ja, Jb, p_ba=pp, p_ab=pp
         )

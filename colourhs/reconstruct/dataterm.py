@@ -9,16 +9,27 @@ are equation (5). The singular values of W give the cost sigma_3 / sigma_2
 (0 for a perfect rank-2 W) and its null vector the normal (oriented towards
 the reference camera).
 
-A hypothesis is *invalid* (cost ``INVALID_COST``, normal 0) when it leaves an
-image, falls outside a silhouette, lands on a saturated pixel, or when any
-of its six samples is too dark to measure (a black marker, a shadow from a
-light, a pure colour in the wrong band) or has no chromaticity: with fewer
+A hypothesis is *invalid* (cost ``INVALID_COST``, normal 0) when it leaves
+an image, falls outside a silhouette, lands on a saturated pixel, or when
+any of its six samples is too dark to measure (a black marker, a shadow from
+a light, a pure colour in the wrong band) or has no chromaticity: with fewer
 than three rows W would be trivially rank 2, so such hypotheses are never
-scored as good. Beyond the paper, it is also invalid when its normal faces
-away from, or within 5 degrees of grazing to, a camera's light: with three
-pairs, det W(z) = 0 has further roots along a ray besides the surface, and
-many of them have such normals (the test removes many false roots, not all:
-ML HS decides between the rest, :mod:`colourhs.reconstruct.ml`).
+scored as good. Beyond the paper, with a tracked chromaticity map
+(:mod:`colourhs.calibration.chromaticity_tracking`, ``borrow_p``), a
+camera's sample with no p of its own (none at any texel of its footprint:
+one that mixes texels with and without p is invalid) takes the reference
+pixel's p in that band: p is a property of the surface point (eq. 4, once
+cross-talk is unmixed), and at the true depth both pixels see the same
+point. A tracked map has holes where the object moved; without this, the
+true depth of every ray that meets a hole in another camera would be
+excluded while false roots elsewhere stay scored. A calibrated map's holes
+(where the chromatic captures could not measure p) stay invalid, as in the
+paper; so does a hypothesis whose reference pixel has no p. Beyond the
+paper, it is also invalid when its normal faces away from, or within 5
+degrees of grazing to, a camera's light: with three pairs, det W(z) = 0 has
+further roots along a ray besides the surface, and many of them have such
+normals (the test removes many false roots, not all: ML HS decides between
+the rest, :mod:`colourhs.reconstruct.ml`).
 """
 
 from __future__ import annotations
@@ -45,6 +56,9 @@ HALLEY_STEPS = 3  # exact to float32 for sigma_3 / sigma_2 < 0.6; 4 for < 0.8
 TINY = 1e-300
 LOW, HIGH = 1e-150, 1e150  # clamps that keep a product of two of them finite
 SENTINEL = np.float32(-1.0e30)  # an unusable sample: any positive bilinear weight makes it < 0
+# A p sample below this has all its bilinear weight (to float32 rounding) on
+# texels without p: their J = mu i, undivided; one above it and <= 0 mixes both.
+ALL_UNKNOWN = np.float32(0.99999 * SENTINEL)
 
 
 class Prepared(NamedTuple):
@@ -57,16 +71,25 @@ class Prepared(NamedTuple):
         the camera's slots, then (with chromaticity calibration only) their
         chromaticities p, padded with 1 to nv, a multiple of 4 (the kernel
         reads 4 slots per call of :data:`~colourhs.reconstruct.simd.bilinear4`).
-        ``SENTINEL`` where J is unusable.
+        ``SENTINEL`` where J is unusable. Where only p is unknown, J = mu * i
+        and its p slot is ``SENTINEL``: the kernel then divides by the
+        reference camera's p (see :func:`data_term`).
     slots : (P, 2) int64
         Slot of each side of each reciprocal pair in its camera's S.
     use_p : bool
         Whether the eq. (5) weights p_ab p_ba are applied.
+    P : (C, H, W, 4) float32
+        Per camera and pixel, the chromaticity p of the three bands (padded
+        with 1), ``SENTINEL`` where unknown; (1, 1, 1, 4) ones unless ``borrow``.
+    borrow : bool
+        Whether a sample with no p of its own takes the reference pixel's.
     """
 
     S: np.ndarray
     slots: np.ndarray
     use_p: bool
+    P: np.ndarray = np.ones((1, 1, 1, LANES), np.float32)
+    borrow: bool = False
 
 
 @nb.njit(cache=True, fastmath=True, inline="always")
@@ -196,10 +219,13 @@ def _kernel(
     Ps,
     lights,
     S,
+    Pc,
     ns,
     slots,
     use_p,
+    borrow,
     pair_cams,
+    pair_ch,
     ref,
     others,
     nthreads,
@@ -227,6 +253,7 @@ def _kernel(
     # Flat, and no array views inside the prange: any alias there makes numba
     # drop noalias on the arrays, which the vectorised passes rely on.
     Sf = S.reshape(S.size)
+    Pf = Pc.reshape(Pc.size)
     nblocks = 4 * nthreads
     chunk = (N + nblocks - 1) // nblocks
     for t in nb.prange(nblocks):
@@ -238,10 +265,13 @@ def _kernel(
         R = np.empty((3, Kn), np.float32)  # normal, copied out after the vectorised pass
         score = np.empty(Kn, np.float32)
         ok = np.empty(Kn, np.uint8)
+        pref = np.empty(LANES, np.float32)  # the reference pixel's p, three bands
         for n in range(t * chunk, min(N, (t + 1) * chunk)):
             r0, r1, r2 = rays[n, 0], rays[n, 1], rays[n, 2]
             for k in range(Kn):
                 ok[k] = 1
+            for g in range(LANES):
+                pref[g] = -1.0
             if ref >= 0:
                 # The camera the rays leave from: one footprint, the same for
                 # every hypothesis (a pixel centre: weight 1 on its own texel).
@@ -266,6 +296,9 @@ def _kernel(
                 at = int(ref * plane + v0 * row + u0 * nv)
                 for g in range(0, nv, LANES):
                     bilinear4(Sf, at + g, nv, row, w00, w01, w10, w11, smp, (ref * nv + g) * Kn, Kn)
+                if borrow:
+                    at = int(((ref * Hh + v0) * Ww + u0) * LANES)
+                    bilinear4(Pf, at, LANES, Ww * LANES, w00, w01, w10, w11, pref, 0, 1)
                 for g in range(nv):
                     val = smp[ref, g, 0]
                     for k in range(1, Kn):
@@ -337,7 +370,8 @@ def _kernel(
                             Kn,
                         )
             # 3. The Gram matrix of W, row by row (eq. 5); a hypothesis with a
-            # J sample <= 0 (dark, saturated, outside, no p) is invalid.
+            # J sample <= 0 (dark, saturated, outside) is invalid, and one
+            # with no p where the reference pixel has none either.
             for k in range(Kn):
                 M[0, k] = 0.0
                 M[1, k] = 0.0
@@ -349,17 +383,28 @@ def _kernel(
                 a = pair_cams[p, 0]
                 b = pair_cams[p, 1]
                 ja, jb = slots[p, 0], slots[p, 1]
+                # float32 like the samples: the products below round as without p_ref
+                qa, qb = pref[pair_ch[p, 0]], pref[pair_ch[p, 1]]
+                qa = qa if qa > 0.0 else np.float32(0.0)
+                qb = qb if qb > 0.0 else np.float32(0.0)
                 la0, la1, la2 = lights[a, 0], lights[a, 1], lights[a, 2]
                 lb0, lb1, lb2 = lights[b, 0], lights[b, 1], lights[b, 2]
                 for k in range(Kn):
                     z = depths[k]
                     Ja = smp[a, ja, k]
                     Jb = smp[b, jb, k]
-                    ok[k] &= (Ja > 0.0) & (Jb > 0.0)
-                    # Eq. (5) weights p_ab p_ba (mu_a i_a / p_ab v_a - ...).
-                    pp = smp[a, ns + ja, k] * smp[b, ns + jb, k] if use_p else 1.0
-                    sa = pp * Ja * fall[a, k]
-                    sb = pp * Jb * fall[b, k]
+                    # Eq. (5) weights p_ab p_ba (mu_a i_a / p_ab v_a - ...). A p
+                    # unknown over the whole footprint (J = mu i undivided) is
+                    # the reference pixel's; a footprint that mixes texels with
+                    # and without p is invalid (its J mixes divided and not).
+                    pa = smp[a, ns + ja, k] if use_p else np.float32(1.0)
+                    pb = smp[b, ns + jb, k] if use_p else np.float32(1.0)
+                    ea = pa if pa > 0.0 else (qa if pa < ALL_UNKNOWN else np.float32(0.0))
+                    eb = pb if pb > 0.0 else (qb if pb < ALL_UNKNOWN else np.float32(0.0))
+                    ok[k] &= (Ja > 0.0) & (Jb > 0.0) & (ea > 0.0) & (eb > 0.0)
+                    # p_ab p_ba rounded to float32, the rest in float64.
+                    sa = np.float64((pa if pa > 0.0 else np.float32(1.0)) * eb) * Ja * fall[a, k]
+                    sb = np.float64((pb if pb > 0.0 else np.float32(1.0)) * ea) * Jb * fall[b, k]
                     w0, w1, w2 = hs_row(
                         sa,
                         sb,
@@ -445,6 +490,7 @@ def prepare_images(
     chroma: np.ndarray | None = None,
     silhouettes: np.ndarray | None = None,
     min_signal: float = MIN_SIGNAL,
+    borrow_p: bool = False,
 ) -> Prepared:
     """Per-frame preparation of the data term's inputs.
 
@@ -474,6 +520,9 @@ def prepare_images(
         Object masks; None for no restriction.
     min_signal : float
         Samples at or below this are unusable.
+    borrow_p : bool
+        Whether a sample with no p of its own takes the reference pixel's (see
+        the module docstring; a tracked map's holes), else it is unusable.
     """
     pair_cams, pair_ch = (np.asarray(a) for a in pairs)
     C, _, H, W = images.shape
@@ -497,6 +546,14 @@ def prepare_images(
     )
     nv = LANES * -(-(2 * ns if chroma is not None else ns) // LANES)
     S = np.ones((C, H, W, nv), np.float32)
+    P = np.ones((1, 1, 1, LANES), np.float32)
+    if chroma is not None:
+        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+            known = (chroma > 0) & np.isfinite(1.0 / chroma.astype(np.float32))
+        p_all = np.where(known, chroma, SENTINEL).astype(np.float32)
+        if borrow_p:
+            P = np.ones((C, H, W, LANES), np.float32)
+            P[..., :3] = np.moveaxis(p_all, 1, -1)
     unusable = saturated.astype(bool).copy()
     if silhouettes is not None:
         unusable |= ~silhouettes.astype(bool)
@@ -505,19 +562,16 @@ def prepare_images(
             J = images[c, ch].astype(np.float32)
             bad = unusable[c] | ~(J > min_signal)
             if chroma is not None:
-                p = chroma[c, ch].astype(np.float32)
-                with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-                    J = J / p
                 # Never a nan or inf in S: the kernel's fastmath assumes none.
-                bad |= ~(p > 0) | ~np.isfinite(J)
-                S[c, :, :, ns + s] = np.where(bad, 1.0, p)
+                J = np.where(known[c, ch], J / np.where(known[c, ch], p_all[c, ch], 1.0), J)
+                S[c, :, :, ns + s] = p_all[c, ch]
             S[c, :, :, s] = np.where(bad, SENTINEL, J)
     if mu is not None:
         for p, ((a, b), (sa, sb)) in enumerate(zip(pair_cams, slots, strict=True)):
             for cam, slot, m in ((a, sa, mu[p, 0]), (b, sb, mu[p, 1])):
                 J = S[cam, :, :, slot]
                 S[cam, :, :, slot] = np.where((J > 0) & (m > 0) & np.isfinite(m), J * m, SENTINEL)
-    return Prepared(S, slots, chroma is not None)
+    return Prepared(S, slots, chroma is not None, P, bool(borrow_p and chroma is not None))
 
 
 def data_term(
@@ -529,6 +583,10 @@ def data_term(
     pairs,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Cost and normal of every (pixel, depth hypothesis), equation (5).
+
+    With ``prepared.borrow``, a sample with no p of its own takes the p of the
+    reference camera's pixel (the camera whose centre is ``c_ref``; none if no
+    camera's is), as the module docstring says.
 
     Parameters
     ----------
@@ -572,10 +630,13 @@ def data_term(
         Ps,
         lights,
         np.ascontiguousarray(prepared.S),
+        np.ascontiguousarray(prepared.P, np.float32),
         ns,
         prepared.slots,
         prepared.use_p,
+        prepared.borrow,
         np.asarray(pair_cams, np.int64),
+        np.asarray(pairs[1], np.int64),
         ref,
         others,
         nb.get_num_threads(),

@@ -328,7 +328,13 @@ def data_term_evaluator(frame: Frame, ref: Camera, pairs):
     ``out = (cost, normals, rows)`` writes ray i's into row ``rows[i]`` of
     those arrays (``normals`` None: not kept) and returns them."""
     prepared = prepare_images(
-        frame.images, frame.saturated, pairs, frame.mu, frame.chroma, frame.silhouettes
+        frame.images,
+        frame.saturated,
+        pairs,
+        frame.mu,
+        frame.chroma,
+        frame.silhouettes,
+        borrow_p=frame.chroma_tracked,
     )
     cameras = frame.rig.cameras
 
@@ -352,12 +358,24 @@ def data_term_evaluator(frame: Frame, ref: Camera, pairs):
     return evaluate
 
 
+def _frame_sides(frame, ref, pairs, blur_px, min_support=None):
+    """The frame's :func:`~colourhs.reconstruct.sides.helmholtz_sides` for rays from
+    camera ``ref``; with a tracked chromaticity map, a side without p takes the
+    reference pixel's (as the data term, :mod:`colourhs.reconstruct.dataterm`)."""
+    from colourhs.reconstruct.sides import BLUR_SUPPORT, helmholtz_sides
+
+    at = frame.rig.camera_names.index(ref.name) if frame.chroma_tracked else None
+    support = BLUR_SUPPORT if min_support is None else min_support
+    return helmholtz_sides(
+        frame, frame.variance, pairs, blur_px=blur_px, min_support=support, reference=at
+    )
+
+
 def _ml_solution(frame, cost, search: _Search, max_cost, blur_px=None, say=None):
     """ML HS (:func:`colourhs.reconstruct.ml.ml_depth`) as (H*W,) depth, (H*W, 3)
     normal, validity, confidence (1 - the best hypothesis' cost) and each
     depth's 1-sigma uncertainty (:func:`ml_sigma`, metres)."""
     from colourhs.reconstruct.ml import ml_depth
-    from colourhs.reconstruct.sides import helmholtz_sides
 
     rays, pix, depths, ref, pairs = (
         search.grid.rays,
@@ -368,7 +386,7 @@ def _ml_solution(frame, cost, search: _Search, max_cost, blur_px=None, say=None)
     )
     shape = search.grid.shape
     H, W = shape
-    sides = helmholtz_sides(frame, frame.variance, pairs, blur_px=blur_px)
+    sides = _frame_sides(frame, ref, pairs, blur_px)
     z_ml, n_ml, good = ml_depth(cost, depths, pix, rays, ref.centre, sides, shape, max_cost, say)
     z = np.full(H * W, np.nan)
     z[pix] = np.where(good, z_ml, np.nan)
@@ -472,14 +490,14 @@ def _consistent_surface(
     """The depth from the agreement of geometry and eq. (5) (see :mod:`.surface`);
     ``say(text)`` reports its steps."""
     from colourhs.reconstruct.bayes.refine import RefineOptions, refine_surface
-    from colourhs.reconstruct.sides import RIM_SUPPORT, helmholtz_sides
+    from colourhs.reconstruct.sides import RIM_SUPPORT
 
     ref, pairs = search.ref, search.pairs
     if say is not None:
         say("refinement: each reciprocal pair's images and noise, resampled for E")
-    sides = helmholtz_sides(frame, frame.variance, pairs, blur_px=blur_px)
+    sides = _frame_sides(frame, ref, pairs, blur_px)
     # The rows at the edges of unusable regions: their pull joins the sigma (rim_valley_pull).
-    clear = helmholtz_sides(frame, frame.variance, pairs, blur_px=blur_px, min_support=RIM_SUPPORT)
+    clear = _frame_sides(frame, ref, pairs, blur_px, RIM_SUPPORT)
     footprint = np.abs(z) / float(ref.K[0, 0])
     fill = object_mask(frame, frame.rig.camera_names.index(ref.name)).ravel()
     zr, nr, sinfo = refine_surface(

@@ -69,6 +69,9 @@ class Frame:
     # (P,) 1-sigma of each pair's log ratio mu_a / mu_b (the photometric calibration's
     # jackknife), None where the calibration does not say (no calibration, true maps)
     mu_ratio_sigma: np.ndarray | None = None
+    # Whether a camera's missing p takes the reference pixel's (a tracked map, whose
+    # holes are where the tracking lost the surface; see colourhs.reconstruct.dataterm)
+    chroma_tracked: bool = False
 
 
 def load_frame(
@@ -89,7 +92,9 @@ def load_frame(
     file that carries a 1-sigma of log p per camera (``sigma/<camera>``: a tracked
     map, :mod:`colourhs.calibration.chromaticity_tracking`) widens that variance by
     ``(i sigma)^2`` per channel: eq. 3 divides each intensity by its p, so a relative
-    error of p is one of the intensity (beyond the paper).
+    error of p is one of the intensity (beyond the paper); and where one camera's
+    tracked map has no p, the reconstruction takes the reference pixel's
+    (``Frame.chroma_tracked``).
     """
     ds = dataset_of(dataset_dir, scenes=[scene])
     rig = ds.rig
@@ -156,4 +161,5 @@ def load_frame(
         variance,
         inputs,
         ratio_sigma,
+        chroma_sigma is not None,
     )

@@ -13,7 +13,10 @@ Bayesian refinement, :mod:`colourhs.reconstruct.bayes.surface`).
 Beyond the paper: the noise variance of every sample (the squared
 interpolation weights of the pixels' variances: a sample between pixels
 averages their noise); cubic-convolution sampling as an option
-(:func:`helmholtz_sides`).
+(:func:`helmholtz_sides`); and, as in the data term
+(:mod:`colourhs.reconstruct.dataterm`), a side with no chromaticity p over a
+sample's whole footprint takes the p of the reference camera's pixel on the
+sample's ray.
 """
 
 from __future__ import annotations
@@ -59,7 +62,10 @@ class HelmholtzSides:
     For side j (pair j // 2, side j % 2): ``cameras[j]`` and its light
     ``light[j]``, and per pixel a stack ``maps[j]`` (H, W, 2) of J = mu i / p
     (the Helmholtz camera's calibrated intensity) and its noise variance;
-    NaN where unusable.
+    NaN where unusable. With a ``reference`` camera, the stack is (H, W, 4):
+    then also mu i and its variance where only p is unknown (NaN elsewhere),
+    divided when sampled by ``p_ref[..., bands[j]]`` (H, W, 3: the reference
+    camera's p, NaN where unknown) at the sample's pixel in the reference.
     """
 
     cameras: list
@@ -68,6 +74,9 @@ class HelmholtzSides:
     blurred: bool = False  # neighbouring pixels' noise correlated (see side_maps)
     order: int = 1  # 1 bilinear, 3 cubic convolution (see helmholtz_sides)
     blur_px: float = 0.0  # the Gaussian blur's sigma, pixels (the noise's correlation)
+    reference: object = None  # the camera the samples' rays leave from (a Camera)
+    p_ref: np.ndarray | None = None  # (H, W, 3) its chromaticity p
+    bands: np.ndarray | None = None  # (2P,) each side's channel
 
     def __post_init__(self):
         self.stack = np.ascontiguousarray(np.stack(self.maps), dtype=np.float64)
@@ -77,6 +86,19 @@ class HelmholtzSides:
         self.t = np.stack([np.asarray(c.t, float) for c in self.cameras])
         self.light = np.ascontiguousarray(self.light, dtype=np.float64)
         self.noise_corr = noise_correlation(self.blur_px) if self.blurred else np.zeros(4)
+        ref = self.reference if self.reference is not None else self.cameras[0]
+        self.ref_proj = (
+            np.asarray(ref.K, float),
+            model_coefficients(ref.dist),
+            np.asarray(ref.R, float),
+            np.asarray(ref.t, float),
+        )
+        if self.p_ref is None:
+            self.p_ref = np.full((1, 1, 3), np.nan)
+        self.p_ref = np.ascontiguousarray(self.p_ref, dtype=np.float64)
+        if self.bands is None:
+            self.bands = np.zeros(len(self.cameras), np.int64)
+        self.bands = np.asarray(self.bands, np.int64)
 
     @property
     def pairs(self) -> int:
@@ -87,9 +109,17 @@ def with_side_scaled(sides: HelmholtzSides, j: int, factor: float) -> HelmholtzS
     """The same sides with side ``j``'s J (and its noise) scaled by ``factor``: the
     log ratio mu_a / mu_b of pair ``j // 2`` moved by ``+-log(factor)`` (side a: +)."""
     maps = list(sides.maps)
-    maps[j] = maps[j] * np.array([factor, factor * factor])
+    maps[j] = maps[j] * np.tile([factor, factor * factor], maps[j].shape[-1] // 2)
     return HelmholtzSides(
-        sides.cameras, sides.light, maps, sides.blurred, sides.order, sides.blur_px
+        sides.cameras,
+        sides.light,
+        maps,
+        sides.blurred,
+        sides.order,
+        sides.blur_px,
+        sides.reference,
+        sides.p_ref,
+        sides.bands,
     )
 
 
@@ -172,6 +202,7 @@ def helmholtz_sides(
     blur_px: float | None = None,
     order: int | None = None,
     min_support: float = BLUR_SUPPORT,
+    reference: int | None = None,
 ) -> HelmholtzSides:
     """The sides of every reciprocal pair of a frame (see :class:`HelmholtzSides`).
 
@@ -181,6 +212,9 @@ def helmholtz_sides(
     the image is saturated, at or below ``min_signal``, outside the
     silhouette, or mu or p is not positive, as in the data term. ``blur_px``
     (default :data:`BLUR_PX`) and ``min_support``: see :func:`side_maps`.
+    ``reference`` (the index of the camera the samples' rays leave from): where
+    a side has no p, its sample takes that camera's p at the ray's pixel, as
+    in the data term (beyond the paper; the p of the surface point both see).
 
     ``order`` (default :data:`ORDER`): 1 samples bilinearly, 3 by cubic
     convolution (Keys 1981, a = -1/2; beyond the paper). Bilinear
@@ -196,6 +230,7 @@ def helmholtz_sides(
     if order not in (1, 3):
         raise ValueError(f"order must be 1 (bilinear) or 3 (cubic), not {order}")
     pair_cams, pair_ch = pairs
+    fallback = frame.chroma is not None and reference is not None
     cams, light, maps = [], [], []
     for p, ((a, b), (ca, cb)) in enumerate(zip(pair_cams, pair_ch, strict=True)):
         for k, (c, ch) in enumerate(((a, ca), (b, cb))):
@@ -206,17 +241,34 @@ def helmholtz_sides(
             scale = np.ones_like(i)
             if frame.mu is not None:
                 scale = scale * frame.mu[p, k]
+            raw = scale  # mu alone: where only p is unknown (see HelmholtzSides)
             if frame.chroma is not None:
                 with np.errstate(invalid="ignore", divide="ignore"):
                     scale = scale / frame.chroma[c, ch]
-            bad |= ~np.isfinite(scale) | ~(scale > 0)
+            bad |= ~np.isfinite(raw) | ~(raw > 0)
+            no_p = ~bad & (~np.isfinite(scale) | ~(scale > 0))
+            bad |= no_p
             J = np.where(bad, np.nan, i * scale)
             V = np.where(bad, np.nan, variance[c, ch] * scale**2)
+            stack = side_maps(J, V, blur_px, min_support=min_support)
+            if fallback:
+                Jr = np.where(no_p, i * raw, np.nan)
+                Vr = np.where(no_p, variance[c, ch] * raw**2, np.nan)
+                stack = np.concatenate(
+                    [stack, side_maps(Jr, Vr, blur_px, min_support=min_support)], -1
+                )
             cam = frame.rig.cameras[c]
             cams.append(cam)
             light.append(cam.light_centre)
-            maps.append(side_maps(J, V, blur_px, min_support=min_support))
-    return HelmholtzSides(cams, np.asarray(light), maps, blur_px > 0, order, blur_px)
+            maps.append(stack)
+    extra = {}
+    if fallback:
+        extra = {
+            "reference": frame.rig.cameras[reference],
+            "p_ref": np.moveaxis(np.asarray(frame.chroma[reference], float), 0, -1),
+            "bands": np.asarray(pair_ch, np.int64).ravel(),
+        }
+    return HelmholtzSides(cams, np.asarray(light), maps, blur_px > 0, order, blur_px, **extra)
 
 
 @nb.njit(cache=True, inline="always")
@@ -253,11 +305,12 @@ def _correlated_gain(w, corr):
 
 
 @nb.njit(cache=True)
-def _cubic(maps, j, u, vv, blurred, corr):
+def _cubic(maps, j, u, vv, blurred, corr, layer=0):
     """Cubic-convolution sample of side j at pixel (u, vv): J, dJ/du, dJ/dv and the
     noise variance (squared weights; where ``blurred``, the weights times the
     correlated noise's gain, :func:`noise_correlation`); NaN without the full
-    4 x 4 support inside the image."""
+    4 x 4 support inside the image. ``layer``: J's index in the stack (its
+    variance the next)."""
     Hh, Ww = maps.shape[1], maps.shape[2]
     if not (u >= 1.0 and vv >= 1.0 and u < Ww - 2 and vv < Hh - 2):
         return np.nan, np.nan, np.nan, np.nan
@@ -271,34 +324,130 @@ def _cubic(maps, j, u, vv, blurred, corr):
     noise = 0.0
     for a in range(4):
         for b in range(4):
-            val = maps[j, v0 - 1 + a, u0 - 1 + b, 0]
+            val = maps[j, v0 - 1 + a, u0 - 1 + b, layer]
             J += wv[a] * wu[b] * val
             gu += wv[a] * du[b] * val
             gv += dv[a] * wu[b] * val
             w = wv[a] * wu[b]
             if not blurred:
                 w = w * w
-            noise += w * maps[j, v0 - 1 + a, u0 - 1 + b, 1]
+            noise += w * maps[j, v0 - 1 + a, u0 - 1 + b, layer + 1]
     if blurred:
         noise *= _correlated_gain(wu, corr) * _correlated_gain(wv, corr)
     return J, gu, gv, noise
 
 
+@nb.njit(cache=True, inline="always")
+def _bilinear(maps, j, u0, v0, a, b, blurred, corr, layer):
+    """Bilinear sample of side j's ``layer`` (J; its variance the next) in the
+    footprint at texel (u0, v0) with offsets (a, b): J, dJ/du, dJ/dv and the
+    noise variance (see :func:`_sample_kernel`)."""
+    w00, w01, w10, w11 = weights_jit(a, b)
+    j00, j01 = maps[j, v0, u0, layer], maps[j, v0, u0 + 1, layer]
+    j10, j11 = maps[j, v0 + 1, u0, layer], maps[j, v0 + 1, u0 + 1, layer]
+    J = w00 * j00 + w01 * j01 + w10 * j10 + w11 * j11
+    # the bilinear interpolant's own derivative: the Jacobian of what is sampled
+    gu = (1.0 - b) * (j01 - j00) + b * (j11 - j10)
+    gv = (1.0 - a) * (j10 - j00) + a * (j11 - j01)
+    # The noise of a weighted sum of independent pixels: squared weights
+    # (a sample between four pixels averages their noise). Blurred
+    # pixels are correlated (corr[1] between neighbours): their
+    # variance interpolates, times the gain of the bilinear weights
+    # on that correlated noise, per axis t^2 + (1 - t)^2 + 2 t (1 - t)
+    # corr[1] (1 at a pixel, (1 + corr[1]) / 2 half-way).
+    gain = 1.0
+    if blurred:
+        gain = (1.0 - 2.0 * a * (1.0 - a) * (1.0 - corr[1])) * (
+            1.0 - 2.0 * b * (1.0 - b) * (1.0 - corr[1])
+        )
+    else:
+        w00, w01, w10, w11 = w00 * w00, w01 * w01, w10 * w10, w11 * w11
+    noise = gain * (
+        w00 * maps[j, v0, u0, layer + 1]
+        + w01 * maps[j, v0, u0 + 1, layer + 1]
+        + w10 * maps[j, v0 + 1, u0, layer + 1]
+        + w11 * maps[j, v0 + 1, u0 + 1, layer + 1]
+    )
+    return J, gu, gv, noise
+
+
+@nb.njit(cache=True, inline="always")
+def _reference_p(x0, x1, x2, K, dist, R, t, p_ref):
+    """The reference camera's p (3,) at the pixel of point X, bilinear (NaN if
+    any texel of the footprint has none; every point of a ray through the
+    reference's centre has the same pixel)."""
+    cx = R[0, 0] * x0 + R[0, 1] * x1 + R[0, 2] * x2 + t[0]
+    cy = R[1, 0] * x0 + R[1, 1] * x1 + R[1, 2] * x2 + t[1]
+    cz = R[2, 0] * x0 + R[2, 1] * x1 + R[2, 2] * x2 + t[2]
+    q = np.full(3, np.nan)
+    if cz <= 0.0:
+        return q
+    u, vv = to_pixel(cx / cz, cy / cz, K, dist)
+    u = np.round(u) if abs(u - np.round(u)) < 1e-6 else u
+    vv = np.round(vv) if abs(vv - np.round(vv)) < 1e-6 else vv
+    inside, fu0, fv0, a, b = footprint_jit(u, vv, p_ref.shape[1], p_ref.shape[0])
+    if not inside:
+        return q
+    u0, v0 = int(fu0), int(fv0)
+    w00, w01, w10, w11 = weights_jit(a, b)
+    for c in range(3):
+        # A texel without p counts only under a positive weight.
+        val = 0.0
+        for w, pv in (
+            (w00, p_ref[v0, u0, c]),
+            (w01, p_ref[v0, u0 + 1, c]),
+            (w10, p_ref[v0 + 1, u0, c]),
+            (w11, p_ref[v0 + 1, u0 + 1, c]),
+        ):
+            if w > 0.0:
+                val = val + w * pv if pv > 0.0 else np.nan
+        q[c] = val
+    return q
+
+
 @nb.njit(parallel=True, cache=True, fastmath=False)
 def _sample_kernel(
-    X, R, Ks, dists, Rs, ts, light, maps, blurred, corr, order, derivatives, s, var, v, ds, dv
+    X,
+    R,
+    Ks,
+    dists,
+    Rs,
+    ts,
+    light,
+    maps,
+    blurred,
+    corr,
+    order,
+    derivatives,
+    ref_proj,
+    p_ref,
+    bands,
+    s,
+    var,
+    v,
+    ds,
+    dv,
 ):
     """Project every point into every side's camera (OpenCV model, with the
     derivative of the pixel along the ray where ``derivatives``), sample the
     side's stack bilinearly (``order`` 1) or by cubic convolution (3), and form
     the eq. (5) terms (see :func:`sample_sides`; ``ds`` and ``dv`` are not
-    written without ``derivatives``)."""
+    written without ``derivatives``). A stack of 4 layers has mu i where the
+    side has no p: divided by the reference pixel's p (``p_ref`` sampled where
+    the reference camera, ``ref_proj`` = K, distortion coefficients, R, t,
+    sees the point) in the side's band ``bands[j]``; the reference's p is
+    constant along the ray, so the derivatives scale by it too."""
     N = X.shape[0]
     nside = Ks.shape[0]
     Hh, Ww = maps.shape[1], maps.shape[2]
+    fallback = maps.shape[3] == 4
+    rK, rdist, rR, rt = ref_proj
     for i in nb.prange(N):
         x0, x1, x2 = X[i, 0], X[i, 1], X[i, 2]
         r0, r1, r2 = R[i, 0], R[i, 1], R[i, 2]
+        q = np.full(3, np.nan)  # the reference pixel's p, where a side has none
+        if fallback:
+            q = _reference_p(x0, x1, x2, rK, rdist, rR, rt, p_ref)
         for j in range(nside):
             p = j // 2
             k = j % 2
@@ -340,33 +489,19 @@ def _sample_kernel(
             if order == 3:
                 J, gu, gv, noise = _cubic(maps, j, u, vv, blurred, corr)
             elif inside:
-                u0, v0 = int(fu0), int(fv0)
-                w00, w01, w10, w11 = weights_jit(a, b)
-                j00, j01 = maps[j, v0, u0, 0], maps[j, v0, u0 + 1, 0]
-                j10, j11 = maps[j, v0 + 1, u0, 0], maps[j, v0 + 1, u0 + 1, 0]
-                J = w00 * j00 + w01 * j01 + w10 * j10 + w11 * j11
-                # the bilinear interpolant's own derivative: the Jacobian of what is sampled
-                gu = (1.0 - b) * (j01 - j00) + b * (j11 - j10)
-                gv = (1.0 - a) * (j10 - j00) + a * (j11 - j01)
-                # The noise of a weighted sum of independent pixels: squared weights
-                # (a sample between four pixels averages their noise). Blurred
-                # pixels are correlated (corr[1] between neighbours): their
-                # variance interpolates, times the gain of the bilinear weights
-                # on that correlated noise, per axis t^2 + (1 - t)^2 + 2 t (1 - t)
-                # corr[1] (1 at a pixel, (1 + corr[1]) / 2 half-way).
-                gain = 1.0
-                if blurred:
-                    gain = (1.0 - 2.0 * a * (1.0 - a) * (1.0 - corr[1])) * (
-                        1.0 - 2.0 * b * (1.0 - b) * (1.0 - corr[1])
+                J, gu, gv, noise = _bilinear(maps, j, int(fu0), int(fv0), a, b, blurred, corr, 0)
+            if fallback and not np.isfinite(J) and np.isfinite(q[bands[j]]):
+                # No p of the side's own: mu i, by the reference pixel's p.
+                if order == 3:
+                    Jr, gur, gvr, nr = _cubic(maps, j, u, vv, blurred, corr, 2)
+                elif inside:
+                    Jr, gur, gvr, nr = _bilinear(
+                        maps, j, int(fu0), int(fv0), a, b, blurred, corr, 2
                     )
                 else:
-                    w00, w01, w10, w11 = w00 * w00, w01 * w01, w10 * w10, w11 * w11
-                noise = gain * (
-                    w00 * maps[j, v0, u0, 1]
-                    + w01 * maps[j, v0, u0 + 1, 1]
-                    + w10 * maps[j, v0 + 1, u0, 1]
-                    + w11 * maps[j, v0 + 1, u0 + 1, 1]
-                )
+                    Jr, gur, gvr, nr = nan, nan, nan, nan
+                qb = q[bands[j]]
+                J, gu, gv, noise = Jr / qb, gur / qb, gvr / qb, nr / (qb * qb)
             Dx = light[j, 0] - x0
             Dy = light[j, 1] - x1
             Dz = light[j, 2] - x2
@@ -425,6 +560,9 @@ def sample_sides(sides: HelmholtzSides, X: np.ndarray, R: np.ndarray, derivative
         sides.noise_corr,
         sides.order,
         bool(derivatives),
+        sides.ref_proj,
+        sides.p_ref,
+        sides.bands,
         s,
         var,
         v,
