@@ -14,17 +14,17 @@ an image, falls outside a silhouette, lands on a saturated pixel, or when
 any of its six samples is too dark to measure (a black marker, a shadow from
 a light, a pure colour in the wrong band) or has no chromaticity: with fewer
 than three rows W would be trivially rank 2, so such hypotheses are never
-scored as good. Beyond the paper, with a tracked chromaticity map
-(:mod:`colourhs.calibration.chromaticity_tracking`, ``borrow_p``), a
-camera's sample with no p of its own (none at any texel of its footprint:
-one that mixes texels with and without p is invalid) takes the reference
-pixel's p in that band: p is a property of the surface point (eq. 4, once
-cross-talk is unmixed), and at the true depth both pixels see the same
-point. A tracked map has holes where the object moved; without this, the
-true depth of every ray that meets a hole in another camera would be
-excluded while false roots elsewhere stay scored. A calibrated map's holes
-(where the chromatic captures could not measure p) stay invalid, as in the
-paper; so does a hypothesis whose reference pixel has no p. Beyond the
+scored as good. Beyond the paper, with a chromaticity map tracked away from
+its chromatic frame (:mod:`colourhs.calibration.chromaticity_tracking`,
+``borrow_p``), a camera's sample with no p of its own (none at any texel of
+its footprint: one that mixes texels with and without p is invalid) takes
+the reference pixel's p in that band: p is a property of the surface point
+(eq. 4, once cross-talk is unmixed), and at the true depth both pixels see
+the same point. A tracked map has holes where the object moved; without
+this, the true depth of every ray that meets a hole in another camera would
+be excluded while false roots elsewhere stay scored. A calibrated map's
+holes (where the chromatic captures could not measure p) stay invalid, as in
+the paper; so does a hypothesis whose reference pixel has no p. Beyond the
 paper, it is also invalid when its normal faces away from, or within 5
 degrees of grazing to, a camera's light: with three pairs, det W(z) = 0 has
 further roots along a ray besides the surface, and many of them have such

@@ -69,8 +69,9 @@ class Frame:
     # (P,) 1-sigma of each pair's log ratio mu_a / mu_b (the photometric calibration's
     # jackknife), None where the calibration does not say (no calibration, true maps)
     mu_ratio_sigma: np.ndarray | None = None
-    # Whether a camera's missing p takes the reference pixel's (a tracked map, whose
-    # holes are where the tracking lost the surface; see colourhs.reconstruct.dataterm)
+    # Whether a camera's missing p takes the reference pixel's: a map tracked away from
+    # its chromatic frame, whose holes are mostly where the tracking lost the surface
+    # (in the chromatic frame they are the calibration's); see colourhs.reconstruct.dataterm
     chroma_tracked: bool = False
 
 
@@ -93,8 +94,8 @@ def load_frame(
     map, :mod:`colourhs.calibration.chromaticity_tracking`) widens that variance by
     ``(i sigma)^2`` per channel: eq. 3 divides each intensity by its p, so a relative
     error of p is one of the intensity (beyond the paper); and where one camera's
-    tracked map has no p, the reconstruction takes the reference pixel's
-    (``Frame.chroma_tracked``).
+    map, tracked away from the chromatic frame, has no p, the reconstruction
+    takes the reference pixel's (``Frame.chroma_tracked``).
     """
     ds = dataset_of(dataset_dir, scenes=[scene])
     rig = ds.rig
@@ -129,12 +130,14 @@ def load_frame(
                 [sigmas.get(f"{ka}~{kb}", sigmas.get(f"{kb}~{ka}", np.nan)) for ka, kb in keys]
             )
     chroma = chroma_sigma = None
+    moved = False
     if chromaticity_h5:
         note_read(chromaticity_h5)
         with h5py.File(chromaticity_h5) as f:
             chroma = np.stack([f[cam][()].transpose(2, 0, 1) for cam in rig.camera_names])
             if all(f"sigma/{cam}" in f for cam in rig.camera_names):
                 chroma_sigma = np.stack([f[f"sigma/{cam}"][()] for cam in rig.camera_names])
+                moved = f.attrs.get("frame", "") != f.attrs.get("chromatic_frame", "")
     for extra in (crosstalk_json, photometric_h5, chromaticity_h5, noise_json):
         if extra:
             inputs.append(Path(extra))
@@ -161,5 +164,5 @@ def load_frame(
         variance,
         inputs,
         ratio_sigma,
-        chroma_sigma is not None,
+        moved,
     )

@@ -276,3 +276,12 @@ def test_the_moving_toys_colours_follow_it(moving_toy, tmp_path, capsys):
     assert tracked["000000"] == pytest.approx(static["000000"])
     assert tracked["000003"] < TOY_TRACKED_FACTOR * static["000003"]
     assert tracked["000003"] < TOY_DRIFT_FACTOR * tracked["000000"]
+    # A camera's missing p takes the reference pixel's away from the chromatic frame
+    # only (colourhs.reconstruct.dataterm); the calibrated map never.
+    from colourhs.reconstruct.frame import load_frame
+
+    borrows = [
+        load_frame(data, "moving-toy", f, chromaticity_h5=h5).chroma_tracked
+        for f, h5 in (("000000", out["000000"]), ("000003", out["000003"]), ("000003", calibrated))
+    ]
+    assert borrows == [False, True, False]
