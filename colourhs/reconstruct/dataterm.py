@@ -71,9 +71,9 @@ class Prepared(NamedTuple):
         the camera's slots, then (with chromaticity calibration only) their
         chromaticities p, padded with 1 to nv, a multiple of 4 (the kernel
         reads 4 slots per call of :data:`~colourhs.reconstruct.simd.bilinear4`).
-        ``SENTINEL`` where J is unusable. Where only p is unknown, J = mu * i
-        and its p slot is ``SENTINEL``: the kernel then divides by the
-        reference camera's p (see :func:`data_term`).
+        ``SENTINEL`` where J is unusable. Where only p is unknown and
+        ``borrow``, J = mu * i and its p slot is ``SENTINEL``: the kernel then
+        takes the reference camera's p (see :func:`data_term`).
     slots : (P, 2) int64
         Slot of each side of each reciprocal pair in its camera's S.
     use_p : bool
@@ -207,6 +207,72 @@ def _into_camera(depths, geo, lens, d, rational, Ww, Hh, cbase, row, nv, wts, ba
         ok[k] &= inside & (h > 0.0)
 
 
+@nb.njit(cache=True, fastmath=True, inline="always")
+def _gram(M, smp, depths, pair_cams, slots, pair_ch, pref, lights, fall, ok, ray, borrow):
+    """Pass 3 of :func:`_kernel`: the Gram matrix ``M`` (6, K) of W, row by row
+    (eq. 5), from the samples ``smp`` (their p from slot ``ray[3]`` on, if
+    ``ray[4]``);
+    ``ok[k]`` cleared where a J sample is <= 0. ``borrow`` (a constant at each
+    call): a p unknown over the whole footprint (J = mu i undivided there) is
+    the reference pixel's, ``pref``; a footprint that mixes texels with and
+    without p, or a reference pixel without p, is invalid. Without it, an
+    unknown p made J unusable (:func:`prepare_images`). ``ray``: the pixel's
+    ray (3), ``ns`` and ``use_p``."""
+    r0, r1, r2, ns, use_p = ray[0], ray[1], ray[2], int(ray[3]), ray[4] != 0.0
+    for k in range(depths.shape[0]):
+        M[0, k] = 0.0
+        M[1, k] = 0.0
+        M[2, k] = 0.0
+        M[3, k] = 0.0
+        M[4, k] = 0.0
+        M[5, k] = 0.0
+    for p in range(pair_cams.shape[0]):
+        a = pair_cams[p, 0]
+        b = pair_cams[p, 1]
+        ja, jb = slots[p, 0], slots[p, 1]
+        # float32 like the samples: p_ab p_ba rounds as the samples' own product
+        qa, qb = pref[pair_ch[p, 0]], pref[pair_ch[p, 1]]
+        qa = qa if qa > 0.0 else np.float32(0.0)
+        qb = qb if qb > 0.0 else np.float32(0.0)
+        la0, la1, la2 = lights[a, 0], lights[a, 1], lights[a, 2]
+        lb0, lb1, lb2 = lights[b, 0], lights[b, 1], lights[b, 2]
+        for k in range(depths.shape[0]):
+            z = depths[k]
+            Ja = smp[a, ja, k]
+            Jb = smp[b, jb, k]
+            # Eq. (5) weights p_ab p_ba (mu_a i_a / p_ab v_a - ...): rounded to
+            # float32, the rest in float64.
+            pa = smp[a, ns + ja, k] if use_p else np.float32(1.0)
+            pb = smp[b, ns + jb, k] if use_p else np.float32(1.0)
+            if borrow:
+                ea = pa if pa > 0.0 else (qa if pa < ALL_UNKNOWN else np.float32(0.0))
+                eb = pb if pb > 0.0 else (qb if pb < ALL_UNKNOWN else np.float32(0.0))
+                ok[k] &= (Ja > 0.0) & (Jb > 0.0) & (ea > 0.0) & (eb > 0.0)
+                sa = np.float64((pa if pa > 0.0 else np.float32(1.0)) * eb) * Ja * fall[a, k]
+                sb = np.float64((pb if pb > 0.0 else np.float32(1.0)) * ea) * Jb * fall[b, k]
+            else:
+                ok[k] &= (Ja > 0.0) & (Jb > 0.0)
+                pp = np.float64(pa * pb)
+                sa = pp * Ja * fall[a, k]
+                sb = pp * Jb * fall[b, k]
+            w0, w1, w2 = hs_row(
+                sa,
+                sb,
+                la0 - z * r0,
+                la1 - z * r1,
+                la2 - z * r2,
+                lb0 - z * r0,
+                lb1 - z * r1,
+                lb2 - z * r2,
+            )
+            M[0, k] += w0 * w0
+            M[1, k] += w1 * w1
+            M[2, k] += w2 * w2
+            M[3, k] += w0 * w1
+            M[4, k] += w0 * w2
+            M[5, k] += w1 * w2
+
+
 @nb.njit(parallel=True, cache=True, fastmath=True)
 @cache_tagged
 def _kernel(
@@ -246,7 +312,6 @@ def _kernel(
     N = rays.shape[0]
     Kn = depths.shape[0]
     ncam = Ks.shape[0]
-    npair = pair_cams.shape[0]
     Hh, Ww, nv = S.shape[1], S.shape[2], S.shape[3]
     row = Ww * nv
     plane = Hh * row
@@ -266,6 +331,8 @@ def _kernel(
         score = np.empty(Kn, np.float32)
         ok = np.empty(Kn, np.uint8)
         pref = np.empty(LANES, np.float32)  # the reference pixel's p, three bands
+        ray = np.empty(5)  # the pixel's ray, then ns and use_p, for _gram
+        ray[3], ray[4] = ns, use_p
         for n in range(t * chunk, min(N, (t + 1) * chunk)):
             r0, r1, r2 = rays[n, 0], rays[n, 1], rays[n, 2]
             for k in range(Kn):
@@ -370,57 +437,13 @@ def _kernel(
                             Kn,
                         )
             # 3. The Gram matrix of W, row by row (eq. 5); a hypothesis with a
-            # J sample <= 0 (dark, saturated, outside) is invalid, and one
-            # with no p where the reference pixel has none either.
-            for k in range(Kn):
-                M[0, k] = 0.0
-                M[1, k] = 0.0
-                M[2, k] = 0.0
-                M[3, k] = 0.0
-                M[4, k] = 0.0
-                M[5, k] = 0.0
-            for p in range(npair):
-                a = pair_cams[p, 0]
-                b = pair_cams[p, 1]
-                ja, jb = slots[p, 0], slots[p, 1]
-                # float32 like the samples: the products below round as without p_ref
-                qa, qb = pref[pair_ch[p, 0]], pref[pair_ch[p, 1]]
-                qa = qa if qa > 0.0 else np.float32(0.0)
-                qb = qb if qb > 0.0 else np.float32(0.0)
-                la0, la1, la2 = lights[a, 0], lights[a, 1], lights[a, 2]
-                lb0, lb1, lb2 = lights[b, 0], lights[b, 1], lights[b, 2]
-                for k in range(Kn):
-                    z = depths[k]
-                    Ja = smp[a, ja, k]
-                    Jb = smp[b, jb, k]
-                    # Eq. (5) weights p_ab p_ba (mu_a i_a / p_ab v_a - ...). A p
-                    # unknown over the whole footprint (J = mu i undivided) is
-                    # the reference pixel's; a footprint that mixes texels with
-                    # and without p is invalid (its J mixes divided and not).
-                    pa = smp[a, ns + ja, k] if use_p else np.float32(1.0)
-                    pb = smp[b, ns + jb, k] if use_p else np.float32(1.0)
-                    ea = pa if pa > 0.0 else (qa if pa < ALL_UNKNOWN else np.float32(0.0))
-                    eb = pb if pb > 0.0 else (qb if pb < ALL_UNKNOWN else np.float32(0.0))
-                    ok[k] &= (Ja > 0.0) & (Jb > 0.0) & (ea > 0.0) & (eb > 0.0)
-                    # p_ab p_ba rounded to float32, the rest in float64.
-                    sa = np.float64((pa if pa > 0.0 else np.float32(1.0)) * eb) * Ja * fall[a, k]
-                    sb = np.float64((pb if pb > 0.0 else np.float32(1.0)) * ea) * Jb * fall[b, k]
-                    w0, w1, w2 = hs_row(
-                        sa,
-                        sb,
-                        la0 - z * r0,
-                        la1 - z * r1,
-                        la2 - z * r2,
-                        lb0 - z * r0,
-                        lb1 - z * r1,
-                        lb2 - z * r2,
-                    )
-                    M[0, k] += w0 * w0
-                    M[1, k] += w1 * w1
-                    M[2, k] += w2 * w2
-                    M[3, k] += w0 * w1
-                    M[4, k] += w0 * w2
-                    M[5, k] += w1 * w2
+            # J sample <= 0 (dark, saturated, outside, no p) is invalid. One
+            # loop per mode (the flag a constant, folded once inlined).
+            ray[0], ray[1], ray[2] = r0, r1, r2
+            if borrow:
+                _gram(M, smp, depths, pair_cams, slots, pair_ch, pref, lights, fall, ok, ray, True)
+            else:
+                _gram(M, smp, depths, pair_cams, slots, pair_ch, pref, lights, fall, ok, ray, False)
             # 4. sigma_3 / sigma_2 and the oriented null vector.
             for k in range(Kn):
                 m00, m11, m22, m01, m02, m12 = M[0, k], M[1, k], M[2, k], M[3, k], M[4, k], M[5, k]
@@ -494,16 +517,16 @@ def prepare_images(
 ) -> Prepared:
     """Per-frame preparation of the data term's inputs.
 
-    Every (camera, channel) of a reciprocal pair is one Helmholtz camera, so
-    its mu map and chromaticity are folded into its image once:
-    J = mu * i / p. J is replaced by ``SENTINEL`` where i is too dark
-    (``min_signal``, after black level, in [0, 1]), p is unknown, the pixel is
+    Every (camera, channel) of a reciprocal pair is one Helmholtz camera, so its
+    mu map and chromaticity are folded into its image once: J = mu * i / p. J is
+    replaced by ``SENTINEL`` where i is too dark (``min_signal``, after black
+    level, in [0, 1]), p is unknown (unless ``borrow_p``), the pixel is
     saturated or outside the silhouette, or mu is not positive; a bilinear
     sample that gives any weight to such a pixel is then negative and its
-    hypothesis invalid. The eq. (5) weights p_ab p_ba are restored in the
-    kernel from the packed p. Each camera's slots (one per channel it
-    contributes to a pair) are packed per pixel, so one bilinear footprint
-    reads them all, 4 at a time.
+    hypothesis invalid. The eq. (5) weights p_ab p_ba are restored in the kernel
+    from the packed p. Each camera's slots (one per channel it contributes to a
+    pair) are packed per pixel, so one bilinear footprint reads them all, 4 at a
+    time.
 
     Parameters
     ----------
@@ -564,7 +587,11 @@ def prepare_images(
             if chroma is not None:
                 # Never a nan or inf in S: the kernel's fastmath assumes none.
                 J = np.where(known[c, ch], J / np.where(known[c, ch], p_all[c, ch], 1.0), J)
-                S[c, :, :, ns + s] = p_all[c, ch]
+                if borrow_p:  # mu i undivided, its p SENTINEL: the kernel borrows
+                    S[c, :, :, ns + s] = p_all[c, ch]
+                else:
+                    bad |= ~known[c, ch]
+                    S[c, :, :, ns + s] = np.where(bad, 1.0, p_all[c, ch])
             S[c, :, :, s] = np.where(bad, SENTINEL, J)
     if mu is not None:
         for p, ((a, b), (sa, sb)) in enumerate(zip(pair_cams, slots, strict=True)):
