@@ -208,17 +208,19 @@ def _into_camera(depths, geo, lens, d, rational, Ww, Hh, cbase, row, nv, wts, ba
 
 
 @nb.njit(cache=True, fastmath=True, inline="always")
-def _gram(M, smp, depths, pair_cams, slots, pair_ch, pref, lights, fall, ok, ray, borrow):
+def _gram(
+    M, smp, depths, pair_cams, slots, pair_ch, pref, lights, fall, ok, ray, ns, use_p, borrow
+):
     """Pass 3 of :func:`_kernel`: the Gram matrix ``M`` (6, K) of W, row by row
-    (eq. 5), from the samples ``smp`` (their p from slot ``ray[3]`` on, if
-    ``ray[4]``);
+    (eq. 5), from the samples ``smp`` (their p from slot ``ns`` on, if
+    ``use_p``);
     ``ok[k]`` cleared where a J sample is <= 0. ``borrow`` (a constant at each
     call): a p unknown over the whole footprint (J = mu i undivided there) is
     the reference pixel's, ``pref``; a footprint that mixes texels with and
     without p, or a reference pixel without p, is invalid. Without it, an
     unknown p made J unusable (:func:`prepare_images`). ``ray``: the pixel's
-    ray (3), ``ns`` and ``use_p``."""
-    r0, r1, r2, ns, use_p = ray[0], ray[1], ray[2], int(ray[3]), ray[4] != 0.0
+    ray (3)."""
+    r0, r1, r2 = ray[0], ray[1], ray[2]
     for k in range(depths.shape[0]):
         M[0, k] = 0.0
         M[1, k] = 0.0
@@ -331,8 +333,7 @@ def _kernel(
         score = np.empty(Kn, np.float32)
         ok = np.empty(Kn, np.uint8)
         pref = np.empty(LANES, np.float32)  # the reference pixel's p, three bands
-        ray = np.empty(5)  # the pixel's ray, then ns and use_p, for _gram
-        ray[3], ray[4] = ns, use_p
+        ray = np.empty(3)  # the pixel's ray, for _gram
         for n in range(t * chunk, min(N, (t + 1) * chunk)):
             r0, r1, r2 = rays[n, 0], rays[n, 1], rays[n, 2]
             for k in range(Kn):
@@ -441,9 +442,39 @@ def _kernel(
             # loop per mode (the flag a constant, folded once inlined).
             ray[0], ray[1], ray[2] = r0, r1, r2
             if borrow:
-                _gram(M, smp, depths, pair_cams, slots, pair_ch, pref, lights, fall, ok, ray, True)
+                _gram(
+                    M,
+                    smp,
+                    depths,
+                    pair_cams,
+                    slots,
+                    pair_ch,
+                    pref,
+                    lights,
+                    fall,
+                    ok,
+                    ray,
+                    ns,
+                    use_p,
+                    True,
+                )
             else:
-                _gram(M, smp, depths, pair_cams, slots, pair_ch, pref, lights, fall, ok, ray, False)
+                _gram(
+                    M,
+                    smp,
+                    depths,
+                    pair_cams,
+                    slots,
+                    pair_ch,
+                    pref,
+                    lights,
+                    fall,
+                    ok,
+                    ray,
+                    ns,
+                    use_p,
+                    False,
+                )
             # 4. sigma_3 / sigma_2 and the oriented null vector.
             for k in range(Kn):
                 m00, m11, m22, m01, m02, m12 = M[0, k], M[1, k], M[2, k], M[3, k], M[4, k], M[5, k]
