@@ -208,18 +208,16 @@ def _into_camera(depths, geo, lens, d, rational, Ww, Hh, cbase, row, nv, wts, ba
 
 
 @nb.njit(cache=True, fastmath=True, inline="always")
-def _gram(
-    M, smp, depths, pair_cams, slots, pair_ch, pref, lights, fall, ok, ray, ns, use_p, borrow
-):
+def _gram(M, smp, depths, pair_idx, pref, lights, fall, ok, ray, ns, use_p, borrow):
     """Pass 3 of :func:`_kernel`: the Gram matrix ``M`` (6, K) of W, row by row
     (eq. 5), from the samples ``smp`` (their p from slot ``ns`` on, if
-    ``use_p``);
-    ``ok[k]`` cleared where a J sample is <= 0. ``borrow`` (a constant at each
-    call): a p unknown over the whole footprint (J = mu i undivided there) is
-    the reference pixel's, ``pref``; a footprint that mixes texels with and
-    without p, or a reference pixel without p, is invalid. Without it, an
-    unknown p made J unusable (:func:`prepare_images`). ``ray``: the pixel's
-    ray (3)."""
+    ``use_p``); ``ok[k]`` cleared where a J sample is <= 0. ``pair_idx`` (P, 6):
+    per pair its cameras, their slots in S and their channels. ``borrow`` (a
+    constant at each call): a p unknown over the whole footprint (J = mu i
+    undivided there) is the reference pixel's, ``pref``; a footprint that mixes
+    texels with and without p, or a reference pixel without p, is invalid.
+    Without it, an unknown p made J unusable (:func:`prepare_images`). ``ray``:
+    the pixel's ray (3)."""
     r0, r1, r2 = ray[0], ray[1], ray[2]
     for k in range(depths.shape[0]):
         M[0, k] = 0.0
@@ -228,12 +226,11 @@ def _gram(
         M[3, k] = 0.0
         M[4, k] = 0.0
         M[5, k] = 0.0
-    for p in range(pair_cams.shape[0]):
-        a = pair_cams[p, 0]
-        b = pair_cams[p, 1]
-        ja, jb = slots[p, 0], slots[p, 1]
+    for p in range(pair_idx.shape[0]):
+        a, b = pair_idx[p, 0], pair_idx[p, 1]
+        ja, jb = pair_idx[p, 2], pair_idx[p, 3]
         # float32 like the samples: p_ab p_ba rounds as the samples' own product
-        qa, qb = pref[pair_ch[p, 0]], pref[pair_ch[p, 1]]
+        qa, qb = pref[pair_idx[p, 4]], pref[pair_idx[p, 5]]
         qa = qa if qa > 0.0 else np.float32(0.0)
         qb = qb if qb > 0.0 else np.float32(0.0)
         la0, la1, la2 = lights[a, 0], lights[a, 1], lights[a, 2]
@@ -289,11 +286,9 @@ def _kernel(
     S,
     Pc,
     ns,
-    slots,
+    pair_idx,
     use_p,
     borrow,
-    pair_cams,
-    pair_ch,
     ref,
     others,
     nthreads,
@@ -442,39 +437,9 @@ def _kernel(
             # loop per mode (the flag a constant, folded once inlined).
             ray[0], ray[1], ray[2] = r0, r1, r2
             if borrow:
-                _gram(
-                    M,
-                    smp,
-                    depths,
-                    pair_cams,
-                    slots,
-                    pair_ch,
-                    pref,
-                    lights,
-                    fall,
-                    ok,
-                    ray,
-                    ns,
-                    use_p,
-                    True,
-                )
+                _gram(M, smp, depths, pair_idx, pref, lights, fall, ok, ray, ns, use_p, True)
             else:
-                _gram(
-                    M,
-                    smp,
-                    depths,
-                    pair_cams,
-                    slots,
-                    pair_ch,
-                    pref,
-                    lights,
-                    fall,
-                    ok,
-                    ray,
-                    ns,
-                    use_p,
-                    False,
-                )
+                _gram(M, smp, depths, pair_idx, pref, lights, fall, ok, ray, ns, use_p, False)
             # 4. sigma_3 / sigma_2 and the oriented null vector.
             for k in range(Kn):
                 m00, m11, m22, m01, m02, m12 = M[0, k], M[1, k], M[2, k], M[3, k], M[4, k], M[5, k]
@@ -690,11 +655,10 @@ def data_term(
         np.ascontiguousarray(prepared.S),
         np.ascontiguousarray(prepared.P, np.float32),
         ns,
-        prepared.slots,
+        # Per pair: its cameras, their slots in S, their channels (for p_ref).
+        np.column_stack([pair_cams, prepared.slots, pairs[1]]).astype(np.int64),
         prepared.use_p,
         prepared.borrow,
-        np.asarray(pair_cams, np.int64),
-        np.asarray(pairs[1], np.int64),
         ref,
         others,
         nb.get_num_threads(),
