@@ -373,36 +373,43 @@ def _bilinear(maps, j, u0, v0, a, b, blurred, corr, layer):
 
 @nb.njit(cache=True, inline="always")
 def _reference_p(x0, x1, x2, K, dist, R, t, p_ref):
-    """The reference camera's p (3,) at the pixel of point X, bilinear (NaN if
-    any texel of the footprint has none; every point of a ray through the
-    reference's centre has the same pixel)."""
+    """The reference camera's p (three floats) at the pixel of point X, bilinear
+    (NaN if any texel of the footprint has none; every point of a ray through
+    the reference's centre has the same pixel). Scalars: no allocation per point."""
     cx = R[0, 0] * x0 + R[0, 1] * x1 + R[0, 2] * x2 + t[0]
     cy = R[1, 0] * x0 + R[1, 1] * x1 + R[1, 2] * x2 + t[1]
     cz = R[2, 0] * x0 + R[2, 1] * x1 + R[2, 2] * x2 + t[2]
-    q = np.full(3, np.nan)
     if cz <= 0.0:
-        return q
+        return np.nan, np.nan, np.nan
     u, vv = to_pixel(cx / cz, cy / cz, K, dist)
     u = np.round(u) if abs(u - np.round(u)) < 1e-6 else u
     vv = np.round(vv) if abs(vv - np.round(vv)) < 1e-6 else vv
     inside, fu0, fv0, a, b = footprint_jit(u, vv, p_ref.shape[1], p_ref.shape[0])
     if not inside:
-        return q
+        return np.nan, np.nan, np.nan
     u0, v0 = int(fu0), int(fv0)
     w00, w01, w10, w11 = weights_jit(a, b)
-    for c in range(3):
-        # A texel without p counts only under a positive weight.
-        val = 0.0
-        for w, pv in (
-            (w00, p_ref[v0, u0, c]),
-            (w01, p_ref[v0, u0 + 1, c]),
-            (w10, p_ref[v0 + 1, u0, c]),
-            (w11, p_ref[v0 + 1, u0 + 1, c]),
-        ):
-            if w > 0.0:
-                val = val + w * pv if pv > 0.0 else np.nan
-        q[c] = val
-    return q
+    return (
+        _known_bilinear(p_ref, u0, v0, 0, w00, w01, w10, w11),
+        _known_bilinear(p_ref, u0, v0, 1, w00, w01, w10, w11),
+        _known_bilinear(p_ref, u0, v0, 2, w00, w01, w10, w11),
+    )
+
+
+@nb.njit(cache=True, inline="always")
+def _known_bilinear(p_ref, u0, v0, c, w00, w01, w10, w11):
+    """Band c of ``p_ref`` over the footprint; NaN if a texel under a positive
+    weight has no p."""
+    val = 0.0
+    for w, pv in (
+        (w00, p_ref[v0, u0, c]),
+        (w01, p_ref[v0, u0 + 1, c]),
+        (w10, p_ref[v0 + 1, u0, c]),
+        (w11, p_ref[v0 + 1, u0 + 1, c]),
+    ):
+        if w > 0.0:
+            val = val + w * pv if pv > 0.0 else np.nan
+    return val
 
 
 @nb.njit(parallel=True, cache=True, fastmath=False)
@@ -445,9 +452,10 @@ def _sample_kernel(
     for i in nb.prange(N):
         x0, x1, x2 = X[i, 0], X[i, 1], X[i, 2]
         r0, r1, r2 = R[i, 0], R[i, 1], R[i, 2]
-        q = np.full(3, np.nan)  # the reference pixel's p, where a side has none
+        # the reference pixel's p, where a side has none
+        q0, q1, q2 = np.nan, np.nan, np.nan
         if fallback:
-            q = _reference_p(x0, x1, x2, rK, rdist, rR, rt, p_ref)
+            q0, q1, q2 = _reference_p(x0, x1, x2, rK, rdist, rR, rt, p_ref)
         for j in range(nside):
             p = j // 2
             k = j % 2
@@ -490,7 +498,9 @@ def _sample_kernel(
                 J, gu, gv, noise = _cubic(maps, j, u, vv, blurred, corr)
             elif inside:
                 J, gu, gv, noise = _bilinear(maps, j, int(fu0), int(fv0), a, b, blurred, corr, 0)
-            if fallback and not np.isfinite(J) and np.isfinite(q[bands[j]]):
+            band = bands[j]
+            qb = q0 if band == 0 else (q1 if band == 1 else q2)
+            if fallback and not np.isfinite(J) and np.isfinite(qb):
                 # No p of the side's own: mu i, by the reference pixel's p.
                 if order == 3:
                     Jr, gur, gvr, nr = _cubic(maps, j, u, vv, blurred, corr, 2)
@@ -500,7 +510,6 @@ def _sample_kernel(
                     )
                 else:
                     Jr, gur, gvr, nr = nan, nan, nan, nan
-                qb = q[bands[j]]
                 J, gu, gv, noise = Jr / qb, gur / qb, gvr / qb, nr / (qb * qb)
             Dx = light[j, 0] - x0
             Dy = light[j, 1] - x1
