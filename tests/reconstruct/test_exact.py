@@ -337,8 +337,8 @@ def test_holes_in_other_cameras_p_keep_the_surface(tiny_dataset):
     """Bayesian HS of the statue with its true p, and with the left halves of
     cameras 1 and 2 without p (a tracked map's holes): the reference pixels' p
     (data term and refinement) keep the coverage (0.830 against 0.828; 0.38
-    before, when every depth whose point met a hole was invalid) at 3.6 mm
-    against 2.9 mm."""
+    before, when every depth whose point met a hole was invalid) at 3.55 mm
+    against 2.90 mm."""
     root = tiny_dataset
     ch = root / "scenes" / "statue" / "gt" / "chromaticity.h5"
     fr = load_frame(
