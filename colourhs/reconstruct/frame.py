@@ -524,6 +524,7 @@ def _consistent_surface(
         "filled": int(sinfo["filled"].sum()),
         "depth_factors": sinfo["depth_factors"],
         "depth_factor_sigma": sinfo["depth_factor_sigma"],
+        "converged": sinfo["converged"],
     }
     return z, nrm, ok, sinfo["weights"], sigma, info
 

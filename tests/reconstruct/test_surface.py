@@ -349,7 +349,7 @@ def test_lm_stops_on_a_converged_surface(plane_sides, monkeypatch):
     solves = []
     real = rf.solve_spd
     monkeypatch.setattr(rf, "solve_spd", lambda A, b: solves.append(1) or real(A, b))
-    c, energy, _ = problem.lm(problem.fit(z[graph.pix]), 4)
+    c, energy, _, _ = problem.lm(problem.fit(z[graph.pix]), 4)
     assert len(solves) <= 4 + 2, len(solves)
     assert np.all(np.isfinite(c)) and energy[-1] <= energy[0]
 
@@ -370,7 +370,7 @@ def test_lm_returns_the_state_at_its_result(plane_sides):
     problem = rf._problem(graph, rays[graph.pix], sides, ref.centre, 8.0, 1e-3, rf.ROBUST)
     start = problem.fit(z[graph.pix] * 1.002)  # 0.2 % off: the steps have work to do
     sc = problem.scale(start)
-    c, energy, (rho, prior) = problem.lm(start, 2, scale=sc)
+    c, energy, (rho, prior), _ = problem.lm(start, 2, scale=sc)
     again_rho, again_prior = problem.state(c, sc)
     assert energy[-1] < energy[0]
     assert np.array_equal(rho, again_rho, equal_nan=True)
@@ -529,3 +529,43 @@ def test_spline_gram_refuses_a_link_between_two_surfaces():
     nbr[0, a] = b  # east of the first surface's corner: the second's
     with pytest.raises(ValueError, match=f"links pixel {a} to another surface"):
         SplineGram(spline.basis, spline.grid_coords, nbr, 3)
+
+
+def _lump_start(plane_sides, height):
+    """The plane's true depths with a smooth lump, ``height`` of the depth at its
+    centre, over a third of the image's width (a discrete start pulled off on a
+    whole region)."""
+    fr, ref, rays, gd, _, mask, _ = plane_sides
+    H, W = fr.rig.image.height, fr.rig.image.width
+    r, c = np.divmod(np.arange(H * W), W)
+    ys, xs = np.divmod(np.flatnonzero(mask), W)
+    cy, cx = np.median(ys), np.median(xs)
+    lump = np.exp(-((r - cy) ** 2 + (c - cx) ** 2) / (2 * (W / 6.0) ** 2))
+    return np.where(mask, gd * (1.0 + height * lump), np.nan)
+
+
+def test_refinement_settles_a_start_pulled_off_on_a_region(plane_sides, monkeypatch):
+    """Beyond the paper: a start far from E's minimum (here a lump of 15 % of the
+    depth over a third of the plane) needs more than a fixed few LM steps. The
+    coarse and final stages go on until E and its robust scale settle
+    (refine.LM_SETTLED); a final stage that has not settled within
+    refine.LM_MAX_STEPS says so: ``converged`` False and every sigma infinite,
+    never a confident depth."""
+    import colourhs.reconstruct.bayes.refine as rf
+    from colourhs.reconstruct.inputs import RayGrid
+
+    fr, ref, rays, gd, _, mask, sides = plane_sides
+    H, W = fr.rig.image.height, fr.rig.image.width
+    grid = RayGrid(rays, ref.centre, (H, W))
+    footprint = np.abs(np.nan_to_num(gd)) / ref.K[0, 0]
+    z0 = np.nan_to_num(_lump_start(plane_sides, 0.15))
+    opts = rf.RefineOptions(sigma_samples=8)
+    z, _, info = rf.refine_surface(z0, mask, grid, sides, footprint, opts)
+    err = (z - gd)[info["valid"]] * 1e3
+    assert info["converged"] and np.isfinite(info["sigma"][info["valid"]]).all()
+    assert len(info["energy"]) > 3 * opts.iterations  # measured 46 steps, not 9
+    assert np.median(np.abs(err)) < 0.24, np.median(np.abs(err))  # measured 0.216 mm
+    monkeypatch.setattr(rf, "LM_MAX_STEPS", opts.iterations)  # a fixed count of steps
+    z, _, info = rf.refine_surface(z0, mask, grid, sides, footprint, opts)
+    assert len(info["energy"]) == 3 * opts.iterations
+    assert not info["converged"] and np.isinf(info["sigma"][info["valid"]]).all()

@@ -37,6 +37,8 @@ LM_START, LM_MIN = 1e-3, 1e-9  # Levenberg-Marquardt damping, relative to diag(A
 LM_UP, LM_DOWN, LM_TRIES = 10.0, 0.3, 8
 COARSE = 8.0  # the first fit's control spacing, in units of the final spacing
 CONVERGED = 1e-6  # predicted decrease of E (chi2 units) below which a surface has converged
+LM_SETTLED = 1e-2  # settled: a step moves E and its robust scale by less than this share
+LM_MAX_STEPS = 40  # at most this many LM steps in a stage that must settle
 """Why these values hold on any rig:
 
 - ``CURVATURE_TOL_PER_M``: the prior's unit is a curvature (1/m) times the
@@ -50,6 +52,18 @@ CONVERGED = 1e-6  # predicted decrease of E (chi2 units) below which a surface h
   could notice. Without it a converged surface (a one-pixel surface, say,
   whose E is at rounding level) would raise its damping ``LM_TRIES`` times
   per step, one solve each.
+- ``LM_SETTLED``: a share of E and of its robust scale, so free of units
+  and of the rig's noise level. The depth search compares E at depths a
+  step apart (:data:`~colourhs.reconstruct.bayes.valley.SEARCH_STEP`),
+  where E differs by about a per cent of itself near the minimum; a shape
+  whose E (or scale, which sets which rows count) still moves by more per
+  LM step is not converged, and a search started from it reads the fall
+  as a valley.
+- ``LM_MAX_STEPS``: a count of steps, each a solve of the same cost on any
+  rig; a start far from E's minimum (a discrete depth map pulled off by a
+  wrong calibration on whole regions) settles in a few tens of steps on
+  the coarse spline, and a final stage that has not settled by then is
+  reported (its depths' sigma is infinite).
 - ``COARSE``: a ratio of spacings, so free of units. The fine spline's
   first LM steps cannot pull in a part of a surface whose start is several
   millimetres off (its residuals are far beyond the robust scale, so it has
@@ -165,7 +179,7 @@ class _Problem:
         """The Geman-McClure scale of the residuals at ``c`` (see :func:`hs_residuals`)."""
         return self._residuals(c, robust=self.robust, jacobian=False)[2]["scale"]
 
-    def lm(self, c, iterations: int, scale=None, lam=LM_START, say=None):
+    def lm(self, c, iterations: int, scale=None, lam=LM_START, say=None, settle=False):
         """``iterations`` Levenberg-Marquardt steps, each kept per surface where it
         lowers that surface's energy (else its damping rises and it tries again,
         up to ``LM_TRIES`` times; a kept step lowers it). The damping is
@@ -174,18 +188,26 @@ class _Problem:
         Beyond plain Gauss-Newton: the sampled intensities make E non-linear in
         the depth, and the damping keeps each step where the linear model holds.
         ``scale`` fixes the robust scale (default: from the residuals at each
-        step). ``say(text)``, if given, is called before each step (progress:
+        step). With ``settle``, steps go on after ``iterations`` until E has
+        settled: the robust scale moved by at most ``LM_SETTLED`` of itself and
+        the last step lowered E, at one scale, by at most ``LM_SETTLED`` of it;
+        at most ``LM_MAX_STEPS`` steps in all (beyond the paper: a fixed count
+        leaves a start far from E's minimum unconverged, and the depth search
+        then reads E's fall as a valley).
+        ``say(text)``, if given, is called before each step (progress:
         a step takes seconds at high resolution). Returns the control points,
-        the total energy after each step and :meth:`state` at the returned
+        the total energy after each step, :meth:`state` at the returned
         control points at the last step's scale (the same numbers a new
         :meth:`state` call gives: a pixel's energy depends on its own
-        surface's control points alone; None without steps).
+        surface's control points alone; None without steps) and whether E
+        settled (without ``settle``: whether the last step lowered E by at
+        most ``LM_SETTLED`` of it).
         """
         lam = np.full(self.n, float(lam))
-        history, s0, rows = [], None, None
-        for step in range(iterations):
+        history, s0, rows, drop, last_sc, calm = [], None, None, np.inf, np.nan, False
+        for step in range(max(iterations, LM_MAX_STEPS) if settle else iterations):
             if say is not None:
-                say(f"refinement: LM step {step + 1} of {iterations}")
+                say(f"refinement: LM step {step + 1} of {iterations}{'+' if settle else ''}")
             if rows is None:
                 rows = self._residuals(c, robust=self.robust, scale=scale)
             Jz, r, info = rows
@@ -195,7 +217,13 @@ class _Problem:
             # tries compute them and the next step does not sample E again.
             reuse = scale is not None and step + 1 < iterations
             sc = info["scale"]
+            if settle and step >= iterations:
+                calm = abs(sc - last_sc) <= LM_SETTLED * sc and drop <= LM_SETTLED
+                if calm:
+                    break
+            last_sc = sc
             s0 = self.state(c, sc, info)
+            before = float(np.nansum(s0[0]) + s0[1].sum())
             Dw = self.prior(sc)
             level = sc / (self.robust**2 * self.sides.pairs)  # Dw = self.Dw sqrt(level)
             vals = info["jacobian_values"]
@@ -236,9 +264,10 @@ class _Problem:
                 if not pending.any():
                     break
             history.append(float(np.nansum(s0[0]) + s0[1].sum()))
+            drop = (before - history[-1]) / max(abs(history[-1]), 1e-300)  # at one scale
             if not reuse:
                 rows = None
-        return c, history, s0
+        return c, history, s0, calm if settle else drop <= LM_SETTLED
 
     def fit(self, z) -> np.ndarray:
         """Control points whose spline is the least-squares fit to depths ``z`` (n,)."""
@@ -301,8 +330,10 @@ class RefineOptions:
     spacing_px : spline control spacing, pixels (default
         :func:`colourhs.reconstruct.bayes.spline.default_spacing`, scaled by the
         image's width).
-    iterations : Levenberg-Marquardt steps per stage (each stage starts close
-        to its minimum, so a few steps converge whatever the rig).
+    iterations : Levenberg-Marquardt steps per stage; the coarse and the
+        final stage go on until E settles (:meth:`_Problem.lm`), the one
+        before the depth search does not (its steps creep along E's valley,
+        which the search walks instead).
     robust : Geman-McClure scale, in units of each row's predicted noise
         (:data:`~colourhs.reconstruct.bayes.surface.ROBUST`).
     edge_footprints : depth jump between neighbours that separates surfaces,
@@ -371,7 +402,9 @@ def refine_surface(
         :func:`.uncertainty.valley_sigma` with its pulls, metres; :func:`filled_sigma`
         where the rows were unusable and in filled holes), ``filled`` (H*W,)
         filled holes, ``energy`` after each step, ``depth_factors`` (the
-        search's scale per surface), ``surfaces`` and ``control_points``.
+        search's scale per surface), ``converged`` (False where the final
+        stage did not settle: every sigma is then infinite), ``surfaces`` and
+        ``control_points``.
     """
     rays, c_ref, shape = grid.rays, grid.centre, grid.shape
     H, W = shape
@@ -383,11 +416,11 @@ def refine_surface(
     fp = float(np.median(footprint[graph.pix]))
     coarse = _problem(graph, R, sides, c_ref, spacing * COARSE, fp, robust)
     say(f"refinement: {graph.n_surfaces} surfaces, {iterations} LM steps on a coarse spline")
-    c, energies, _ = coarse.lm(coarse.fit(z0[graph.pix]), iterations, say=say)
+    c, energies, _, _ = coarse.lm(coarse.fit(z0[graph.pix]), iterations, say=say, settle=True)
     problem = _problem(graph, R, sides, c_ref, spacing, fp, robust)
     B = problem.B
     say(f"refinement: {iterations} LM steps on {B.shape[1]} control points")
-    c, more, _ = problem.lm(problem.fit(coarse.B @ c), iterations, say=say)
+    c, more, _, _ = problem.lm(problem.fit(coarse.B @ c), iterations, say=say)
     energies += more
     factors = np.ones(graph.n_surfaces)
     valley = np.zeros(graph.n_surfaces)
@@ -402,7 +435,7 @@ def refine_surface(
             say=say,
         )
     say(f"refinement: {iterations} final LM steps")
-    c, more, _ = problem.lm(c, iterations, say=say)
+    c, more, _, converged = problem.lm(c, iterations, say=say, settle=True)
     z = B @ c
     _, _, info = hs_residuals(z, graph, R, sides, c_ref, robust, jacobian=False)
     out_z = np.full(H * W, np.nan)
@@ -430,6 +463,8 @@ def refine_surface(
     # Filled holes and pixels whose rows were unusable: extrapolated depths.
     guessed = valid & ~np.isfinite(sigma)
     sigma[guessed] = filled_sigma(sigma, guessed, shape)
+    if not converged:  # E's minimum was not reached: no depth of it is known
+        sigma[valid] = np.inf
     out_n = np.full((H * W, 3), np.nan)
     if valid.any():  # the output's normals: E's, over the output's own links
         # Filled holes had no footprint: it is z / focal length, so scale it from out_z.
@@ -450,5 +485,6 @@ def refine_surface(
             "depth_factor_sigma": valley.tolist(),
             "surfaces": int(graph.n_surfaces),
             "control_points": int(B.shape[1]),
+            "converged": bool(converged),
         },
     )

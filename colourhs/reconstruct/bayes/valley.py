@@ -130,7 +130,7 @@ def depth_search(
             shown = ", ".join(f"{100 * d:+.2f}" for d in new_delta[record][:4])
             say(f"refinement: depth search, trial {trials[0]} at {shown} % (first surfaces)")
         cc = problem.scaled(base, (1.0 + new_delta) / (1.0 + base_delta))
-        cc, _, (rho, prior) = problem.lm(cc, SEARCH_FITS, scale=sc)
+        cc, _, (rho, prior), _ = problem.lm(cc, SEARCH_FITS, scale=sc)
         for k in np.flatnonzero(record):
             tried[k][key(new_delta[k])] = (rho[pixels[k]], prior[k], cc[mine[k]])
 
