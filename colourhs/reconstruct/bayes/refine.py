@@ -200,8 +200,7 @@ class _Problem:
         control points at the last step's scale (the same numbers a new
         :meth:`state` call gives: a pixel's energy depends on its own
         surface's control points alone; None without steps) and whether E
-        settled (without ``settle``: whether the last step lowered E by at
-        most ``LM_SETTLED`` of it).
+        settled (False without ``settle``).
         """
         lam = np.full(self.n, float(lam))
         history, s0, rows, drop, last_sc, calm = [], None, None, np.inf, np.nan, False
@@ -223,7 +222,7 @@ class _Problem:
                     break
             last_sc = sc
             s0 = self.state(c, sc, info)
-            before = float(np.nansum(s0[0]) + s0[1].sum())
+            before = _energy(s0)
             Dw = self.prior(sc)
             level = sc / (self.robust**2 * self.sides.pairs)  # Dw = self.Dw sqrt(level)
             vals = info["jacobian_values"]
@@ -263,11 +262,11 @@ class _Problem:
                 lam = np.where(pending, lam * LM_UP, lam)
                 if not pending.any():
                     break
-            history.append(float(np.nansum(s0[0]) + s0[1].sum()))
+            history.append(_energy(s0))
             drop = (before - history[-1]) / max(abs(history[-1]), 1e-300)  # at one scale
             if not reuse:
                 rows = None
-        return c, history, s0, calm if settle else drop <= LM_SETTLED
+        return c, history, s0, calm
 
     def fit(self, z) -> np.ndarray:
         """Control points whose spline is the least-squares fit to depths ``z`` (n,)."""
@@ -278,6 +277,11 @@ class _Problem:
     def scaled(self, c, factor) -> np.ndarray:
         """Control points with each surface k's depths multiplied by ``factor[k]``."""
         return c * factor[self.ctrl_surface]
+
+
+def _energy(state) -> float:
+    """E of a :meth:`_Problem.state`: its pixels' robust energies and the priors."""
+    return float(np.nansum(state[0]) + state[1].sum())
 
 
 def _kept_rows(rows, tried, take, pairs: int, active=None):
