@@ -484,7 +484,7 @@ def main(argv=None) -> dict:
         "--preset",
         default="random-dynamic-tiny",
         help="a dynamic preset: dynamic-tiny, dynamic, random-dynamic, random-dynamic-tiny "
-        "(default)",
+        "(default), corner-dynamic, corner-dynamic-tiny",
     )
     p.add_argument("--seeds", default="0-3", help="seeds, e.g. 0-3 or 1,3 (default 0-3)")
     p.add_argument(

@@ -127,7 +127,8 @@ def build_parser(show_defaults: bool | Collection[str] = False) -> argparse.Argu
         "--preset",
         default="demo",
         help="tiny, demo, paper, random, random-tiny, random-tiny-lens, corner, corner-tiny, "
-        "dynamic, dynamic-tiny, random-dynamic or random-dynamic-tiny (default demo); the "
+        "dynamic, dynamic-tiny, random-dynamic, random-dynamic-tiny, corner-dynamic or "
+        "corner-dynamic-tiny (default demo); the "
         "random and corner presets draw a different rig, board, encoding and scene set for "
         "every --seed (corner: the ranges' hard ends combined); the dynamic ones render "
         "moving coloured sequences (moving-toy, cloth, turning-metal) and the plane",

@@ -155,7 +155,9 @@ light offset          U(0.02, 0.04) m from the      lights on a ring beside the 
 
 The ``random-dynamic`` presets draw the rig, board, poses, encoding and sheet
 from the ranges of ``random`` and ``random-tiny`` (12 sheet frames, all in
-view), and their moving objects as :mod:`colourhs.synth.dynamicscenes` says.
+view), the ``corner-dynamic`` presets from those of ``corner`` and
+``corner-tiny``, and their moving objects as :mod:`colourhs.synth.dynamicscenes`
+says.
 
 Draws come from independent random streams per topic (rig geometry and
 scenes, photometric model, encoding, light offsets), each seeded by the seed

@@ -13,8 +13,9 @@ true board poses (``gt/board_poses.json``), the true target poses
 (``scenes/<scene>/gt/chromaticity.h5``).
 
 The ``dynamic`` presets (``dynamic``, ``dynamic-tiny``, ``random-dynamic``,
-``random-dynamic-tiny``) hold instead of the statue, toy and sheet the
-sequences of :mod:`colourhs.synth.dynamicscenes` (``moving-toy``, ``cloth``,
+``random-dynamic-tiny``, ``corner-dynamic``, ``corner-dynamic-tiny``) hold
+instead of the statue, toy and sheet the sequences of
+:mod:`colourhs.synth.dynamicscenes` (``moving-toy``, ``cloth``,
 ``turning-metal``: multi-coloured objects that move or deform), each with
 chromatic captures of one frame (scene.json's ``chromatic_frame``), true
 chromaticity maps per frame (``scenes/<scene>/gt/chromaticity/<frame>.h5``)
@@ -164,6 +165,13 @@ PRESETS["random-dynamic"] = replace(
 )
 PRESETS["random-dynamic-tiny"] = replace(
     PRESETS["random-tiny"], name="random-dynamic-tiny", sheet_frames=12, scene_set="dynamic"
+)
+# The same moving objects on the corner rigs (the ranges' hard ends combined).
+PRESETS["corner-dynamic"] = replace(
+    PRESETS["corner"], name="corner-dynamic", sheet_frames=12, scene_set="dynamic"
+)
+PRESETS["corner-dynamic-tiny"] = replace(
+    PRESETS["corner-tiny"], name="corner-dynamic-tiny", sheet_frames=12, scene_set="dynamic"
 )
 
 
@@ -449,7 +457,8 @@ def synthesise(
     preset : a name of :data:`PRESETS` (``"tiny"``, ``"demo"``, ``"paper"``,
         ``"random"``, ``"random-tiny"``, ``"random-tiny-lens"``, ``"corner"``,
         ``"corner-tiny"``, ``"dynamic-tiny"``, ``"dynamic"``, ``"random-dynamic"``,
-        ``"random-dynamic-tiny"``) or a :class:`Preset`.
+        ``"random-dynamic-tiny"``, ``"corner-dynamic"``, ``"corner-dynamic-tiny"``) or a
+        :class:`Preset`.
     seed : seed of every random choice (rig, poses, noise; with a randomised
         preset also the rig's design, board, encoding, masks and scenes).
     nuisances : effects to simulate (default: all on, :class:`Nuisances`). With a

@@ -44,11 +44,15 @@ def _chroma(root, scene, frame):
 
 
 def test_dynamic_presets_add_scenes_and_leave_the_others_static():
-    for name in ("dynamic-tiny", "dynamic", "random-dynamic", "random-dynamic-tiny"):
+    dynamic = ("dynamic-tiny", "dynamic", "random-dynamic", "random-dynamic-tiny")
+    for name in dynamic + ("corner-dynamic", "corner-dynamic-tiny"):
         p = PRESETS[name]
         assert (p.scene_set, p.sheet_frames) == ("dynamic", FRAMES)
     assert (PRESETS["dynamic-tiny"].width, PRESETS["dynamic"].width) == (160, 640)
     assert PRESETS["random-dynamic"].randomised and not PRESETS["dynamic"].randomised
+    for size in ("", "-tiny"):  # the corner rigs, at the random presets' sizes
+        corner, static = PRESETS[f"corner-dynamic{size}"], PRESETS[f"corner{size}"]
+        assert (corner.random_ranges, corner.width) == (static.random_ranges, static.width)
     others = [p for n, p in PRESETS.items() if "dynamic" not in n]
     assert {p.scene_set for p in others} == {"static"}
     with pytest.raises(ValueError, match="unknown scenes \\['toy'\\]"):
@@ -160,8 +164,9 @@ def test_albedo_is_read_in_rest_coordinates():
             np.testing.assert_allclose(g.albedo(centres, tri), p0, rtol=0, atol=1e-12)
 
 
-def test_random_dynamic_draw_moves_within_its_ranges():
-    p = PRESETS["random-dynamic-tiny"]
+@pytest.mark.parametrize("preset", ["random-dynamic-tiny", "corner-dynamic-tiny"])
+def test_random_dynamic_draw_moves_within_its_ranges(preset):
+    p = PRESETS[preset]
     ranges = RANGES_BY_NAME[p.random_ranges]
     for seed in (0, 1):
         d = draw_random(seed, p.width, p.height, Nuisances(), ranges, sheet_frames=FRAMES)
