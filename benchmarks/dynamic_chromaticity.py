@@ -51,9 +51,12 @@ Figures per seed x scene x frame x variant (``benchmarks/results/
 dynamic_chromaticity_seeds<TAG>.csv``, written after every seed): the
 depth median of the absolute errors and the signed median (reconstructed
 minus true z-depth, mm), RMS and p95 (mm), normal median (deg), coverage
-(compared / ground-truth-visible pixels of the reference camera), the shares
-of those pixels dropped per reason (``dropped_no_chromaticity``: no p at the
-pixel, e.g. where the object now is but was not in the chromatic pose), and
+(compared / ground-truth-visible pixels of the reference camera), the error
+bar's calibration (``depth_sigma_median_mm``, ``sigma_within_1/2/3``: the share
+of the compared pixels within k depth_sigma of the truth, as
+``generalisation.py`` gives them), the shares of those pixels dropped per
+reason (``dropped_no_chromaticity``: no p at the pixel, e.g. where the object
+now is but was not in the chromatic pose), and
 the chromaticity error of the map used against the frame's truth
 (a reconstruction that raises is a frame with nothing reconstructed: coverage
 0, the exception in ``error``):
@@ -338,6 +341,8 @@ METRICS = (
     ("depth_signed_median_mm", "signed median (mm)", "+.3f", "abs"),
     ("normal_median_deg", "normal median (deg)", ".2f", "max"),
     ("coverage", "coverage", ".3f", "min"),
+    ("depth_sigma_median_mm", "sigma median (mm)", ".3f", "max"),
+    ("sigma_within_3", "within 3 sigma", ".2f", "min"),
     ("dropped_no_chromaticity", "dropped: no p", ".3f", "max"),
     ("chroma_rms_log", "chroma RMS log", ".3f", "max"),
     ("chroma_known", "chroma known", ".3f", "min"),
@@ -416,7 +421,9 @@ def summarise_markdown(summary: dict) -> str:
         "seeds / worst seed. `moved`: each seed's median over the frames other than the "
         "chromatic frame; `worst moved`: each seed's worst such frame. Chroma RMS log: RMS "
         "of the centred log ratios' difference to the truth over the object's pixels where "
-        "the map has a p (`known`: their share). `empty`: seed x frame rows with nothing "
+        "the map has a p (`known`: their share). Within 3 sigma: the share of the compared "
+        "pixels whose depth error is within 3 of their depth_sigma (0.997 for an honest "
+        "Gaussian error bar). `empty`: seed x frame rows with nothing "
         "reconstructed (no depth figure; left out of the depth columns, coverage 0).",
         "",
     ]
@@ -426,6 +433,7 @@ def summarise_markdown(summary: dict) -> str:
         "depth, chromatic frame",
         "depth, moved",
         "depth, worst moved",
+        "within 3 sigma, chromatic / moved",
         "normal, moved",
         "coverage, chromatic frame",
         "coverage, moved",
@@ -447,6 +455,7 @@ def summarise_markdown(summary: dict) -> str:
                 _pair(h.get("depth_median_mm"), ".3f"),
                 _pair(m.get("depth_median_mm"), ".3f"),
                 _pair(w.get("depth_median_mm"), ".3f"),
+                f"{_pair(h.get('sigma_within_3'), '.2f')}; {_pair(m.get('sigma_within_3'), '.2f')}",
                 _pair(m.get("normal_median_deg"), ".2f"),
                 _pair(h.get("coverage"), ".3f"),
                 _pair(m.get("coverage"), ".3f"),
