@@ -410,6 +410,14 @@ def _pair(e: dict | None, fmt: str) -> str:
     return "-" if not e else f"{e['median']:{fmt}} / {e['worst']:{fmt}}"
 
 
+def _home_moved(home: dict, moved: dict, col: str, fmt: str) -> str:
+    """One cell of a metric on the chromatic frame and on the moved frames (each
+    :func:`_pair`); "-" where neither has it."""
+    if not (home.get(col) or moved.get(col)):
+        return "-"
+    return f"{_pair(home.get(col), fmt)}; {_pair(moved.get(col), fmt)}"
+
+
 def summarise_markdown(summary: dict) -> str:
     """:func:`summarise` as markdown: the chromatic frame against the moved frames per
     scene x variant, then per scene a table per frame (median over seeds / worst seed)."""
@@ -445,22 +453,16 @@ def summarise_markdown(summary: dict) -> str:
     for scene, variants in summary["scenes"].items():
         for variant, e in variants.items():
             h, m, w = e["chromatic_frame"], e["moved"], e["moved_worst_frame"]
-            chroma, known = (
-                "-"
-                if not (h.get(k) or m.get(k))
-                else f"{_pair(h.get(k), '.3f')}; {_pair(m.get(k), '.3f')}"
-                for k in ("chroma_rms_log", "chroma_known")
-            )
             cells = [
                 _pair(h.get("depth_median_mm"), ".3f"),
                 _pair(m.get("depth_median_mm"), ".3f"),
                 _pair(w.get("depth_median_mm"), ".3f"),
-                f"{_pair(h.get('sigma_within_3'), '.2f')}; {_pair(m.get('sigma_within_3'), '.2f')}",
+                _home_moved(h, m, "sigma_within_3", ".2f"),
                 _pair(m.get("normal_median_deg"), ".2f"),
                 _pair(h.get("coverage"), ".3f"),
                 _pair(m.get("coverage"), ".3f"),
-                chroma,
-                known,
+                _home_moved(h, m, "chroma_rms_log", ".3f"),
+                _home_moved(h, m, "chroma_known", ".3f"),
                 str(len(e["empty_frames"])),
             ]
             lines.append("| " + " | ".join([scene, variant, *cells]) + " |")

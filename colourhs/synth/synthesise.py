@@ -155,23 +155,20 @@ PRESETS["corner-tiny"] = replace(
     PRESETS["random-tiny"], name="corner-tiny", random_ranges="corner-tiny"
 )
 # Moving and deforming multi-coloured objects (colourhs.synth.dynamicscenes), 12
-# frames each, on the fixed rig (at the tiny and demo sizes) and on the random rigs.
-PRESETS["dynamic-tiny"] = replace(
-    PRESETS["tiny"], name="dynamic-tiny", sheet_frames=12, scene_set="dynamic"
-)
-PRESETS["dynamic"] = replace(PRESETS["demo"], name="dynamic", scene_set="dynamic")
-PRESETS["random-dynamic"] = replace(
-    PRESETS["random"], name="random-dynamic", sheet_frames=12, scene_set="dynamic"
-)
-PRESETS["random-dynamic-tiny"] = replace(
-    PRESETS["random-tiny"], name="random-dynamic-tiny", sheet_frames=12, scene_set="dynamic"
-)
-# The same moving objects on the corner rigs (the ranges' hard ends combined).
-PRESETS["corner-dynamic"] = replace(
-    PRESETS["corner"], name="corner-dynamic", sheet_frames=12, scene_set="dynamic"
-)
-PRESETS["corner-dynamic-tiny"] = replace(
-    PRESETS["corner-tiny"], name="corner-dynamic-tiny", sheet_frames=12, scene_set="dynamic"
+# frames each, on the fixed rig (at the tiny and demo sizes), on the random rigs and
+# on the corner rigs (the ranges' hard ends combined).
+PRESETS.update(
+    {
+        name: replace(PRESETS[base], name=name, sheet_frames=12, scene_set="dynamic")
+        for name, base in (
+            ("dynamic-tiny", "tiny"),
+            ("dynamic", "demo"),
+            ("random-dynamic", "random"),
+            ("random-dynamic-tiny", "random-tiny"),
+            ("corner-dynamic", "corner"),
+            ("corner-dynamic-tiny", "corner-tiny"),
+        )
+    }
 )
 
 
