@@ -520,6 +520,7 @@ def _consistent_surface(
         "iterations": iterations,
         "energy": sinfo["energy"],
         "surfaces": sinfo["surfaces"],
+        "restarted": sinfo["restarted"],
         "control_points": sinfo["control_points"],
         "filled": int(sinfo["filled"].sum()),
         "depth_factors": sinfo["depth_factors"],

@@ -569,3 +569,89 @@ def test_refinement_settles_a_start_pulled_off_on_a_region(plane_sides, monkeypa
     z, _, info = rf.refine_surface(z0, mask, grid, sides, footprint, opts)
     assert len(info["energy"]) == 3 * opts.iterations
     assert not info["converged"] and np.isinf(info["sigma"][info["valid"]]).all()
+
+
+def test_subset_graph_keeps_the_surfaces_energies(plane_sides):
+    """A problem over some surfaces alone (refine._Problem.restricted) has their
+    control points, rows and energies: every number equal to the full problem's."""
+    import colourhs.reconstruct.bayes.refine as rf
+
+    fr, ref, rays, gd, _, mask, sides = plane_sides
+    H, W = fr.rig.image.height, fr.rig.image.width
+    cols = np.arange(H * W) % W
+    split = mask & (np.abs(cols - W // 2) > 2)
+    z = np.nan_to_num(gd)
+    graph = SurfaceGraph(split, (H, W), z, z / ref.K[0, 0])
+    assert graph.n_surfaces >= 2
+    problem = rf._problem(graph, rays[graph.pix], sides, ref.centre, 8.0, 1e-3, rf.ROBUST)
+    keep = np.arange(graph.n_surfaces) == 1
+    sub = problem.restricted(keep)
+    assert sub.n == 1 and sub.graph.n == int(np.sum(graph.surface == 1))
+    assert np.array_equal(graph.pix[sub.graph.index], sub.graph.pix)
+    c = problem.fit(z[graph.pix] * 1.001)
+    sc = problem.scale(c)
+    rho, prior = problem.state(c, sc)
+    rho_sub, prior_sub = sub.state(c[keep[problem.ctrl_surface]], sc)
+    assert np.array_equal(rho[sub.graph.index], rho_sub, equal_nan=True)
+    assert np.allclose(prior[keep], prior_sub, rtol=1e-12)
+
+
+def test_neighbour_factors_across_a_gap():
+    """restart.neighbour_factors: a surface takes the depth of the better-fitting
+    surface across a gap of at most gap_px, never of a worse one, nor across a wider gap."""
+    from colourhs.reconstruct.bayes.restart import neighbour_factors
+
+    H, W = 20, 30
+    cols = np.arange(H * W) % W
+    mask = (cols < 12) | (cols > 15)  # a gap of 4 columns (12-15)
+    z = np.where(cols < 12, 1.0, 1.1)
+    graph = SurfaceGraph(mask, (H, W), z, np.full(H * W, 1e-3))
+    assert graph.n_surfaces == 2
+    left = graph.surface[0]
+    level = np.where(np.arange(2) == left, 1.0, 3.0)
+    f = neighbour_factors(graph, z[graph.pix], level, gap_px=5.0)
+    assert np.isclose(f[1 - left, 0], 1.0 / 1.1) and np.isnan(f[left]).all()
+    assert np.isnan(f[:, 1:]).all()
+    assert np.isnan(neighbour_factors(graph, z[graph.pix], level, gap_px=3.5)).all()
+
+
+def test_energy_difference_and_its_cluster_standard_error():
+    """restart.energy_difference: per surface, the summed difference over the pixels
+    usable in both states plus the priors', and sqrt(G/(G-1) sum (D_g - mean)^2)."""
+    from colourhs.reconstruct.bayes.restart import energy_difference
+
+    rho0 = np.array([1.0, 2.0, 3.0, 4.0, 5.0, np.nan])
+    rho1 = np.array([2.0, 2.0, 1.0, 4.0, 8.0, 1.0])
+    surface = np.array([0, 0, 0, 1, 1, 1])
+    groups = np.array([0, 0, 1, 0, 0, 1])
+    d, se = energy_difference(rho0, rho1, [0.5, 0.0], [0.0, 1.0], surface, groups, 2)
+    # surface 0: blocks 0 (+1) and 1 (-2): D = -1 - 0.5; surface 1: one block (+3) + 1
+    assert np.allclose(d, [-1.5, 4.0])
+    assert np.isclose(se[0], np.sqrt(2.0 * (1.5**2 + 1.5**2))) and np.isinf(se[1])
+
+
+def test_restart_brings_an_island_started_beyond_the_search(plane_sides):
+    """Beyond the paper: a half of the plane whose start is 25 % off (beyond the
+    depth search's 6 % and the coarse stage's reach) reaches the truth from its
+    better-fitting neighbour's depth across a gap (refine.restart_round); without
+    the restarts it stays off. Measured: 172 mm without, 0.535 mm with."""
+    import colourhs.reconstruct.bayes.refine as rf
+    from colourhs.reconstruct.inputs import RayGrid
+
+    fr, ref, rays, gd, _, mask, sides = plane_sides
+    H, W = fr.rig.image.height, fr.rig.image.width
+    grid = RayGrid(rays, ref.centre, (H, W))
+    cols = np.arange(H * W) % W
+    split = mask & (np.abs(cols - W // 2) > 1)  # two halves, three columns apart
+    right = split & (cols > W // 2)
+    z0 = np.nan_to_num(np.where(right, gd * 1.25, gd))
+    footprint = np.abs(np.nan_to_num(gd)) / ref.K[0, 0]
+    errs = {}
+    for restarts in (0, rf.RESTART_ROUNDS):
+        opts = rf.RefineOptions(sigma_samples=8, restarts=restarts)
+        z, _, info = rf.refine_surface(z0, split, grid, sides, footprint, opts)
+        ok = info["valid"] & right
+        errs[restarts] = np.median(np.abs(z - gd)[ok]) * 1e3
+        assert (info["restarted"] > 0) == (restarts > 0)
+    assert errs[0] > 100.0, errs
+    assert errs[rf.RESTART_ROUNDS] < 0.6, errs

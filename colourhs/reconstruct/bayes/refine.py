@@ -3,7 +3,9 @@
 Beyond the paper. Each connected surface's depth map is a cubic B-spline
 (:mod:`colourhs.reconstruct.bayes.spline`). Levenberg-Marquardt fits its shape;
 its depth, the one mode E determines weakly, comes from a search along E's
-valley (:func:`colourhs.reconstruct.bayes.valley.depth_search`); holes are filled
+valley (:func:`colourhs.reconstruct.bayes.valley.depth_search`), and a second
+start at each better-fitting neighbour's depth (:func:`restart_round`) where the
+labelling left a surface beyond the search's reach; holes are filled
 (:func:`~colourhs.reconstruct.bayes.surface.fill_holes`).
 """
 
@@ -17,6 +19,13 @@ import scipy.sparse as sp
 
 from colourhs.common.linalg import solve_spd
 from colourhs.reconstruct.bayes.gram import SplineGram
+from colourhs.reconstruct.bayes.restart import (
+    RESTART_GAP,
+    RESTART_TEST,
+    energy_difference,
+    neighbour_factors,
+    surface_fit_levels,
+)
 from colourhs.reconstruct.bayes.spline import SplineSurface, default_spacing
 from colourhs.reconstruct.bayes.surface import (
     EDGE_FOOTPRINTS,
@@ -27,7 +36,12 @@ from colourhs.reconstruct.bayes.surface import (
     robust_energy,
     surface_normals,
 )
-from colourhs.reconstruct.bayes.uncertainty import SIGMA_SAMPLES, depth_sigma, filled_sigma
+from colourhs.reconstruct.bayes.uncertainty import (
+    SIGMA_SAMPLES,
+    depth_sigma,
+    filled_sigma,
+    valley_blocks,
+)
 from colourhs.reconstruct.bayes.valley import depth_search, search_stride
 from colourhs.reconstruct.inputs import RayGrid
 from colourhs.reconstruct.sides import HelmholtzSides
@@ -39,6 +53,8 @@ COARSE = 8.0  # the first fit's control spacing, in units of the final spacing
 CONVERGED = 1e-6  # predicted decrease of E (chi2 units) below which a surface has converged
 LM_SETTLED = 1e-2  # settled: a step moves E and its robust scale by less than this share
 LM_MAX_STEPS = 40  # at most this many LM steps in a stage that must settle
+RESTART_ROUNDS = 4  # rounds of second starts at a neighbour's depth (refine_surface)
+RESTART_KEEP = 0.9  # a second start must keep this share of a surface's usable pixels
 """Why these values hold on any rig:
 
 - ``CURVATURE_TOL_PER_M``: the prior's unit is a curvature (1/m) times the
@@ -64,6 +80,13 @@ LM_MAX_STEPS = 40  # at most this many LM steps in a stage that must settle
   wrong calibration on whole regions) settles in a few tens of steps on
   the coarse spline, and a final stage that has not settled by then is
   reported (its depths' sigma is infinite).
+- ``RESTART_ROUNDS``: a count of hops, each passing a depth from one
+  surface to the next (:mod:`colourhs.reconstruct.bayes.restart`), so free of
+  the rig; a round refines only the surfaces restarted.
+- ``RESTART_KEEP``: a share of pixels. E compares two depths over the
+  pixels usable at both (:meth:`_Problem.compare`); a depth where a surface
+  loses more than a tenth of them to the other views' silhouettes and
+  shadows is compared on what is left, and such depths hold false minima.
 - ``COARSE``: a ratio of spacings, so free of units. The fine spline's
   first LM steps cannot pull in a part of a surface whose start is several
   millimetres off (its residuals are far beyond the robust scale, so it has
@@ -79,15 +102,16 @@ def _problem(graph, R, sides, c_ref, spacing, footprint, robust) -> _Problem:
     spline = SplineSurface(graph.rows, graph.cols, graph.surface, spacing)
     D, prior_surface = spline.second_differences()
     Dw = D * (1.0 / (CURVATURE_TOL_PER_M * (spacing * footprint) ** 2))
-    return _Problem(graph, R, sides, c_ref, spline, Dw, prior_surface, robust)
+    return _Problem(graph, R, sides, c_ref, spline, Dw, prior_surface, robust, footprint)
 
 
 class _Problem:
     """E of the spline's control points, per surface (the surfaces are independent:
     no triangle or prior row joins two), and its Levenberg-Marquardt steps."""
 
-    def __init__(self, graph, R, sides, c_ref, spline, Dw, prior_surface, robust):
+    def __init__(self, graph, R, sides, c_ref, spline, Dw, prior_surface, robust, footprint):
         self.graph, self.R, self.sides, self.c_ref = graph, R, sides, c_ref
+        self.footprint = footprint
         self.spline, self.B, self.Dw, self.robust = spline, spline.basis, Dw, robust
         self.Bt = spline.basis.T.tocsr()  # B^T, once: every step multiplies by it
         self.gram = SplineGram(spline.basis, spline.grid_coords, graph.neighbours, sides.pairs)
@@ -124,6 +148,16 @@ class _Problem:
             self.B, self.spline.grid_coords, g.neighbours, self.sides.pairs, pixels=active
         )
         return out
+
+    def restricted(self, keep) -> _Problem:
+        """E over the surfaces ``keep`` (n_surfaces,) bool alone; its control points
+        are this problem's ``c[keep[self.ctrl_surface]]`` (a surface's control
+        grid depends on its own pixels alone)."""
+        sub = self.graph.subset(keep)
+        spacing = self.spline.spacing
+        return _problem(
+            sub, self.R[sub.index], self.sides, self.c_ref, spacing, self.footprint, self.robust
+        )
 
     def _residuals(self, c, **kw):
         """:func:`hs_residuals` at control points ``c`` over the counted pixels."""
@@ -303,6 +337,81 @@ def _kept_rows(rows, tried, take, pairs: int, active=None):
     return J, np.where(row, r1, r), kept
 
 
+def restart_round(problem, c, factors, valley, focal_px, iterations, search_kw, say=None):
+    """One round of second starts: each surface restarted at the depths of its
+    neighbours that fit better (:func:`.restart.neighbour_factors`).
+
+    Beyond the paper. For each neighbour's depth in turn, the surfaces that
+    have one are refined again from it (``iterations`` LM steps,
+    :func:`.valley.depth_search` with ``search_kw``, LM steps until E settles),
+    alone and at the robust scale of the residuals at ``c``; a surface keeps
+    the new depth where its E over the pixels usable at both is lower than
+    its best so far and it keeps ``RESTART_KEEP`` of its usable pixels.
+    ``focal_px``: the reference camera's focal length, pixels (the
+    neighbours' gap, :data:`~colourhs.reconstruct.bayes.restart.RESTART_GAP`).
+
+    Where E's difference between the two depths is within ``RESTART_TEST``
+    of its standard error (:func:`.restart.energy_difference`), the data do
+    not rule either out: half their relative distance is the surface's
+    ``spread``, which joins its depth factor's sigma.
+
+    Returns the control points, the depth factors and their relative sigmas
+    (n_surfaces,; the new search's where a surface was restarted), the
+    surfaces restarted (n_surfaces,) bool, whether the restarted surfaces'
+    E settled, and each surface's relative ``spread`` (n_surfaces,).
+    """
+    from scipy.ndimage import median
+
+    g = problem.graph
+    sc = problem.scale(c)
+    _, _, info = problem._residuals(c, jacobian=False, scale=sc)
+    level = surface_fit_levels(
+        info["chi2"], info["valid"], g.surface, problem.n, problem.sides.pairs
+    )
+    f = neighbour_factors(g, problem.B @ c, level, RESTART_GAP * focal_px)
+    taken = np.zeros(problem.n, bool)
+    start, start_factors = c, np.asarray(factors)
+    spread = np.zeros(problem.n)
+    factors, valley = factors.copy(), valley.copy()
+    settled_all = True
+    for j in range(f.shape[1]):
+        cand = np.isfinite(f[:, j])
+        if not cand.any():
+            break
+        if say is not None:
+            say(f"refinement: {int(cand.sum())} surfaces restarted at a neighbour's depth")
+        sub = problem.restricted(cand)
+        mine = cand[problem.ctrl_surface]
+        c0 = c[mine]
+        alt = sub.scaled(start[mine], f[cand, j])  # each start from the round's depths
+        alt, _, _, _ = sub.lm(alt, iterations, scale=sc, say=say)
+        stride = search_stride(sub.spline.spacing)
+        alt, fa, va = depth_search(sub.subsampled(stride), alt, scale=sc, say=say, **search_kw)
+        alt, _, _, settled = sub.lm(alt, iterations, scale=sc, say=say, settle=True)
+        s0, s1 = sub.state(c0, sc), sub.state(alt, sc)
+        e0, e1 = sub.compare([s0, s1])
+        u0 = np.bincount(sub.graph.surface, np.isfinite(s0[0]), sub.n)
+        u1 = np.bincount(sub.graph.surface, np.isfinite(s1[0]), sub.n)
+        comparable = (u1 >= RESTART_KEEP * u0) & (u1 > 0)
+        better = (e1 < e0) & comparable
+        # Where E cannot rule the other depth out, the sigma must cover it.
+        sg = sub.graph
+        blocks = valley_blocks(sg.rows, sg.cols, sg.shape[1], sub.spline.spacing)
+        diff, se = energy_difference(s0[0], s1[0], s0[1], s1[1], sg.surface, blocks, sub.n)
+        z0, z1 = sub.B @ c0, sub.B @ alt
+        apart = np.abs(median(z1 / z0 - 1.0, sg.surface, np.arange(sub.n)))
+        tied = comparable & (np.abs(diff) < RESTART_TEST * se)
+        spread[cand] = np.maximum(spread[cand], np.where(tied, 0.5 * apart, 0.0))
+        c = c.copy()
+        c[mine] = np.where(better[sub.ctrl_surface], alt, c0)
+        taken[cand] |= better
+        moved = start_factors[cand] * f[cand, j] * fa
+        factors[cand] = np.where(better, moved, factors[cand])
+        valley[cand] = np.where(better, va, valley[cand])
+        settled_all &= bool(settled or not better.any())
+    return c, factors, valley, taken, settled_all, spread
+
+
 def explained_surfaces(chi2, usable, surface, scale) -> np.ndarray:
     """Which surfaces (n_surfaces,) the model explains: the median chi2 of a
     surface's usable pixels is under the Geman-McClure ``scale``.
@@ -344,6 +453,7 @@ class RefineOptions:
         in pixel footprints (:data:`~colourhs.reconstruct.bayes.surface.EDGE_FOOTPRINTS`).
     search : whether :func:`.valley.depth_search` sets each surface's depth.
     sigma_samples : draws of :func:`depth_sigma` (0: no uncertainty, all NaN).
+    restarts : rounds of :func:`restart_round` after the search (with ``search``).
     """
 
     spacing_px: float | None = None
@@ -352,6 +462,7 @@ class RefineOptions:
     edge_footprints: float = EDGE_FOOTPRINTS
     search: bool = True
     sigma_samples: int = SIGMA_SAMPLES
+    restarts: int = RESTART_ROUNDS
 
 
 def refine_surface(
@@ -372,7 +483,9 @@ def refine_surface(
     coarser, then as many on the final one, bring each surface's shape into
     agreement with the HS normals at its starting depth; :func:`.valley.depth_search`
     then finds each surface's depth (with ``opts.search``); ``opts.iterations``
-    more steps polish shape and depth together.
+    more steps polish shape and depth together; up to ``opts.restarts``
+    rounds of :func:`restart_round` then restart surfaces at their
+    neighbours' depths.
 
     Parameters
     ----------
@@ -407,8 +520,9 @@ def refine_surface(
         where the rows were unusable and in filled holes), ``filled`` (H*W,)
         filled holes, ``energy`` after each step, ``depth_factors`` (the
         search's scale per surface), ``converged`` (False where the final
-        stage did not settle: every sigma is then infinite), ``surfaces`` and
-        ``control_points``.
+        stage did not settle: every sigma is then infinite), ``surfaces``,
+        ``restarted`` (surfaces whose depth came from a neighbour's,
+        :func:`restart_round`) and ``control_points``.
     """
     rays, c_ref, shape = grid.rays, grid.centre, grid.shape
     H, W = shape
@@ -428,18 +542,27 @@ def refine_surface(
     energies += more
     factors = np.ones(graph.n_surfaces)
     valley = np.zeros(graph.n_surfaces)
+    search_kw = {"clear_sides": clear_sides, "ratio_sigma": ratio_sigma}
     if opts.search:
         stride = search_stride(spacing)
         say(f"refinement: depth search along E's valley (pixel stride {stride})")
-        c, factors, valley = depth_search(
-            problem.subsampled(stride),
-            c,
-            clear_sides=clear_sides,
-            ratio_sigma=ratio_sigma,
-            say=say,
-        )
+        c, factors, valley = depth_search(problem.subsampled(stride), c, say=say, **search_kw)
     say(f"refinement: {iterations} final LM steps")
     c, more, _, converged = problem.lm(c, iterations, say=say, settle=True)
+    restarted = np.zeros(graph.n_surfaces, bool)
+    ambiguity = np.zeros(graph.n_surfaces)  # relative: half the gap to a depth E cannot rule out
+    if opts.search and graph.n_surfaces > 1:
+        focal = float(np.median(np.abs(z0[graph.pix]) / footprint[graph.pix]))
+        for _ in range(opts.restarts):
+            c, factors, valley, taken, settled, spread = restart_round(
+                problem, c, factors, valley, focal, iterations, search_kw, say
+            )
+            converged &= settled
+            restarted |= taken
+            ambiguity = np.maximum(ambiguity, spread)
+            if not taken.any():
+                break
+        valley = np.hypot(valley, ambiguity)
     z = B @ c
     _, _, info = hs_residuals(z, graph, R, sides, c_ref, robust, jacobian=False)
     out_z = np.full(H * W, np.nan)
@@ -488,6 +611,7 @@ def refine_surface(
             "depth_factors": factors.tolist(),
             "depth_factor_sigma": valley.tolist(),
             "surfaces": int(graph.n_surfaces),
+            "restarted": int(restarted.sum()),
             "control_points": int(B.shape[1]),
             "converged": bool(converged),
         },

@@ -106,6 +106,29 @@ class SurfaceGraph:
         q = np.concatenate([east[east >= 0], south[south >= 0]])
         g = sp.coo_matrix((np.ones(len(p)), (p, q)), shape=(n, n))
         self.n_surfaces, self.surface = connected_components(g, directed=False)
+        self.index = np.arange(n)  # each pixel's index in the graph this one was cut from
+
+    def subset(self, keep: np.ndarray) -> SurfaceGraph:
+        """The graph of the surfaces ``keep`` (n_surfaces,) bool alone.
+
+        Their pixels and links are unchanged (a link never joins two
+        surfaces); the surfaces are numbered in their order here, and
+        ``index`` gives each kept pixel's index in this graph.
+        """
+        import copy
+
+        sel = keep[self.surface]
+        out = copy.copy(self)
+        idx = np.full(self.n, -1)
+        idx[sel] = np.arange(int(sel.sum()))
+        out.pix, out.rows, out.cols = self.pix[sel], self.rows[sel], self.cols[sel]
+        out.n = int(sel.sum())
+        nbr = self.neighbours[:, sel]
+        out.neighbours = np.where(nbr >= 0, idx[np.maximum(nbr, 0)], -1)
+        out.surface = (np.cumsum(keep) - 1)[self.surface[sel]]
+        out.n_surfaces = int(np.count_nonzero(keep))
+        out.index = np.flatnonzero(sel)
+        return out
 
 
 @nb.njit(cache=True, inline="always")

@@ -32,6 +32,14 @@ surface at any resolution, wide enough that neighbouring blocks share few
 control points and no noise (the sides' blur is a pixel)."""
 
 
+def valley_blocks(rows: np.ndarray, cols: np.ndarray, width: int, spacing: float) -> np.ndarray:
+    """Each pixel's block (n,) for the cluster-robust variances: squares of
+    ``VALLEY_BLOCK`` spline spacings (``spacing``, pixels) over an image
+    ``width`` pixels wide, at pixel coordinates ``rows``, ``cols`` (n,)."""
+    block = VALLEY_BLOCK * spacing
+    return (rows // block).astype(np.int64) * (int(width // block) + 1) + cols // block
+
+
 def _near_trials(tried: dict, best: float, span: float):
     """The depth search's trial depths within ``span`` of ``best``: per-pixel rho
     (trials, n), prior energies (trials,), offsets ``x = d - best`` and the

@@ -16,9 +16,9 @@ import copy
 import numpy as np
 
 from colourhs.reconstruct.bayes.uncertainty import (
-    VALLEY_BLOCK,
     ratio_sensitivity,
     rim_valley_pull,
+    valley_blocks,
     valley_sigma,
 )
 
@@ -71,6 +71,7 @@ def depth_search(
     clear_sides=None,
     ratio_sigma=None,
     say=None,
+    scale=None,
 ):
     """Each surface's depth from the minimum of E along its family of shapes.
 
@@ -97,12 +98,13 @@ def depth_search(
     :func:`ratio_sensitivity` times it, added in variance).
     ``problem`` is E over the spline (``refine._Problem``, subsampled with
     :func:`search_stride`). ``say(text)``, if given, reports each trial depth (each is
-    ``SEARCH_FITS`` LM steps).
+    ``SEARCH_FITS`` LM steps). ``scale``: the robust scale at which energies
+    compare (default that of the residuals at ``c``).
     """
     n = problem.n
     if n == 0:  # nothing left to refine (every pixel dropped before): nothing to search
         return c, np.ones(0), np.zeros(0)
-    sc = problem.scale(c)
+    sc = problem.scale(c) if scale is None else scale
     mine = [problem.ctrl_surface == k for k in range(n)]
     pixels = [problem.graph.surface == k for k in range(n)]
     tried = [{} for _ in range(n)]  # surface -> offset -> (rho, prior, control points)
@@ -171,8 +173,7 @@ def depth_search(
         trial(at(best), best, vertex, everyone)
         best = pick(list(zip(best, vertex, strict=True)))
     g = problem.graph
-    block = VALLEY_BLOCK * problem.spline.spacing
-    groups = (g.rows // block).astype(np.int64) * (int(g.shape[1] // block) + 1) + g.cols // block
+    groups = valley_blocks(g.rows, g.cols, g.shape[1], problem.spline.spacing)
     sigma = np.array([valley_sigma(tried[k], best[k], groups[pixels[k]], step) for k in range(n)])
     if clear_sides is not None:  # the rim rows' pull on each surface's depth mode
         alt = copy.copy(problem)
