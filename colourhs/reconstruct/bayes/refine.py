@@ -25,6 +25,7 @@ from colourhs.reconstruct.bayes.restart import (
     energy_difference,
     neighbour_factors,
     surface_fit_levels,
+    surface_median_chi2,
 )
 from colourhs.reconstruct.bayes.spline import SplineSurface, default_spacing
 from colourhs.reconstruct.bayes.surface import (
@@ -424,14 +425,9 @@ def explained_surfaces(chi2, usable, surface, scale) -> np.ndarray:
     (its pixels may still be filled as a hole of a surface around it)
     rather than reported at a depth the data do not support.
     """
-    from scipy.ndimage import median
-
     n = int(surface.max()) + 1 if len(surface) else 0
-    if n == 0 or not usable.any():
-        return np.zeros(n, bool)
-    med = np.asarray(median(chi2[usable], surface[usable], np.arange(n)), float)
-    has = np.bincount(surface[usable], minlength=n) > 0  # no usable pixel: not explained
-    return has & (med < scale)
+    med = surface_median_chi2(chi2, usable, surface, n)
+    return med < scale  # NaN (no usable pixel): not explained
 
 
 @dataclass(frozen=True)

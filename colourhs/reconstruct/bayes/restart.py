@@ -39,6 +39,19 @@ RESTART_TEST = 2.0  # E must prefer one depth by this many standard errors to ru
 """
 
 
+def surface_median_chi2(chi2, usable, surface, n_surfaces: int) -> np.ndarray:
+    """The median ``chi2`` (n,) of each surface's ``usable`` (n,) pixels (n_surfaces,);
+    NaN where a surface (``surface`` (n,)) has none."""
+    from scipy.ndimage import median
+
+    out = np.full(n_surfaces, np.nan)
+    has = np.bincount(surface[usable], minlength=n_surfaces) > 0
+    if has.any():
+        med = np.asarray(median(chi2[usable], surface[usable], np.arange(n_surfaces)), float)
+        out[has] = med[has]
+    return out
+
+
 def surface_fit_levels(chi2, usable, surface, n_surfaces: int, pairs: int) -> np.ndarray:
     """How well each surface (n_surfaces,) fits eq. (5): the median chi2 of its usable
     pixels per degree of freedom, in units of the predicted noise (1 on the noise
@@ -50,14 +63,7 @@ def surface_fit_levels(chi2, usable, surface, n_surfaces: int, pairs: int) -> np
     ``pairs`` rows per pixel (the median of a chi-square with P degrees of
     freedom is about P - 2/3).
     """
-    from scipy.ndimage import median
-
-    out = np.full(n_surfaces, np.nan)
-    has = np.bincount(surface[usable], minlength=n_surfaces) > 0
-    if has.any():
-        med = np.asarray(median(chi2[usable], surface[usable], np.arange(n_surfaces)), float)
-        out[has] = med[has] / (pairs - 2.0 / 3.0)
-    return out
+    return surface_median_chi2(chi2, usable, surface, n_surfaces) / (pairs - 2.0 / 3.0)
 
 
 def neighbour_factors(
