@@ -655,3 +655,40 @@ def test_restart_brings_an_island_started_beyond_the_search(plane_sides):
         assert (info["restarted"] > 0) == (restarts > 0)
     assert errs[0] > 100.0, errs
     assert errs[rf.RESTART_ROUNDS] < 0.6, errs
+
+
+def test_with_scan_gives_starts_to_surfaces_without_a_neighbour():
+    """restart.with_scan: a surface with no neighbour's factor gets SCAN_STARTS; one
+    with a neighbour's keeps its own, and the array widens to hold the scan."""
+    from colourhs.reconstruct.bayes.restart import SCAN_STARTS, with_scan
+
+    f = np.array([[1.1], [np.nan]])
+    out = with_scan(f)
+    assert out.shape == (2, max(1, len(SCAN_STARTS)))
+    assert out[0, 0] == 1.1 and np.isnan(out[0, 1:]).all()
+    assert np.array_equal(out[1, : len(SCAN_STARTS)], SCAN_STARTS)
+
+
+def test_scan_brings_a_plane_started_beyond_the_search(plane_sides, monkeypatch):
+    """Beyond the paper: the whole plane started 12 % off (every surface alike, so no
+    neighbour's depth helps) ends at a minimum of E beyond the depth search's reach;
+    the first restart round's starts 2 % either side of each surface without a
+    better neighbour (restart.with_scan) reach the truth. Measured: 29.9 mm
+    without the scan, 0.285 mm with it."""
+    import colourhs.reconstruct.bayes.refine as rf
+    from colourhs.reconstruct.inputs import RayGrid
+
+    fr, ref, rays, gd, _, mask, sides = plane_sides
+    H, W = fr.rig.image.height, fr.rig.image.width
+    grid = RayGrid(rays, ref.centre, (H, W))
+    footprint = np.abs(np.nan_to_num(gd)) / ref.K[0, 0]
+    z0 = np.nan_to_num(gd * 1.12)
+    opts = rf.RefineOptions(sigma_samples=8)
+    errs = {}
+    for scan in (True, False):
+        if not scan:
+            monkeypatch.setattr(rf, "with_scan", lambda f: f)
+        z, _, info = rf.refine_surface(z0, mask, grid, sides, footprint, opts)
+        errs[scan] = np.median(np.abs(z - gd)[info["valid"]]) * 1e3
+    assert errs[False] > 25.0, errs
+    assert errs[True] < 0.32, errs

@@ -3,9 +3,10 @@
 Beyond the paper. Each connected surface's depth map is a cubic B-spline
 (:mod:`colourhs.reconstruct.bayes.spline`). Levenberg-Marquardt fits its shape;
 its depth, the one mode E determines weakly, comes from a search along E's
-valley (:func:`colourhs.reconstruct.bayes.valley.depth_search`), and a second
-start at each better-fitting neighbour's depth (:func:`restart_round`) where the
-labelling left a surface beyond the search's reach; holes are filled
+valley (:func:`colourhs.reconstruct.bayes.valley.depth_search`), and second
+starts at the better-fitting neighbours' depths, or a few per cent either side of
+its own (:func:`restart_round`), where the labelling left a surface beyond the
+search's reach or at a local minimum of E; holes are filled
 (:func:`~colourhs.reconstruct.bayes.surface.fill_holes`).
 """
 
@@ -26,6 +27,7 @@ from colourhs.reconstruct.bayes.restart import (
     neighbour_factors,
     surface_fit_levels,
     surface_median_chi2,
+    with_scan,
 )
 from colourhs.reconstruct.bayes.spline import SplineSurface, default_spacing
 from colourhs.reconstruct.bayes.surface import (
@@ -83,7 +85,8 @@ RESTART_KEEP = 0.9  # a second start must keep this share of a surface's usable 
   reported (its depths' sigma is infinite).
 - ``RESTART_ROUNDS``: a count of hops, each passing a depth from one
   surface to the next (:mod:`colourhs.reconstruct.bayes.restart`), so free of
-  the rig; a round refines only the surfaces restarted.
+  the rig; a round refines only the surfaces restarted, and only the first
+  scans the depths around the surfaces that have no better neighbour.
 - ``RESTART_KEEP``: a share of pixels. E compares two depths over the
   pixels usable at both (:meth:`_Problem.compare`); a depth where a surface
   loses more than a tenth of them to the other views' silhouettes and
@@ -338,9 +341,13 @@ def _kept_rows(rows, tried, take, pairs: int, active=None):
     return J, np.where(row, r1, r), kept
 
 
-def restart_round(problem, c, factors, valley, focal_px, iterations, search_kw, say=None):
+def restart_round(
+    problem, c, factors, valley, focal_px, iterations, search_kw, say=None, scan=False
+):
     """One round of second starts: each surface restarted at the depths of its
-    neighbours that fit better (:func:`.restart.neighbour_factors`).
+    neighbours that fit better (:func:`.restart.neighbour_factors`) and, with
+    ``scan``, one without such a neighbour at :data:`.restart.SCAN_STARTS`
+    times its own depth (:func:`.restart.with_scan`).
 
     Beyond the paper. For each neighbour's depth in turn, the surfaces that
     have one are refined again from it (``iterations`` LM steps,
@@ -364,12 +371,14 @@ def restart_round(problem, c, factors, valley, focal_px, iterations, search_kw, 
     from scipy.ndimage import median
 
     g = problem.graph
-    sc = problem.scale(c)
-    _, _, info = problem._residuals(c, jacobian=False, scale=sc)
+    _, _, info = problem._residuals(c, robust=problem.robust, jacobian=False)
+    sc = info["scale"]
     level = surface_fit_levels(
         info["chi2"], info["valid"], g.surface, problem.n, problem.sides.pairs
     )
     f = neighbour_factors(g, problem.B @ c, level, RESTART_GAP * focal_px)
+    if scan:
+        f = with_scan(f)
     taken = np.zeros(problem.n, bool)
     start, start_factors = c, np.asarray(factors)
     spread = np.zeros(problem.n)
@@ -380,7 +389,7 @@ def restart_round(problem, c, factors, valley, focal_px, iterations, search_kw, 
         if not cand.any():
             break
         if say is not None:
-            say(f"refinement: {int(cand.sum())} surfaces restarted at a neighbour's depth")
+            say(f"refinement: {int(cand.sum())} surfaces restarted at another depth")
         sub = problem.restricted(cand)
         mine = cand[problem.ctrl_surface]
         c0 = c[mine]
@@ -449,7 +458,8 @@ class RefineOptions:
         in pixel footprints (:data:`~colourhs.reconstruct.bayes.surface.EDGE_FOOTPRINTS`).
     search : whether :func:`.valley.depth_search` sets each surface's depth.
     sigma_samples : draws of :func:`depth_sigma` (0: no uncertainty, all NaN).
-    restarts : rounds of :func:`restart_round` after the search (with ``search``).
+    restarts : rounds of :func:`restart_round` after the search (with ``search``;
+        the first also scans :data:`.restart.SCAN_STARTS`).
     """
 
     spacing_px: float | None = None
@@ -547,11 +557,11 @@ def refine_surface(
     c, more, _, converged = problem.lm(c, iterations, say=say, settle=True)
     restarted = np.zeros(graph.n_surfaces, bool)
     ambiguity = np.zeros(graph.n_surfaces)  # relative: half the gap to a depth E cannot rule out
-    if opts.search and graph.n_surfaces > 1:
+    if opts.search and graph.n_surfaces > 0:
         focal = float(np.median(np.abs(z0[graph.pix]) / footprint[graph.pix]))
-        for _ in range(opts.restarts):
+        for k in range(opts.restarts):
             c, factors, valley, taken, settled, spread = restart_round(
-                problem, c, factors, valley, focal, iterations, search_kw, say
+                problem, c, factors, valley, focal, iterations, search_kw, say, scan=k == 0
             )
             converged &= settled
             restarted |= taken

@@ -6,9 +6,11 @@ depth mode E determines weakly is then fitted to a local minimum of E, with
 a small valley sigma. The pieces of one continuous object, split by depth
 edges in a wrong start or by dark pure-colour patches between them, each
 find their own depth, and some find the truth. These functions give each
-surface the depth of its best-fitting neighbour as a second start;
-:func:`colourhs.reconstruct.bayes.refine.refine_surface` refines from it
-and keeps whichever of the two starts ends at the lower E.
+surface the depths of its better-fitting neighbours as second starts, and
+a surface with no such neighbour starts 2 % nearer and farther than its own
+depth, where E may hold a lower minimum behind a rise (:func:`with_scan`);
+:func:`colourhs.reconstruct.bayes.refine.refine_surface` refines from each
+and keeps whichever start ends at the lowest E.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ RESTART_GAP = 0.015  # surfaces closer than this share of the focal length (pixe
 RESTART_MIN = 0.01  # a neighbour's depth differs by less than this share: no second start
 RESTART_STARTS = 3  # at most this many neighbours' depths are tried per surface and round
 RESTART_TEST = 2.0  # E must prefer one depth by this many standard errors to rule the other out
+SCAN_STARTS = (0.98, 1.02)  # depth factors tried on a surface without a better neighbour
 """Why these values hold on any rig:
 
 - ``RESTART_GAP``: two points of one surface ``g`` pixels apart differ in
@@ -36,6 +39,12 @@ RESTART_TEST = 2.0  # E must prefer one depth by this many standard errors to ru
   depths (:func:`energy_difference`), which are in the data's own noise
   units on any rig: a difference under two (a 5 % two-sided test) does
   not rule the other depth out, and the surface's sigma must cover it.
+- ``SCAN_STARTS``: relative depths, so the same at any working distance.
+  The depth search walks downhill from its start and stops where E rises,
+  so a local minimum of E along the valley can hold a surface a few per
+  cent off, behind a rise, with a worse fit than the truth's. A start 2 %
+  (four search steps) either side is past such a rise, and its own search
+  walks on for 6 %, so starts farther out add cost and no reach.
 """
 
 
@@ -90,17 +99,26 @@ def neighbour_factors(
     depth[graph.rows, graph.cols] = z
     fit = np.where(np.isfinite(level), level, np.inf)
     out = np.full((graph.n_surfaces, starts), np.nan)
+    reach = int(np.ceil(gap_px)) + 1
+    order = np.argsort(graph.surface, kind="stable")
+    bounds = np.searchsorted(graph.surface[order], np.arange(graph.n_surfaces + 1))
     for s in np.flatnonzero(np.isfinite(level)):
-        better = (lab >= 0) & (fit[np.maximum(lab, 0)] < fit[s])
+        mine = order[bounds[s] : bounds[s + 1]]
+        r, c = graph.rows[mine], graph.cols[mine]
+        # Only pixels within the gap of the surface can be its neighbours:
+        # the distance transform runs over its box grown by the gap.
+        r0, c0 = max(r.min() - reach, 0), max(c.min() - reach, 0)
+        r1, c1 = min(r.max() + reach + 1, H), min(c.max() + reach + 1, W)
+        box = lab[r0:r1, c0:c1]
+        better = (box >= 0) & (fit[np.maximum(box, 0)] < fit[s])
         if not better.any():
             continue
         dist, (ii, jj) = distance_transform_edt(~better, return_indices=True)
-        mine = graph.surface == s
-        r, c = graph.rows[mine], graph.cols[mine]
+        r, c = r - r0, c - c0
         near = dist[r, c] <= gap_px
         if not near.any():
             continue
-        ni, nj = ii[r[near], c[near]], jj[r[near], c[near]]
+        ni, nj = ii[r[near], c[near]] + r0, jj[r[near], c[near]] + c0
         nb = lab[ni, nj]
         ratio = depth[ni, nj] / z[mine][near]
         counts = np.bincount(nb)
@@ -110,6 +128,18 @@ def neighbour_factors(
             if min(abs(f - g) for g in found) > RESTART_MIN and len(found) <= starts:
                 out[s, len(found) - 1] = f
                 found.append(f)
+    return out
+
+
+def with_scan(factors: np.ndarray, scan=SCAN_STARTS) -> np.ndarray:
+    """:func:`neighbour_factors`' ``factors`` (n_surfaces, k), with the relative
+    depths ``scan`` as the starts of each surface that has no neighbour's
+    (n_surfaces, max(k, len(scan)))."""
+    n, k = factors.shape
+    out = np.full((n, max(k, len(scan))), np.nan)
+    out[:, :k] = factors
+    lone = ~np.isfinite(factors).any(axis=1)
+    out[np.ix_(lone, np.arange(len(scan)))] = scan
     return out
 
 
