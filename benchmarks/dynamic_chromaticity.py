@@ -70,6 +70,14 @@ the chromaticity error of the map used against the frame's truth
   what the reconstruction sees); 0.1 is about a 10 % error of a band ratio.
 - ``chroma_known``: the share of the object's pixels (as above) where the map
   has a p at all.
+- ``track_position_px`` (median), ``track_position_p90_px``: for a tracked map,
+  how far each pixel's tracked position in the chromatic frame is from its point's
+  true one (:func:`colourhs.evaluation.tracking_errors.true_positions`, from the
+  ground-truth meshes, which share one triangulation), pooled over the cameras'
+  pixels with both, pixels; ``track_motion_px``: the median true motion since the
+  chromatic frame, pixels, and ``track_position_known``: the share of the pixels
+  with a true position that have a tracked one. A p can be right with a wrong
+  position (inside a uniform patch), so this is the tracking's own error.
 
 The summary (``dynamic_chromaticity_summary<TAG>.md`` / ``.json``) gives per
 scene x variant and metric the median over seeds and the worst seed of the
@@ -215,6 +223,47 @@ def chroma_error(map_h5: Path, truth_h5: Path, cameras) -> dict:
     }
 
 
+#: The tracking's position columns (:func:`position_error`), None where not measured.
+POSITION_COLUMNS = (
+    "track_position_px",
+    "track_position_p90_px",
+    "track_motion_px",
+    "track_position_known",
+)
+
+
+def position_error(map_h5: Path, data: Path, scene: str, frame: str, chromatic: str, rig) -> dict:
+    """:data:`POSITION_COLUMNS` of a tracked map (one with ``position/<camera>``) against
+    the true positions, pooled over the rig's cameras; None where the map has no
+    positions or the meshes no common triangulation."""
+    import h5py
+
+    from colourhs.common.ply import load_mesh
+    from colourhs.evaluation.tracking_errors import (
+        position_summary,
+        same_triangulation,
+        true_positions,
+    )
+
+    with h5py.File(map_h5) as f:
+        if "position" not in f:
+            return dict.fromkeys(POSITION_COLUMNS)
+        pos = np.stack([f[f"position/{cam}"][()] for cam in rig.camera_names])
+    gt = data / "scenes" / scene / "gt"
+    now, then = load_mesh(gt / f"{frame}.ply"), load_mesh(gt / f"{chromatic}.ply")
+    if not same_triangulation(now, then):
+        return dict.fromkeys(POSITION_COLUMNS)
+    w, h = rig.image.width, rig.image.height
+    truth = np.stack([true_positions(now, then, rig.camera(c), w, h) for c in rig.camera_names])
+    s = position_summary(pos, truth)
+    return {
+        "track_position_px": s["position_median_px"],
+        "track_position_p90_px": s["position_p90_px"],
+        "track_motion_px": s["motion_median_px"],
+        "track_position_known": s["position_known"],
+    }
+
+
 def evaluate_frame(data, scene, frame, variant: Variant, files, chromatic, map_h5, work) -> dict:
     """One frame of one scene x variant (``generalisation.evaluate_variant`` on that frame,
     with ``map_h5`` as the object's chromaticity map where there is one)."""
@@ -306,8 +355,12 @@ def run_seed(
                 except Exception as exc:  # a pipeline failure is a frame lost, not a lost seed
                     m = failed_frame(exc, time.time() - t1)
                 err = {"chroma_rms_log": None, "chroma_known": None}
+                err |= dict.fromkeys(POSITION_COLUMNS)
                 if map_h5 is not None:
-                    err = chroma_error(Path(map_h5), truth, cameras)
+                    err |= chroma_error(Path(map_h5), truth, cameras)
+                    err |= position_error(
+                        Path(map_h5), data, scene, frame, sc.chromatic_frame, ds.rig
+                    )
                 rows.append(
                     {
                         "preset": preset,
@@ -346,6 +399,8 @@ METRICS = (
     ("dropped_no_chromaticity", "dropped: no p", ".3f", "max"),
     ("chroma_rms_log", "chroma RMS log", ".3f", "max"),
     ("chroma_known", "chroma known", ".3f", "min"),
+    ("track_position_px", "position error (px)", ".2f", "max"),
+    ("track_motion_px", "motion (px)", ".1f", "max"),
 )
 
 
@@ -429,10 +484,12 @@ def summarise_markdown(summary: dict) -> str:
         "seeds / worst seed. `moved`: each seed's median over the frames other than the "
         "chromatic frame; `worst moved`: each seed's worst such frame. Chroma RMS log: RMS "
         "of the centred log ratios' difference to the truth over the object's pixels where "
-        "the map has a p (`known`: their share). Within 3 sigma: the share of the compared "
-        "pixels whose depth error is within 3 of their depth_sigma (0.997 for an honest "
-        "Gaussian error bar). `empty`: seed x frame rows with nothing "
-        "reconstructed (no depth figure; left out of the depth columns, coverage 0).",
+        "the map has a p (`known`: their share). Position error: a tracked map's median "
+        "distance from each pixel's tracked position in the chromatic frame to its point's "
+        "true one (pixels; motion: the true one's median distance from the pixel). Within "
+        "3 sigma: the share of the compared pixels whose depth error is within 3 of their "
+        "depth_sigma (0.997 for an honest Gaussian error bar). `empty`: seed x frame rows "
+        "with nothing reconstructed (no depth figure; left out of the depth columns, coverage 0).",
         "",
     ]
     head = [
@@ -447,6 +504,7 @@ def summarise_markdown(summary: dict) -> str:
         "coverage, moved",
         "chroma RMS log, chromatic / moved",
         "chroma known, chromatic / moved",
+        "position error (px), chromatic / moved",
         "empty",
     ]
     lines += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
@@ -463,6 +521,7 @@ def summarise_markdown(summary: dict) -> str:
                 _pair(m.get("coverage"), ".3f"),
                 _home_moved(h, m, "chroma_rms_log", ".3f"),
                 _home_moved(h, m, "chroma_known", ".3f"),
+                _home_moved(h, m, "track_position_px", ".2f"),
                 str(len(e["empty_frames"])),
             ]
             lines.append("| " + " | ".join([scene, variant, *cells]) + " |")

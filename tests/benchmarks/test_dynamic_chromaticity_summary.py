@@ -69,3 +69,47 @@ def test_the_error_bars_calibration_is_summarised_beside_the_depth():
     assert "0.98 / 0.97; 0.78 / 0.48" in row
     head = next(line for line in md.splitlines() if line.startswith("| scene |"))
     assert "within 3 sigma, chromatic / moved" in head
+
+
+def test_position_error_of_a_tracked_map_against_the_meshes(tmp_path):
+    """dyn.position_error: a plane at 1 m moved 5 cm (5 px at f 100 px) between the
+    chromatic frame and the frame; a tracked map that saw no motion is 5 px off,
+    one that followed it 0 px; a map without positions (the calibrated one) has none."""
+    from types import SimpleNamespace
+
+    import h5py
+
+    from colourhs.common.ply import write_ply
+
+    w, h, f = 80, 60, 100.0
+    cam = SimpleNamespace(
+        K=np.array([[f, 0.0, 40.0], [0.0, f, 30.0], [0.0, 0.0, 1.0]]),
+        dist=np.zeros(5),
+        R=np.eye(3),
+        t=np.zeros(3),
+    )
+    rig = SimpleNamespace(
+        camera_names=("A",), image=SimpleNamespace(width=w, height=h), camera=lambda name: cam
+    )
+    gt = tmp_path / "scenes" / "plane" / "gt"
+    gt.mkdir(parents=True)
+    v = np.array([[-0.4, -0.4, 1.0], [0.4, -0.4, 1.0], [0.4, 0.4, 1.0], [-0.4, 0.4, 1.0]])
+    tri = np.array([[0, 1, 2], [0, 2, 3]])
+    write_ply(gt / "000000.ply", v, tri)
+    write_ply(gt / "000001.ply", v + [0.05, 0.0, 0.0], tri)
+    gx, gy = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
+    for name, dx in (("still", 0.0), ("followed", -5.0)):
+        with h5py.File(tmp_path / f"{name}.h5", "w") as m:
+            m["A"] = np.ones((h, w, 3), np.float32)
+            m["position/A"] = np.stack([gx + dx, gy], axis=-1)
+    args = (tmp_path, "plane", "000001", "000000", rig)
+    still = dyn.position_error(tmp_path / "still.h5", *args)
+    assert still["track_position_px"] == pytest.approx(5.0, abs=1e-3)
+    assert still["track_motion_px"] == pytest.approx(5.0, abs=1e-3)
+    assert still["track_position_known"] == 1.0
+    followed = dyn.position_error(tmp_path / "followed.h5", *args)
+    assert followed["track_position_px"] == pytest.approx(0.0, abs=1e-3)
+    with h5py.File(tmp_path / "calibrated.h5", "w") as m:
+        m["A"] = np.ones((h, w, 3), np.float32)
+    none = dyn.position_error(tmp_path / "calibrated.h5", *args)
+    assert none == dict.fromkeys(dyn.POSITION_COLUMNS)
