@@ -32,6 +32,15 @@ def rot_y(degrees: float) -> np.ndarray:
     return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
 
 
+def pinhole(f: float, cx: float, cy: float):
+    """A camera at the origin looking along +z without distortion (``K``, ``dist``,
+    ``R``, ``t``, as the ray casting and projection read them); f, cx, cy in pixels."""
+    from types import SimpleNamespace
+
+    K = np.array([[f, 0.0, cx], [0.0, f, cy], [0.0, 0.0, 1.0]])
+    return SimpleNamespace(K=K, dist=np.zeros(5), R=np.eye(3), t=np.zeros(3))
+
+
 def rig_dict(bit_depth: int = 16) -> dict[str, Any]:
     """A valid rig.json document: cam1 at the world origin's -z side, cam2/cam3 turned by ±20°."""
     black, white = LEVELS[bit_depth]

@@ -78,16 +78,12 @@ def test_position_error_of_a_tracked_map_against_the_meshes(tmp_path):
     from types import SimpleNamespace
 
     import h5py
+    from capture_helpers import pinhole
 
     from colourhs.common.ply import write_ply
 
-    w, h, f = 80, 60, 100.0
-    cam = SimpleNamespace(
-        K=np.array([[f, 0.0, 40.0], [0.0, f, 30.0], [0.0, 0.0, 1.0]]),
-        dist=np.zeros(5),
-        R=np.eye(3),
-        t=np.zeros(3),
-    )
+    w, h = 80, 60
+    cam = pinhole(100.0, 40.0, 30.0)
     rig = SimpleNamespace(
         camera_names=("A",), image=SimpleNamespace(width=w, height=h), camera=lambda name: cam
     )

@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
-from types import SimpleNamespace
-
 import numpy as np
 import pytest
+from capture_helpers import pinhole
 
 from colourhs.evaluation.tracking_errors import (
     position_summary,
@@ -13,13 +12,8 @@ from colourhs.evaluation.tracking_errors import (
     true_positions,
 )
 
-W, H, F = 80, 60, 100.0
-CAMERA = SimpleNamespace(
-    K=np.array([[F, 0.0, 40.0], [0.0, F, 30.0], [0.0, 0.0, 1.0]]),
-    dist=np.zeros(5),
-    R=np.eye(3),
-    t=np.zeros(3),
-)
+W, H = 80, 60
+CAMERA = pinhole(100.0, 40.0, 30.0)
 
 
 def _square(z: float, half: float, shift=(0.0, 0.0)):
