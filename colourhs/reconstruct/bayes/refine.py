@@ -354,7 +354,10 @@ def restart_round(
     :func:`.valley.depth_search` with ``search_kw``, LM steps until E settles),
     alone and at the robust scale of the residuals at ``c``; a surface keeps
     the new depth where its E over the pixels usable at both is lower than
-    its best so far and it keeps ``RESTART_KEEP`` of its usable pixels.
+    its best so far and it keeps ``RESTART_KEEP`` of its usable pixels; a
+    scanned surface's E must be lower by ``RESTART_TEST`` standard errors
+    (its start is a guess: a lower E within E's noise would trade one depth
+    the data support for another, adding scatter, not accuracy).
     ``focal_px``: the reference camera's focal length, pixels (the
     neighbours' gap, :data:`~colourhs.reconstruct.bayes.restart.RESTART_GAP`).
 
@@ -377,6 +380,9 @@ def restart_round(
         info["chi2"], info["valid"], g.surface, problem.n, problem.sides.pairs
     )
     f = neighbour_factors(g, problem.B @ c, level, RESTART_GAP * focal_px)
+    # A scanned surface has no better neighbour: its start is a guess, not another
+    # surface's evidence, and must win beyond E's noise (below).
+    scanned = ~np.isfinite(f).any(axis=1) if scan else np.zeros(problem.n, bool)
     if scan:
         f = with_scan(f)
     taken = np.zeros(problem.n, bool)
@@ -403,11 +409,12 @@ def restart_round(
         u0 = np.bincount(sub.graph.surface, np.isfinite(s0[0]), sub.n)
         u1 = np.bincount(sub.graph.surface, np.isfinite(s1[0]), sub.n)
         comparable = (u1 >= RESTART_KEEP * u0) & (u1 > 0)
-        better = (e1 < e0) & comparable
         # Where E cannot rule the other depth out, the sigma must cover it.
         sg = sub.graph
         blocks = valley_blocks(sg.rows, sg.cols, sg.shape[1], sub.spline.spacing)
         diff, se = energy_difference(s0[0], s1[0], s0[1], s1[1], sg.surface, blocks, sub.n)
+        clear = ~scanned[cand] | (diff < -RESTART_TEST * se)
+        better = (e1 < e0) & comparable & clear
         z0, z1 = sub.B @ c0, sub.B @ alt
         apart = np.abs(median(z1 / z0 - 1.0, sg.surface, np.arange(sub.n)))
         tied = comparable & (np.abs(diff) < RESTART_TEST * se)
