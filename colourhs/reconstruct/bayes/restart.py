@@ -10,7 +10,8 @@ surface the depths of its better-fitting neighbours as second starts, and
 a surface with no such neighbour starts 2 % nearer and farther than its own
 depth, where E may hold a lower minimum behind a rise (:func:`with_scan`);
 :func:`colourhs.reconstruct.bayes.refine.refine_surface` refines from each
-and keeps whichever start ends at the lowest E.
+and keeps whichever start ends at the lowest E (a scanned start only beyond
+E's noise, :data:`RESTART_TEST`).
 """
 
 from __future__ import annotations
