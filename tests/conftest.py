@@ -41,6 +41,7 @@ SLOW_FIXTURES = {
     "offset_random_tiny",
     "fixed_tiny",
     "full_datasets",
+    "white_specular_cloth",
 }
 
 

@@ -525,6 +525,7 @@ def _consistent_surface(
         "filled": int(sinfo["filled"].sum()),
         "depth_factors": sinfo["depth_factors"],
         "depth_factor_sigma": sinfo["depth_factor_sigma"],
+        "robust_pull_m": sinfo["robust_pull_m"],
         "converged": sinfo["converged"],
     }
     return z, nrm, ok, sinfo["weights"], sigma, info

@@ -43,6 +43,7 @@ from colourhs.reconstruct.bayes.uncertainty import (
     SIGMA_SAMPLES,
     depth_sigma,
     filled_sigma,
+    robust_scale_pull,
     valley_blocks,
 )
 from colourhs.reconstruct.bayes.valley import depth_search, search_stride
@@ -529,10 +530,13 @@ def refine_surface(
         that :func:`explained_surfaces` leaves out), ``weights`` (H*W,) final
         robust weights (0 where the rows were unusable), ``sigma`` (H*W,) each
         depth's 1-sigma uncertainty (:func:`depth_sigma`, the depth search's
-        :func:`.uncertainty.valley_sigma` with its pulls, metres; :func:`filled_sigma`
+        :func:`.uncertainty.valley_sigma` with its pulls, and at least the
+        move of :func:`.uncertainty.robust_scale_pull`, metres; :func:`filled_sigma`
         where the rows were unusable and in filled holes), ``filled`` (H*W,)
         filled holes, ``energy`` after each step, ``depth_factors`` (the
-        search's scale per surface), ``converged`` (False where the final
+        search's scale per surface), ``robust_pull_m`` (per surface, the median
+        of :func:`.uncertainty.robust_scale_pull`'s move, metres; None without a
+        sigma), ``converged`` (False where the final
         stage did not settle: every sigma is then infinite), ``surfaces``,
         ``restarted`` (surfaces whose depth came from a neighbour's,
         :func:`restart_round`) and ``control_points``.
@@ -590,10 +594,16 @@ def refine_surface(
     weights = np.zeros(H * W)
     weights[graph.pix] = info["weights"] * info["valid"]
     sigma = np.full(H * W, np.nan)
+    pull_median = [None] * graph.n_surfaces
     if opts.sigma_samples > 0:
         say("refinement: each depth's uncertainty")
         local = depth_sigma(problem, c, opts.sigma_samples)
-        sigma[graph.pix] = np.hypot(local, np.abs(z) * valley[graph.surface])
+        say("refinement: the surface's move under a tighter robust scale")
+        pull = np.abs(robust_scale_pull(problem, c))
+        sigma[graph.pix] = np.maximum(np.hypot(local, z * valley[graph.surface]), pull)
+        for k in range(graph.n_surfaces):
+            on = np.isfinite(local) & (graph.surface == k)
+            pull_median[k] = float(np.median(pull[on])) if on.any() else None
     filled = np.zeros(H * W, bool)
     if fill is not None:
         zh = fill_holes(z, graph, fill, rays, surfaces=explained)
@@ -623,6 +633,7 @@ def refine_surface(
             "filled": filled,
             "depth_factors": factors.tolist(),
             "depth_factor_sigma": valley.tolist(),
+            "robust_pull_m": pull_median,
             "surfaces": int(graph.n_surfaces),
             "restarted": int(restarted.sum()),
             "control_points": int(B.shape[1]),

@@ -11,8 +11,10 @@ at the edges of unusable regions on it, a model error
 pair ratios' uncertainty allows (:func:`ratio_sensitivity`, the ratios'
 sigma from :func:`colourhs.calibration.photometric_solve.pair_ratio_sigma`), filled
 holes from their nearest measured depth
-(:func:`filled_sigma`); the parts add in variance. ML HS: the curvature of its
-chi-square cost along the ray (:func:`ml_sigma`).
+(:func:`filled_sigma`); the parts add in variance, and the sum is at least
+the move of the surface when E's robust scale is tightened, a model error
+that sensor noise lets into the fit (:func:`robust_scale_pull`). ML HS: the
+curvature of its chi-square cost along the ray (:func:`ml_sigma`).
 """
 
 from __future__ import annotations
@@ -257,6 +259,50 @@ def depth_sigma(problem, c, samples: int = SIGMA_SAMPLES, seed: int = 0) -> np.n
     zs = problem.B @ x
     var = np.mean(zs * zs, axis=1) * level * correlated_gain(problem.sides)
     return np.where(info["valid"], np.sqrt(var), np.nan)
+
+
+ROBUST_CHECK = 0.5  # the robust scale of the check fit, as a share of E's own
+"""Why ``ROBUST_CHECK`` holds on any rig: it is a ratio of two robust scales,
+each already in units of the rows' own noise level
+(:func:`colourhs.reconstruct.bayes.surface.hs_residuals`), so the check fit
+rejects the same share of rows at any noise, resolution or working distance.
+Half keeps most rows that the noise alone explains (at the median chi-square
+of ``P`` rows a pixel's Geman-McClure weight falls from 0.80 to 0.48) and lets
+rows that the model cannot explain lose most of theirs."""
+
+ROBUST_CHECK_STEPS = 20  # Levenberg-Marquardt steps of the check fit
+"""Why ``ROBUST_CHECK_STEPS`` holds on any rig: it counts reweightings of the
+rows (each step recomputes the Geman-McClure weights), and the check fit's
+move nears its limit by a share per step that depends on how far the rows
+bend the surface, not on the image's size or the rig. E's settling test
+(``refine.LM_SETTLED``) would stop this fit early: it drifts slowly and
+steadily, each step lowering E by less than the test's share; half of E's
+step limit (``refine.LM_MAX_STEPS``) lets it get most of the way."""
+
+
+def robust_scale_pull(problem, c, steps: int = ROBUST_CHECK_STEPS) -> np.ndarray:
+    """Each pixel's depth move (n,) when E's robust scale is tightened, metres.
+
+    Beyond the paper. The Geman-McClure weights
+    (:mod:`colourhs.reconstruct.bayes.surface`) keep the rows that the model
+    explains and drop the others (a white highlight on a coloured surface, a
+    mixed pixel), but their scale follows the residuals' own level: where
+    sensor noise raises that level, rows that break the model keep part of
+    their weight and bend the surface. That is a bias which grows with the
+    noise while the noise-only covariance (:func:`depth_sigma`) stays small,
+    since the surface fits those rows. The same E refitted from ``c`` with
+    its scale times :data:`ROBUST_CHECK` (``steps`` Levenberg-Marquardt steps
+    on ``problem``, ``refine._Problem``) moves the surface where such rows pull
+    it; where every row follows the noise model the two fits differ by noise
+    alone, which the error bar already holds. A depth's sigma is therefore at
+    least the size of its move (beyond the paper; a model error the noise
+    lets in, not a noise of its own, so it does not add in variance to what
+    already covers the move).
+    """
+    tight = copy.copy(problem)
+    tight.robust = problem.robust * ROBUST_CHECK
+    checked, _, _, _ = tight.lm(c, steps)
+    return problem.B @ (checked - c)
 
 
 FILL_SIGMA = 2.0  # a filled hole's sigma, in units of its nearest measured depth's
