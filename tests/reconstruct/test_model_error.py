@@ -65,7 +65,7 @@ def test_error_bar_covers_a_model_error_on_exact_images(white_specular_cloth):
     frame, truth = white_specular_cloth
     res = reconstruct(frame, "bayes")
     m = res.mask & np.isfinite(truth)
-    assert m.sum() > 0.8 * np.isfinite(truth).sum()  # measured 0.86
+    assert m.sum() > 0.85 * np.isfinite(truth).sum()  # measured 0.93
     err = np.abs(res.depth[m] - truth[m]) * 1e3
     sigma = res.depth_sigma[m] * 1e3
     assert np.median(err) > 2.0  # the model error this test is about (measured 5.0 mm)
