@@ -266,9 +266,10 @@ ROBUST_CHECK = 0.5  # the robust scale of the check fit, as a share of E's own
 each already in units of the rows' own noise level
 (:func:`colourhs.reconstruct.bayes.surface.hs_residuals`), so the check fit
 rejects the same share of rows at any noise, resolution or working distance.
-Half keeps most rows that the noise alone explains (at the median chi-square
-of ``P`` rows a pixel's Geman-McClure weight falls from 0.80 to 0.48) and lets
-rows that the model cannot explain lose most of theirs."""
+Half keeps most rows that the noise alone explains (at a chi-square of ``P``,
+the noise's mean over a pixel's ``P`` rows, its Geman-McClure weight falls from
+0.81 to 0.48 when the scale of 3 noise units halves) and lets rows that the
+model cannot explain lose most of theirs."""
 
 ROBUST_CHECK_STEPS = 20  # Levenberg-Marquardt steps of the check fit
 """Why ``ROBUST_CHECK_STEPS`` holds on any rig: it counts reweightings of the
