@@ -6,6 +6,10 @@ time, so ``pytest -m "not slow"`` is the quick check while developing; the
 whole suite is what CI runs. ``slurm``, ``bench`` and ``mitsuba`` mark tests
 that need what a plain run lacks: they run only when ``-m`` names them
 (``pytest -m slurm``) and are skipped, with the reason, otherwise.
+
+The suite runs in two pytest-xdist workers (``addopts`` in ``pyproject.toml``):
+a session fixture is rendered once per worker that uses it; ``pytest -n 0``
+runs the tests in one process.
 """
 
 from __future__ import annotations
