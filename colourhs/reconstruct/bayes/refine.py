@@ -536,8 +536,8 @@ def refine_surface(
         filled holes, ``energy`` after each step, ``depth_factors`` (the
         search's scale per surface), ``robust_pull_m`` (per surface, the median
         of :func:`.uncertainty.robust_scale_pull`'s move, metres; None without a
-        sigma), ``converged`` (False where the final
-        stage did not settle: every sigma is then infinite), ``surfaces``,
+        sigma), ``converged`` (False where the final stage did not settle: every
+        sigma is then infinite, and neither is computed), ``surfaces``,
         ``restarted`` (surfaces whose depth came from a neighbour's,
         :func:`restart_round`) and ``control_points``.
     """
@@ -595,7 +595,7 @@ def refine_surface(
     weights[graph.pix] = info["weights"] * info["valid"]
     sigma = np.full(H * W, np.nan)
     pull_median = [None] * graph.n_surfaces
-    if opts.sigma_samples > 0:
+    if opts.sigma_samples > 0 and converged:  # unconverged: every sigma is infinite below
         say("refinement: each depth's uncertainty")
         local = depth_sigma(problem, c, opts.sigma_samples)
         say("refinement: the surface's move under a tighter robust scale")
