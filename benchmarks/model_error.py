@@ -42,22 +42,13 @@ HERE = Path(__file__).parent
 
 def render(root: Path, seed: int, scene: str, frame: int, size: tuple[int, int]) -> Path:
     """One frame of a random-dynamic scene without noise or cross-talk (exact draw)."""
-    from colourhs.synth.simulated_rig import Nuisances
-    from colourhs.synth.synthesise import PRESETS, DrawOverrides, RenderSelection, synthesise
+    from colourhs.synth.synthesise import PRESETS, RenderSelection, synthesise_exact
 
     w, h = size
     preset = replace(PRESETS["random-dynamic"], name=f"random-dynamic-{w}", width=w, height=h)
-    return synthesise(
-        root / "data",
-        preset,
-        seed=seed,
-        nuisances=Nuisances().without("noise", "crosstalk"),
-        draw=DrawOverrides(exact=True),
-        selection=RenderSelection(
-            parts=("photometric", "chromatic", "scenes"), scenes=(scene,), frames=[frame]
-        ),
-        workers=2,
-    )
+    parts = ("photometric", "chromatic", "scenes")
+    selection = RenderSelection(parts=parts, scenes=(scene,), frames=[frame])
+    return synthesise_exact(root / "data", preset, seed, selection, workers=2)
 
 
 def noisy(frame, nuisances, k: float, rng):

@@ -49,18 +49,11 @@ def scaled_mu(gt: Path, out: Path, camera: str, factor: float) -> Path:
 
 def run_seed(seed: int, errors, ml_errors, root: Path) -> list[dict]:
     from colourhs.capture import load_rig
-    from colourhs.synth.simulated_rig import Nuisances
-    from colourhs.synth.synthesise import PRESETS, DrawOverrides, RenderSelection, synthesise
+    from colourhs.synth.synthesise import PRESETS, RenderSelection, synthesise_exact
 
     preset = replace(PRESETS["random-tiny"], name="musens", width=320, height=240, sheet_frames=1)
-    data = synthesise(
-        root / "data",
-        preset,
-        seed=seed,
-        nuisances=Nuisances().without("noise", "crosstalk"),
-        draw=DrawOverrides(exact=True),
-        selection=RenderSelection(parts=("photometric", "scenes"), scenes=SCENES),
-    )
+    selection = RenderSelection(parts=("photometric", "scenes"), scenes=SCENES)
+    data = synthesise_exact(root / "data", preset, seed, selection)
     camera = load_rig(data).camera_names[0]
     rows = []
     for e in errors:

@@ -190,18 +190,10 @@ def assign(*keys: str | int, value: Any) -> Callable[[Any], None]:
     return change
 
 
-def render_exact(root, preset, seed: int, scenes, parts=("photometric", "scenes")):
-    """A synthetic dataset of ``scenes`` without sensor noise and cross-talk (16 bit,
-    exact masks; every other nuisance on, which the true calibration undoes)."""
-    from colourhs.synth.simulated_rig import Nuisances
-    from colourhs.synth.synthesise import DrawOverrides, RenderSelection, synthesise
+def render_exact(root, preset, seed: int, scenes, parts=("photometric", "scenes"), frames=None):
+    """:func:`colourhs.synth.synthesise.synthesise_exact` of ``scenes`` (and ``frames``
+    of a sequence) with ``parts``, two rendering processes."""
+    from colourhs.synth.synthesise import RenderSelection, synthesise_exact
 
-    return synthesise(
-        root,
-        preset,
-        seed=seed,
-        nuisances=Nuisances().without("noise", "crosstalk"),
-        draw=DrawOverrides(exact=True),
-        selection=RenderSelection(parts=parts, scenes=scenes),
-        workers=2,
-    )
+    selection = RenderSelection(parts=parts, scenes=scenes, frames=frames)
+    return synthesise_exact(root, preset, seed, selection, workers=2)

@@ -549,6 +549,28 @@ def synthesise(
     return out
 
 
+def synthesise_exact(
+    out: str | Path,
+    preset: str | Preset,
+    seed: int = 0,
+    selection: RenderSelection = RenderSelection(),
+    workers: int | None = None,
+) -> Path:
+    """:func:`synthesise` the data that must give exact answers: no sensor noise and no
+    cross-talk, 16-bit images and exact masks (``DrawOverrides(exact=True)``); every
+    other nuisance stays on, since the true calibration (``gt/photometric.h5``, the
+    true chromaticity) undoes it. Returns the dataset folder."""
+    return synthesise(
+        out,
+        preset,
+        seed=seed,
+        nuisances=Nuisances().without("noise", "crosstalk"),
+        selection=selection,
+        workers=workers,
+        draw=DrawOverrides(exact=True),
+    )
+
+
 def preset_chromatic_objects(preset: str | Preset) -> list[str]:
     """The chromatic objects (but ``white``) of ``preset``'s datasets, known before one
     is rendered (the workflow plans their chromaticity maps from them)."""

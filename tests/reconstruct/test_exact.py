@@ -20,8 +20,7 @@ from hs_constraint import numpy_data_term
 from colourhs.common.ply import load_mesh
 from colourhs.common.raycast import render_depth_normals
 from colourhs.reconstruct.frame import load_frame, reconstruct
-from colourhs.synth.simulated_rig import Nuisances
-from colourhs.synth.synthesise import PRESETS, DrawOverrides, RenderSelection, synthesise
+from colourhs.synth.synthesise import PRESETS
 
 EXACT = replace(
     PRESETS["random-tiny"],
@@ -50,15 +49,7 @@ def exact_rigs(tmp_path_factory):
     for seed in SEEDS:
         root = tmp_path_factory.mktemp(f"exact{seed}") / "d"
         preset = replace(EXACT, random_ranges="random-tiny-lens") if seed == LENS_SEED else EXACT
-        synthesise(
-            root,
-            preset,
-            seed=seed,
-            nuisances=Nuisances().without("noise", "crosstalk"),
-            draw=DrawOverrides(exact=True),
-            selection=RenderSelection(parts=("photometric", "scenes"), scenes=("plane", "sheet")),
-            workers=2,
-        )
+        render_exact(root, preset, seed, ("plane", "sheet"))
         out[seed] = root
     cams = load_frame(out[LENS_SEED], "plane", "000000").rig.cameras
     assert all(len(c.dist) == 12 and abs(c.K[0, 1]) > 0 for c in cams)

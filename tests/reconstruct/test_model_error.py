@@ -19,12 +19,12 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from capture_helpers import render_exact
 
 from colourhs.common.ply import load_mesh
 from colourhs.common.raycast import render_depth_normals
 from colourhs.reconstruct.frame import load_frame, reconstruct
-from colourhs.synth.simulated_rig import Nuisances
-from colourhs.synth.synthesise import PRESETS, DrawOverrides, RenderSelection, synthesise
+from colourhs.synth.synthesise import PRESETS
 
 
 @pytest.fixture(scope="module")
@@ -33,17 +33,7 @@ def white_specular_cloth(tmp_path_factory):
     cross-talk (16 bit, exact masks): its frame (true mu and p) and true depth."""
     preset = replace(PRESETS["random-dynamic"], name="random-dynamic-320", width=320, height=240)
     root = tmp_path_factory.mktemp("cloth") / "d"
-    synthesise(
-        root,
-        preset,
-        seed=0,
-        nuisances=Nuisances().without("noise", "crosstalk"),
-        draw=DrawOverrides(exact=True),
-        selection=RenderSelection(
-            parts=("photometric", "chromatic", "scenes"), scenes=("cloth",), frames=[0]
-        ),
-        workers=2,
-    )
+    render_exact(root, preset, 0, ("cloth",), ("photometric", "chromatic", "scenes"), [0])
     p_true = root / "scenes" / "cloth" / "gt" / "chromaticity" / "000000.h5"
     frame = load_frame(
         root,
