@@ -8,9 +8,8 @@ that need what a plain run lacks: they run only when ``-m`` names them
 (``pytest -m slurm``) and are skipped, with the reason, otherwise.
 
 The suite runs in two pytest-xdist workers (``addopts`` in ``pyproject.toml``):
-the tests of each :data:`SLOW_FIXTURES` fixture run on one worker (``--dist
-loadgroup``), which renders it once; a lighter session fixture is rendered once
-per worker that uses it. ``pytest -n 0`` runs the tests in one process.
+a session fixture is rendered once per worker that uses it; ``pytest -n 0``
+runs the tests in one process.
 """
 
 from __future__ import annotations
@@ -52,18 +51,13 @@ SLOW_FIXTURES = {
 
 @pytest.hookimpl(tryfirst=True)  # before -m selects on the markers added here
 def pytest_collection_modifyitems(config, items):
-    """Mark ``slow`` the tests that use a :data:`SLOW_FIXTURES` fixture, and group them
-    by it for pytest-xdist's workers; skip the tests
+    """Mark ``slow`` the tests that use a :data:`SLOW_FIXTURES` fixture; skip the tests
     of an opt-in marker unless ``-m`` asks for it (not negated)."""
     expr = config.getoption("markexpr") or ""
     wanted = {m for m in OPT_IN if re.search(rf"(?<!not )\b{m}\b", expr)}
     for item in items:
-        heavy = sorted(SLOW_FIXTURES & set(getattr(item, "fixturenames", ())))
-        if heavy:
+        if SLOW_FIXTURES & set(getattr(item, "fixturenames", ())):
             item.add_marker(pytest.mark.slow)
-            # One pytest-xdist worker runs every test of a heavy fixture (--dist loadgroup),
-            # so it is rendered once, not once per worker.
-            item.add_marker(pytest.mark.xdist_group(heavy[0]))
         for marker, why in OPT_IN.items():
             if marker not in wanted and item.get_closest_marker(marker):
                 item.add_marker(pytest.mark.skip(reason=f"opt-in: pytest -m {marker} ({why})"))
