@@ -68,6 +68,11 @@ the chromaticity error of the map used against the frame's truth
   / 3``, of the map and the truth. It does not depend on either map's overall
   scale (nor on a per-pixel scale: only the colour's direction counts, which is
   what the reconstruction sees); 0.1 is about a 10 % error of a band ratio.
+- ``chroma_sigma_median``, ``chroma_sigma_within_1/2/3``: for a map with a 1-sigma
+  of log p (``sigma/<camera>``: the calibration's or a tracked map's), its median
+  and the shares of the pixels' and bands' centred log ratio differences above within
+  1, 2 and 3 of it: the
+  chromaticity's error bar against the truth, as ``sigma_within_k`` is the depth's.
 - ``chroma_known``: the share of the object's pixels (as above) where the map
   has a p at all.
 - ``track_position_px`` (median), ``track_position_p90_px``: for a tracked map,
@@ -204,10 +209,44 @@ VARIANTS = (
 RAW_TRUTH = Variant("bayes_full_true_raw", "bayes_full", true_raw_source)
 
 
+#: The chromaticity map's own error bar against the truth (:func:`chroma_sigma_error`).
+CHROMA_SIGMA_COLUMNS = (
+    "chroma_sigma_median",
+    "chroma_sigma_within_1",
+    "chroma_sigma_within_2",
+    "chroma_sigma_within_3",
+)
+
+
+def chroma_sigma_error(p: np.ndarray, truth: np.ndarray, sigma: np.ndarray) -> dict:
+    """:data:`CHROMA_SIGMA_COLUMNS` of a map ``p`` (N, 3) whose 1-sigma of log p is
+    ``sigma`` (N, 3) per band (or (N,), the same in each), against ``truth`` (N, 3): the
+    median sigma and the
+    shares of the (pixel, band) differences of the centred log ratios within 1, 2 and 3
+    of their own sigma, over the pixels with all three known; None where no pixel has
+    all three. Centring takes the mean of three independent band errors out, so a
+    centred difference's sigma is ``sqrt(2/3)`` of the band's: an honest Gaussian error
+    bar gives 0.68, 0.95 and 0.997."""
+    sigma = np.broadcast_to(np.asarray(sigma, float).reshape(len(p), -1), p.shape)
+    ok = np.all(np.isfinite(p) & (p > 0) & np.isfinite(truth) & (truth > 0), axis=-1)
+    ok &= np.all(np.isfinite(sigma), axis=-1)
+    if not ok.any():
+        return dict.fromkeys(CHROMA_SIGMA_COLUMNS)
+    d = np.log(p[ok]) - np.log(truth[ok])
+    d = np.abs(d - d.mean(axis=1, keepdims=True))
+    s = sigma[ok] * np.sqrt(2.0 / 3.0)
+    return {
+        "chroma_sigma_median": float(np.median(sigma[ok])),
+        **{f"chroma_sigma_within_{k}": float(np.mean(d <= k * s)) for k in (1, 2, 3)},
+    }
+
+
 def chroma_error(map_h5: Path, truth_h5: Path, cameras) -> dict:
     """``chroma_rms_log`` (:func:`colourhs.calibration.chromaticity.log_ratio_rms` of the
     cameras' maps side by side) and ``chroma_known`` of a map against a frame's truth
-    (module docstring), pooled over ``cameras``; None where the object has no pixel."""
+    (module docstring), pooled over ``cameras``; None where the object has no pixel.
+    A map with a 1-sigma of log p (``sigma/<camera>``) also gets
+    :func:`chroma_sigma_error`'s columns (None without)."""
     import h5py
 
     from colourhs.calibration.chromaticity import log_ratio_rms
@@ -215,12 +254,20 @@ def chroma_error(map_h5: Path, truth_h5: Path, cameras) -> dict:
     with h5py.File(map_h5) as f, h5py.File(truth_h5) as g:
         t = np.concatenate([np.asarray(g[cam][()], float) for cam in cameras])
         p = np.concatenate([np.asarray(f[cam][()], float) for cam in cameras])
+        sig = None
+        if all(f"sigma/{cam}" in f for cam in cameras):
+            sig = np.concatenate([np.asarray(f[f"sigma/{cam}"][()], float) for cam in cameras])
     on = np.all(np.isfinite(t) & (t > 0), axis=-1)
     known = on & np.all(np.isfinite(p) & (p > 0), axis=-1)
-    return {
+    out = {
         "chroma_rms_log": log_ratio_rms(p, t) if known.any() else None,
         "chroma_known": float(known.sum() / on.sum()) if on.any() else None,
     }
+    if sig is None:
+        return out | dict.fromkeys(CHROMA_SIGMA_COLUMNS)
+    return out | chroma_sigma_error(
+        p.reshape(-1, 3), t.reshape(-1, 3), sig.reshape(len(t.reshape(-1, 3)), -1)
+    )
 
 
 #: The tracking's position columns (:func:`position_error`), None where not measured.
@@ -355,6 +402,7 @@ def run_seed(
                 except Exception as exc:  # a pipeline failure is a frame lost, not a lost seed
                     m = failed_frame(exc, time.time() - t1)
                 err = {"chroma_rms_log": None, "chroma_known": None}
+                err |= dict.fromkeys(CHROMA_SIGMA_COLUMNS)
                 err |= dict.fromkeys(POSITION_COLUMNS)
                 if map_h5 is not None:
                     err |= chroma_error(Path(map_h5), truth, cameras)
@@ -399,6 +447,7 @@ METRICS = (
     ("dropped_no_chromaticity", "dropped: no p", ".3f", "max"),
     ("chroma_rms_log", "chroma RMS log", ".3f", "max"),
     ("chroma_known", "chroma known", ".3f", "min"),
+    ("chroma_sigma_within_3", "chroma within 3 sigma", ".2f", "min"),
     ("track_position_px", "position error (px)", ".2f", "max"),
     ("track_motion_px", "motion (px)", ".1f", "max"),
 )
@@ -484,7 +533,9 @@ def summarise_markdown(summary: dict) -> str:
         "seeds / worst seed. `moved`: each seed's median over the frames other than the "
         "chromatic frame; `worst moved`: each seed's worst such frame. Chroma RMS log: RMS "
         "of the centred log ratios' difference to the truth over the object's pixels where "
-        "the map has a p (`known`: their share). Position error: a tracked map's median "
+        "the map has a p (`known`: their share); chroma within 3 sigma: the share of those "
+        "pixels' and bands' differences within 3 of the map's own sigma of log p. "
+        "Position error: a tracked map's median "
         "distance from each pixel's tracked position in the chromatic frame to its point's "
         "true one (pixels; motion: the true one's median distance from the pixel). Within "
         "3 sigma: the share of the compared pixels whose depth error is within 3 of their "
@@ -504,6 +555,7 @@ def summarise_markdown(summary: dict) -> str:
         "coverage, moved",
         "chroma RMS log, chromatic / moved",
         "chroma known, chromatic / moved",
+        "chroma within 3 sigma, chromatic / moved",
         "position error (px), chromatic / moved",
         "empty",
     ]
@@ -521,6 +573,7 @@ def summarise_markdown(summary: dict) -> str:
                 _pair(m.get("coverage"), ".3f"),
                 _home_moved(h, m, "chroma_rms_log", ".3f"),
                 _home_moved(h, m, "chroma_known", ".3f"),
+                _home_moved(h, m, "chroma_sigma_within_3", ".2f"),
                 _home_moved(h, m, "track_position_px", ".2f"),
                 str(len(e["empty_frames"])),
             ]

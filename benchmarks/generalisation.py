@@ -197,7 +197,7 @@ def calibrate(data: Path, calib: Path) -> dict:
     for obj in ds.chromatic_objects:
         if obj != "white":
             files[f"chroma/{obj}"] = calib / f"chromaticity_{obj}.h5"
-            chromaticity_maps(data, obj, files[f"chroma/{obj}"])
+            chromaticity_maps(data, obj, files[f"chroma/{obj}"], noise_json=files["noise"])
     return files
 
 

@@ -79,6 +79,7 @@ __all__ = [
     "RATIO_PAIRS",
     "chromaticity_error",
     "log_ratio_rms",
+    "log_sigma",
     "chromaticity_map",
     "chromaticity_maps",
     "chromaticity_ratios",
@@ -232,6 +233,50 @@ def normalise(p: np.ndarray) -> np.ndarray:
         return np.where(total > 0, p * (_NORM_SUM / total), np.nan)
 
 
+def log_sigma(
+    p: np.ndarray,
+    obj: dict[str, np.ndarray],
+    white: dict[str, np.ndarray],
+    obj_var: dict[str, np.ndarray],
+    white_var: dict[str, np.ndarray],
+) -> np.ndarray:
+    """1-sigma of each band's log p (..., 3) under the sensor noise of eq. (12)'s intensities.
+
+    Beyond the paper, which gives p no uncertainty. Each band's ratio ``q_b = i_b /
+    i_b^w`` of two independent captures has the relative variance ``v_b = var(i_b) /
+    i_b^2 + var(i_b^w) / (i_b^w)^2``; the map is ``q`` scaled to sum 3 (the ratios of
+    eq. 12 are consistent, so the least squares of :func:`solve_chromaticity` returns
+    ``p_b = 3 q_b / sum q``), whose log changes by ``d log p_b = sum_c (delta_bc - p_c /
+    3) d log q_c``, so ``var(log p_b) = sum_c (delta_bc - p_c / 3)^2 v_c`` to first order.
+    A pure colour's dark bands carry the largest sigma.
+
+    Parameters
+    ----------
+    p : ndarray, shape (..., 3)
+        The map (:func:`solve_chromaticity`), NaN where unknown.
+    obj, white : dict of str to ndarray, shape (...)
+        The matching-channel intensities, as for :func:`chromaticity_ratios`.
+    obj_var, white_var : dict of str to ndarray, shape (...)
+        Their variances (the noise model's, :class:`colourhs.calibration.noise.NoiseModel`),
+        fractions of full scale squared.
+
+    Returns
+    -------
+    ndarray of float32, shape (..., 3)
+        NaN where ``p`` is.
+    """
+    with np.errstate(divide="ignore", invalid="ignore"):
+        v = _stack(obj_var, "object variance") / _stack(obj, "object") ** 2
+        v = v + _stack(white_var, "white variance") / _stack(white, "white reference") ** 2
+    w = np.asarray(p, np.float64) / _NORM_SUM
+    var = np.zeros(w.shape)
+    for b in range(3):
+        d = -w
+        d[..., b] += 1.0
+        var[..., b] = np.sum(d * d * v, axis=-1)
+    return np.where(np.isfinite(p), np.sqrt(var), np.nan).astype(np.float32)
+
+
 def chromaticity_error(estimate: np.ndarray, truth: np.ndarray) -> np.ndarray:
     """Per-pixel relative error ``||p_est - p_gt|| / ||p_gt||`` after normalising both to sum 3.
 
@@ -339,14 +384,26 @@ def read_chromatic_captures(
     return intensities, saturated, paths
 
 
+def _matching_variance(noise, camera: str, intensities: dict[str, np.ndarray]) -> dict:
+    """The noise model's variance of each colour's matching-channel intensity (H, W)."""
+    out = {}
+    for k, colour in enumerate(COLOURS):
+        rgb = np.zeros(intensities[colour].shape + (3,))
+        rgb[..., k] = intensities[colour]
+        out[colour] = noise.variance(camera, rgb)[..., k]
+    return out
+
+
 def _chromaticity_map(
     dataset: Dataset,
     obj: str,
     camera: str,
     min_signal: float,
     object_threshold: float,
+    noise=None,
 ) -> tuple[np.ndarray, dict]:
-    """The map and what went into it (paths, mask source, intensity image)."""
+    """The map and what went into it (paths, mask source, intensity image; with a
+    :class:`~colourhs.calibration.noise.NoiseModel` ``noise``, ``sigma``: :func:`log_sigma`)."""
     dataset.rig.camera(camera)
     obj_i, obj_sat, obj_paths = read_chromatic_captures(dataset, obj, camera)
     white_i, white_sat, white_paths = read_chromatic_captures(dataset, "white", camera)
@@ -368,7 +425,13 @@ def _chromaticity_map(
     p = solve_chromaticity(chromaticity_ratios(obj_i, white_i), valid)
     if not np.isfinite(p).any():
         raise ValueError(f"{where}: all samples masked (no solvable pixel)")
+    sigma = None
+    if noise is not None:
+        obj_var = _matching_variance(noise, camera, obj_i)
+        white_var = _matching_variance(noise, camera, white_i)
+        sigma = log_sigma(p, obj_i, white_i, obj_var, white_var)
     info = {
+        "sigma": sigma,
         "paths": obj_paths + white_paths + ([silhouette] if silhouette is not None else []),
         "mask_source": mask_source,
         "intensity": sum(obj_i[c] for c in COLOURS),
@@ -438,6 +501,7 @@ def chromaticity_maps(
     out_h5: str | Path,
     min_signal: float = MIN_SIGNAL,
     object_threshold: float = OBJECT_THRESHOLD,
+    noise_json: str | Path | None = None,
 ) -> ObjectChromaticity:
     """Chromaticity maps of ``obj`` for every camera, written to HDF5.
 
@@ -446,7 +510,11 @@ def chromaticity_maps(
     unknown; each with attributes ``mask`` (silhouette file or threshold) and ``valid_pixels``.
     File attributes: ``object``, ``dataset``, ``cameras``, ``normalisation``, ``min_signal``,
     ``object_threshold``, ``inputs`` (JSON: input file relative to the dataset -> sha256) and
-    ``inputs_sha256`` (sha256 of the sorted ``"path sha256"`` lines). Written to a temporary
+    ``inputs_sha256`` (sha256 of the sorted ``"path sha256"`` lines). With ``noise_json``
+    also ``sigma/<camera>`` (H, W, 3) float32, each band's 1-sigma of log p under the
+    captures' sensor noise (:func:`log_sigma`: the map's error bar, which
+    :func:`colourhs.reconstruct.inputs.load_frame` does not weigh the channels by), and
+    the attribute ``noise_model`` (the file and its sha256). Written to a temporary
     name and renamed at the end: nothing is left behind on error. The figure (the paper's
     Figure 6, :func:`colourhs.report.figures.chromaticity_figure`) is the command's to draw, from
     what this returns: calibration modules do not import the figures. Shows a bar over the
@@ -462,6 +530,8 @@ def chromaticity_maps(
         HDF5 file to write.
     min_signal, object_threshold : float
         See :func:`chromaticity_map`.
+    noise_json : str or Path, optional
+        The rig's noise model (:func:`colourhs.calibration.noise.calibrate_noise`).
 
     Returns
     -------
@@ -472,11 +542,16 @@ def chromaticity_maps(
     # The images it decodes are checked as they are read (read_image), not every header.
     dataset = dataset_of(dataset_dir)
     _check_object(dataset, obj)
+    noise = None
+    if noise_json is not None:
+        from colourhs.calibration.noise import load_noise
+
+        noise = load_noise(noise_json)
     maps, infos = {}, {}
     cams = bar(dataset.rig.camera_names, f"chromaticity {obj}", unit="camera")
     for camera in cams:
         maps[camera], infos[camera] = _chromaticity_map(
-            dataset, obj, camera, min_signal, object_threshold
+            dataset, obj, camera, min_signal, object_threshold, noise
         )
     inputs = {
         str(p.relative_to(dataset.root)): _sha256(p)
@@ -499,10 +574,14 @@ def chromaticity_maps(
             f.attrs["object_threshold"] = float(object_threshold)
             f.attrs["inputs"] = json.dumps(inputs, sort_keys=True)
             f.attrs["inputs_sha256"] = hashlib.sha256(lines.encode()).hexdigest()
+            if noise_json is not None:
+                f.attrs["noise_model"] = f"{noise_json} {_sha256(Path(noise_json))}"
             for camera, p in maps.items():
                 d = f.create_dataset(camera, data=p, compression="gzip")
                 d.attrs["mask"] = infos[camera]["mask_source"]
                 d.attrs["valid_pixels"] = infos[camera]["valid_pixels"]
+                if infos[camera]["sigma"] is not None:
+                    f.create_dataset(f"sigma/{camera}", data=infos[camera]["sigma"])
         os.replace(tmp_h5, out_h5)
     finally:
         if tmp_h5.exists():

@@ -310,7 +310,11 @@ def _chromaticity(args) -> int:
     from colourhs.calibration.chromaticity import chromaticity_maps
 
     result = chromaticity_maps(
-        _dataset(args, None), args.object, args.out, min_signal=args.min_signal
+        _dataset(args, None),
+        args.object,
+        args.out,
+        min_signal=args.min_signal,
+        noise_json=args.noise,
     )
     if args.figure:
         from colourhs.report.figures import chromaticity_figure

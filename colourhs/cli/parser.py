@@ -313,6 +313,12 @@ def build_parser(show_defaults: bool | Collection[str] = False) -> argparse.Argu
     c.add_argument("out", type=Path, help="HDF5 file to write (one dataset per camera)")
     c.add_argument("--figure", type=Path, default=None, help="also write this PNG figure")
     c.add_argument(
+        "--noise",
+        type=Path,
+        default=None,
+        help="the rig's noise model (colourhs noise): also write each band's sigma of log p",
+    )
+    c.add_argument(
         "--min-signal",
         type=float,
         default=MIN_SIGNAL,
@@ -548,7 +554,7 @@ INPUTS = {
     "noise": ("dataset", "rig"),
     "crosstalk": ("dataset", "rig", "poses"),
     "photometric": ("dataset", "rig", "poses", "crosstalk"),
-    "chromaticity": ("dataset", "rig"),
+    "chromaticity": ("dataset", "rig", "noise"),
     "track-chromaticity": ("dataset", "rig", "calibrated", "neighbour"),
     "reconstruct": (
         "dataset",

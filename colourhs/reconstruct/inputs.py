@@ -91,7 +91,8 @@ def load_frame(
     noise variance; without it the noise model is estimated from the frame's
     own images (:func:`colourhs.calibration.noise.estimate_noise`). A chromaticity
     file that carries a 1-sigma of log p per camera (``sigma/<camera>``: a tracked
-    map, :mod:`colourhs.calibration.chromaticity_tracking`) widens that variance by
+    map, :mod:`colourhs.calibration.chromaticity_tracking`; not the calibrated map's
+    own, :func:`colourhs.calibration.chromaticity.log_sigma`) widens that variance by
     ``(i sigma)^2`` per channel: eq. 3 divides each intensity by its p, so a relative
     error of p is one of the intensity (beyond the paper); and where one camera's
     map, tracked away from the chromatic frame, has no p, the reconstruction
@@ -135,7 +136,10 @@ def load_frame(
         note_read(chromaticity_h5)
         with h5py.File(chromaticity_h5) as f:
             chroma = np.stack([f[cam][()].transpose(2, 0, 1) for cam in rig.camera_names])
-            if all(f"sigma/{cam}" in f for cam in rig.camera_names):
+            # A tracked map's sigma (its attribute "frame"); the calibration's own
+            # (chromaticity.log_sigma) is not weighed in.
+            tracked = "frame" in f.attrs
+            if tracked and all(f"sigma/{cam}" in f for cam in rig.camera_names):
                 chroma_sigma = np.stack([f[f"sigma/{cam}"][()] for cam in rig.camera_names])
                 moved = f.attrs.get("frame", "") != f.attrs.get("chromatic_frame", "")
     for extra in (crosstalk_json, photometric_h5, chromaticity_h5, noise_json):

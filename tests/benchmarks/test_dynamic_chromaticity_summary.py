@@ -109,3 +109,26 @@ def test_position_error_of_a_tracked_map_against_the_meshes(tmp_path):
         m["A"] = np.ones((h, w, 3), np.float32)
     none = dyn.position_error(tmp_path / "calibrated.h5", *args)
     assert none == dict.fromkeys(dyn.POSITION_COLUMNS)
+
+
+def test_chroma_sigma_calibration_against_the_truth():
+    """A map whose log p errs by independent Gaussian noise of its stated sigma in each
+    band (and by an arbitrary scale per pixel, which the calibration cannot measure)
+    is honest: 0.68 / 0.95 / 0.997 within 1 / 2 / 3 sigma; the same map stating a
+    third of that sigma is not."""
+    rng = np.random.default_rng(0)
+    n = 200_000
+    truth = rng.uniform(0.05, 2.0, (n, 3))
+    sigma = rng.uniform(0.01, 0.2, n)
+    p = truth * np.exp(sigma[:, None] * rng.standard_normal((n, 3)) + rng.normal(0, 1, (n, 1)))
+    honest = dyn.chroma_sigma_error(p, truth, sigma)
+    assert honest["chroma_sigma_median"] == pytest.approx(np.median(sigma))
+    for k, share in ((1, 0.683), (2, 0.954), (3, 0.997)):
+        assert honest[f"chroma_sigma_within_{k}"] == pytest.approx(share, abs=0.005)
+    assert dyn.chroma_sigma_error(p, truth, sigma / 3)["chroma_sigma_within_3"] < 0.7
+    p[: n // 2] = np.nan  # unknown pixels are left out
+    assert dyn.chroma_sigma_error(p, truth, sigma)["chroma_sigma_within_1"] == pytest.approx(
+        0.683, abs=0.01
+    )
+    none = dyn.chroma_sigma_error(p[:1], truth[:1], sigma[:1])
+    assert all(v is None for v in none.values())

@@ -293,6 +293,12 @@ def test_board_image_reruns_photometric_maps_and_downstream(run):
         ("photometric_maps", f"{calib}/photometric.png"),
         ("noise_model", f"{calib}/noise.json"),  # estimated from the board images too
         ("crosstalk", f"{calib}/crosstalk.json"),  # its LED factor: from the board poses
+        # the chromaticity maps' sigma of log p comes from the noise model
+        *{
+            ("chromaticity_map", f"{calib}/chromaticity/{obj}.{ext}")
+            for obj in ("statue", "toy")
+            for ext in ("h5", "png")
+        },
         # bayes_ph and bayes_full read photometric.h5, noise.json and crosstalk.json
         # (bayes_full on plane and sheet copies bayes_ph: reruns with it); vh reads
         # no calibration.
@@ -302,7 +308,7 @@ def test_board_image_reruns_photometric_maps_and_downstream(run):
     assert_plan(plan, required, optional=VALIDATION)
     assert plan.rules["reconstruct_frame"] == 6 * 2  # every frame, both HS variants
     assert plan.rules["frame_mesh"] == plan.rules["evaluate_frame"] == 12
-    assert not {"chromaticity_map", "visual_hull", "effective_config"} & set(plan.rules)
+    assert not {"visual_hull", "effective_config"} & set(plan.rules)
     assert not [p for p in plan.of("frame_mesh") if "/vh/" in p]
     # Undone: nothing to do again.
     assert not planned_jobs(run.workdir, run.configfiles)

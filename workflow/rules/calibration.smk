@@ -120,7 +120,8 @@ rule photometric_maps:
 
 rule chromaticity_map:
     input:
-        lambda w: chromaticity_inputs(w.name, w.object),
+        captures=lambda w: chromaticity_inputs(w.name, w.object),
+        noise=NOISE,
     output:
         h5=CHROMATICITY,
         png=CHROMATICITY_PNG,
@@ -140,7 +141,7 @@ rule chromaticity_map:
         options=lambda w: cli_options(calibration(w.name)["chromaticity"]),
     shell:
         '"$COLOURHS_PYTHON" -m colourhs chromaticity {params.dataset:q} {params.rig} {wildcards.object} {output.h5:q} '
-        "--figure {output.png:q} {params.options} > {log:q} 2>&1"
+        "--noise {input.noise:q} --figure {output.png:q} {params.options} > {log:q} 2>&1"
 
 
 # Beyond the paper: a moving object's chromaticity carried from its chromatic frame
