@@ -220,24 +220,18 @@ CHROMA_SIGMA_COLUMNS = (
 
 def chroma_sigma_error(p: np.ndarray, truth: np.ndarray, sigma: np.ndarray) -> dict:
     """:data:`CHROMA_SIGMA_COLUMNS` of a map ``p`` (N, 3) whose 1-sigma of log p is
-    ``sigma`` (N, 3) per band (or (N,), the same in each), against ``truth`` (N, 3): the
-    median sigma and the
-    shares of the (pixel, band) differences of the centred log ratios within 1, 2 and 3
-    of their own sigma, over the pixels with all three known; None where no pixel has
-    all three. Centring takes the mean of three independent band errors out, so a
-    centred difference's sigma is ``sqrt(2/3)`` of the band's: an honest Gaussian error
-    bar gives 0.68, 0.95 and 0.997."""
-    sigma = np.broadcast_to(np.asarray(sigma, float).reshape(len(p), -1), p.shape)
-    ok = np.all(np.isfinite(p) & (p > 0) & np.isfinite(truth) & (truth > 0), axis=-1)
-    ok &= np.all(np.isfinite(sigma), axis=-1)
-    if not ok.any():
+    ``sigma`` (N, 3) per band (or (N,), the same in each), against ``truth`` (N, 3)
+    (:func:`colourhs.calibration.chromaticity.log_sigma_coverage`); None where no pixel
+    has all three."""
+    from colourhs.calibration.chromaticity import log_sigma_coverage
+
+    cover = log_sigma_coverage(p, truth, sigma)
+    if cover is None:
         return dict.fromkeys(CHROMA_SIGMA_COLUMNS)
-    d = np.log(p[ok]) - np.log(truth[ok])
-    d = np.abs(d - d.mean(axis=1, keepdims=True))
-    s = sigma[ok] * np.sqrt(2.0 / 3.0)
+    median, within = cover
     return {
-        "chroma_sigma_median": float(np.median(sigma[ok])),
-        **{f"chroma_sigma_within_{k}": float(np.mean(d <= k * s)) for k in (1, 2, 3)},
+        "chroma_sigma_median": median,
+        **{f"chroma_sigma_within_{k}": w for k, w in zip((1, 2, 3), within, strict=True)},
     }
 
 

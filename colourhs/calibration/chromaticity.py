@@ -80,6 +80,7 @@ __all__ = [
     "chromaticity_error",
     "log_ratio_rms",
     "log_sigma",
+    "log_sigma_coverage",
     "chromaticity_map",
     "chromaticity_maps",
     "chromaticity_ratios",
@@ -308,13 +309,49 @@ def log_ratio_rms(estimate: np.ndarray, truth: np.ndarray) -> float:
     estimate, truth : ndarray, shape (H, W, 3)
         NaN (or <= 0) where unknown.
     """
-    e, t = np.asarray(estimate, np.float64), np.asarray(truth, np.float64)
-    ok = np.all(np.isfinite(e) & np.isfinite(t) & (e > 0) & (t > 0), axis=-1)
+    d, ok = _centred_log_difference(estimate, truth)
     if not ok.any():
         return float("nan")
-    d = np.log(e[ok]) - np.log(t[ok])
-    d -= d.mean(axis=1, keepdims=True)
     return float(np.sqrt(np.mean(d**2)))
+
+
+def _centred_log_difference(estimate, truth) -> tuple[np.ndarray, np.ndarray]:
+    """``log(p_est / p_gt)`` less its mean over the channels (n, 3), at the pixels (...)
+    where both are known (finite and > 0), and those pixels."""
+    e, t = np.asarray(estimate, np.float64), np.asarray(truth, np.float64)
+    ok = np.all(np.isfinite(e) & np.isfinite(t) & (e > 0) & (t > 0), axis=-1)
+    d = np.log(e[ok]) - np.log(t[ok])
+    return d - d.mean(axis=1, keepdims=True), ok
+
+
+def log_sigma_coverage(
+    estimate: np.ndarray, truth: np.ndarray, sigma: np.ndarray, ks=(1, 2, 3)
+) -> tuple[float, list[float]] | None:
+    """How well a map's 1-sigma of log p covers its error against a truth.
+
+    Over the pixels where the map, the truth and ``sigma`` are known: the median sigma
+    and, for each k of ``ks``, the share of the (pixel, band) differences of
+    :func:`log_ratio_rms`'s centred log ratios within k of their own sigma. Centring
+    takes the mean of three independent band errors out, so a centred difference's
+    sigma is ``sqrt(2/3)`` of the band's: an honest Gaussian error bar gives 0.68, 0.95
+    and 0.997 within 1, 2 and 3. None where no pixel has all three.
+
+    Parameters
+    ----------
+    estimate, truth : ndarray, shape (..., 3)
+        NaN (or <= 0) where unknown.
+    sigma : ndarray, shape (..., 3) per band, or (...) the same in every band
+        The 1-sigma of log p (:func:`log_sigma`, or a tracked map's).
+    """
+    estimate = np.asarray(estimate, np.float64)
+    s = np.asarray(sigma, np.float64).reshape(estimate.shape[:-1] + (-1,))
+    s = np.broadcast_to(s, estimate.shape)
+    known = np.all(np.isfinite(s), axis=-1, keepdims=True)
+    d, ok = _centred_log_difference(np.where(known, estimate, np.nan), truth)
+    if not ok.any():
+        return None
+    within = np.abs(d) / (s[ok] * np.sqrt(2.0 / 3.0))
+    return float(np.median(s[ok])), [float(np.mean(within <= k)) for k in ks]
 
 
 # --------------------------------------------------------------------------------------------
