@@ -8,14 +8,18 @@ that need what a plain run lacks: they run only when ``-m`` names them
 (``pytest -m slurm``) and are skipped, with the reason, otherwise.
 
 The suite runs in two pytest-xdist workers (``addopts`` in ``pyproject.toml``):
-a session fixture is rendered once per worker that uses it; ``pytest -n 0``
-runs the tests in one process.
+the session fixtures that render a dataset (:func:`built_once`) are rendered once
+for the whole run, by the first worker that asks; ``pytest -n 0`` runs the tests in
+one process.
 """
 
 from __future__ import annotations
 
+import fcntl
+import os
 import re
 import shutil
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -71,6 +75,26 @@ def _logging_kept():
         yield
 
 
+def built_once(tmp_path_factory, name: str, build: Callable[[Path], object]) -> Path:
+    """A session fixture's folder ``name``, filled by ``build(folder)`` once for the whole
+    run: under pytest-xdist the first worker that asks builds it in the run's shared
+    temporary folder while the others wait, then reuse it (a session fixture is
+    otherwise built once per worker). A build that raises leaves it for the next to
+    retry. Its users read it and write nothing into it, as with any session fixture."""
+    base = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):  # each worker's basetemp is under the run's
+        base = base.parent
+    folder, done = base / name, base / f"{name}.built"
+    with open(base / f"{name}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not done.exists():
+            shutil.rmtree(folder, ignore_errors=True)
+            folder.mkdir()
+            build(folder)
+            done.touch()
+    return folder
+
+
 # 640x480 like the demo preset, with fewer board poses and sheet frames.
 CHECK_PRESET = Preset("check", 640, 480, 1250.0, 2, n_poses=3, sheet_frames=1)
 
@@ -78,7 +102,8 @@ CHECK_PRESET = Preset("check", 640, 480, 1250.0, 2, n_poses=3, sheet_frames=1)
 @pytest.fixture(scope="session")
 def tiny_dataset(tmp_path_factory):
     """The tiny preset with every nuisance on (seed 0)."""
-    return synthesise(tmp_path_factory.mktemp("tiny") / "tiny", "tiny")
+    root = built_once(tmp_path_factory, "tiny", lambda folder: synthesise(folder / "tiny", "tiny"))
+    return root / "tiny"
 
 
 @pytest.fixture(scope="session")
@@ -97,12 +122,16 @@ NOT_GEOMETRIC = tuple(p for p in PARTS if p != "geometric")
 @pytest.fixture(scope="session")
 def clean_dataset(tmp_path_factory):
     """Demo resolution, noise and cross-talk off: equation (4) with mu and p only."""
-    return synthesise(
-        tmp_path_factory.mktemp("clean") / "clean",
-        CHECK_PRESET,
-        nuisances=Nuisances().without("noise", "crosstalk"),
-        selection=RenderSelection(parts=NOT_GEOMETRIC),
-    )
+
+    def build(folder):
+        synthesise(
+            folder / "clean",
+            CHECK_PRESET,
+            nuisances=Nuisances().without("noise", "crosstalk"),
+            selection=RenderSelection(parts=NOT_GEOMETRIC),
+        )
+
+    return built_once(tmp_path_factory, "clean", build) / "clean"
 
 
 # The demo preset's rig, board poses and seed, rendering only the board captures,
@@ -121,15 +150,17 @@ def plane_calibrated(tmp_path_factory):
     from colourhs.calibration.markers import marker_poses
     from colourhs.calibration.photometric import photometric_maps
 
-    root = tmp_path_factory.mktemp("plane")
-    plane = RenderSelection(parts=NOT_GEOMETRIC, scenes=("plane",))
-    data = synthesise(root / "data", PLANE_PRESET, selection=plane)
-    marker_poses(data, root / "marker_poses.csv")
-    calibrate_crosstalk(data, root / "crosstalk.json")
-    photometric_maps(
-        data, root / "marker_poses.csv", root / "photometric.h5", root / "crosstalk.json"
-    )
-    return data, {
+    def build(root):
+        plane = RenderSelection(parts=NOT_GEOMETRIC, scenes=("plane",))
+        data = synthesise(root / "data", PLANE_PRESET, selection=plane)
+        marker_poses(data, root / "marker_poses.csv")
+        calibrate_crosstalk(data, root / "crosstalk.json")
+        photometric_maps(
+            data, root / "marker_poses.csv", root / "photometric.h5", root / "crosstalk.json"
+        )
+
+    root = built_once(tmp_path_factory, "plane", build)
+    return root / "data", {
         "crosstalk_json": root / "crosstalk.json",
         "photometric_h5": root / "photometric.h5",
     }

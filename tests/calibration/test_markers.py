@@ -271,7 +271,7 @@ def test_fewer_than_three_usable_poses_is_an_error(tiny_dataset, tmp_path):
     assert not out.parent.exists() or not any(out.parent.iterdir())
 
 
-def test_demo_preset_plane_accuracy(plane_calibrated):
+def test_demo_preset_plane_accuracy(plane_calibrated, tmp_path):
     """Demo preset: normals within 0.05 degree and offsets within 0.1 mm for every pose.
 
     The board captures are the demo preset's own (conftest's ``plane_calibrated``
@@ -280,7 +280,7 @@ def test_demo_preset_plane_accuracy(plane_calibrated):
     """
     root, _ = plane_calibrated
     rig = load_rig(root)
-    table = marker_poses(root, root.parent / "demo_marker_poses.csv")
+    table = marker_poses(root, tmp_path / "demo_marker_poses.csv")
     assert list(table["pose"]) == sorted(p.name for p in (root / "photometric").iterdir())
     assert (table["n_markers"] == len(rig.board.markers)).all()
     angles, offsets = _plane_errors(table, root, rig)

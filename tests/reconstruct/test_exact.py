@@ -56,9 +56,23 @@ def exact_rigs(tmp_path_factory):
     return out
 
 
-def _errors(root, scene, method):
-    fr = load_frame(root, scene, "000000", photometric_h5=root / "gt" / "photometric.h5")
-    res = reconstruct(fr, method)
+@pytest.fixture(scope="module")
+def reconstructed():
+    """The module's reconstructions of the rigs' frames with the true mu, each made
+    once: (root, scene, method) -> (frame, result)."""
+    return {}
+
+
+def _reconstruction(reconstructed, root, scene, method):
+    key = (root, scene, method)
+    if key not in reconstructed:
+        fr = load_frame(root, scene, "000000", photometric_h5=root / "gt" / "photometric.h5")
+        reconstructed[key] = fr, reconstruct(fr, method)
+    return reconstructed[key]
+
+
+def _errors(reconstructed, root, scene, method):
+    fr, res = _reconstruction(reconstructed, root, scene, method)
     ref = fr.rig.camera(res.info["reference"])
     v, t, n = load_mesh(root / "scenes" / scene / "gt" / "000000.ply")
     gd, gn = render_depth_normals(v, t, n, ref, fr.rig.image.width, fr.rig.image.height)
@@ -70,7 +84,7 @@ def _errors(root, scene, method):
 
 
 @pytest.mark.parametrize("scene", ["plane", "sheet"])
-def test_exact_data_exact_answers(exact_rigs, scene):
+def test_exact_data_exact_answers(exact_rigs, reconstructed, scene):
     """Measured (depth median mm / normal median deg, seeds 1-5; seed 5 the
     skewed rational thin-prism lenses):
 
@@ -101,9 +115,9 @@ def test_exact_data_exact_answers(exact_rigs, scene):
     """
     rows = []
     for seed, root in exact_rigs.items():
-        bayes = _errors(root, scene, "bayes")
+        bayes = _errors(reconstructed, root, scene, "bayes")
         with_ml = scene == "plane" and seed in ML_SEEDS
-        ml = _errors(root, scene, "ml") if with_ml else (np.inf, np.inf, 1.0, 0.0)
+        ml = _errors(reconstructed, root, scene, "ml") if with_ml else (np.inf, np.inf, 1.0, 0.0)
         print(f"seed {seed} {scene}: bayes {bayes} ml {ml}")
         rows.append(bayes + ml)
     b_mm, b_deg, b_cov, b_signed, m_mm, m_deg, _, m_signed = np.array(rows).T
@@ -371,7 +385,7 @@ def test_subsampled_depth_search_on_a_curved_object(exact_statue, monkeypatch):
     assert np.median(ang) < 0.6  # measured 0.396 deg (0.420)
 
 
-def test_the_ratio_term_of_the_error_bar_predicts_the_depths_move(exact_rigs):
+def test_the_ratio_term_of_the_error_bar_predicts_the_depths_move(exact_rigs, reconstructed):
     """A pair's ratio mu_a / mu_b off by 0.2 % moves the sheet of an exact rig
     (seed 1) as a whole: the error bar's ratio term (the depth search's gain on
     that ratio, :func:`colourhs.reconstruct.bayes.uncertainty.ratio_sensitivity`, times a
@@ -381,9 +395,7 @@ def test_the_ratio_term_of_the_error_bar_predicts_the_depths_move(exact_rigs):
     function's knee)."""
     import copy
 
-    root = exact_rigs[1]
-    fr = load_frame(root, "sheet", "000000", photometric_h5=root / "gt" / "photometric.h5")
-    base = reconstruct(fr, "bayes")
+    fr, base = _reconstruction(reconstructed, exact_rigs[1], "sheet", "bayes")
     eps = 0.002
     off = copy.copy(fr)
     off.mu = fr.mu.copy()
