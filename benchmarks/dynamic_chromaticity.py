@@ -69,7 +69,8 @@ the chromaticity error of the map used against the frame's truth
   scale (nor on a per-pixel scale: only the colour's direction counts, which is
   what the reconstruction sees); 0.1 is about a 10 % error of a band ratio.
 - ``chroma_sigma_median``, ``chroma_sigma_within_1/2/3``: for a map with a 1-sigma
-  of log p (``sigma/<camera>``: the calibration's or a tracked map's), its median
+  of log p (:func:`colourhs.calibration.chromaticity.map_log_sigma`: the
+  calibration's, or a tracked map's with the calibration's at its position), its median
   and the shares of the pixels' and bands' centred log ratio differences above within
   1, 2 and 3 of it: the
   chromaticity's error bar against the truth, as ``sigma_within_k`` is the depth's.
@@ -239,18 +240,20 @@ def chroma_error(map_h5: Path, truth_h5: Path, cameras) -> dict:
     """``chroma_rms_log`` (:func:`colourhs.calibration.chromaticity.log_ratio_rms` of the
     cameras' maps side by side) and ``chroma_known`` of a map against a frame's truth
     (module docstring), pooled over ``cameras``; None where the object has no pixel.
-    A map with a 1-sigma of log p (``sigma/<camera>``) also gets
+    A map with a 1-sigma of log p
+    (:func:`colourhs.calibration.chromaticity.map_log_sigma`) also gets
     :func:`chroma_sigma_error`'s columns (None without)."""
     import h5py
 
-    from colourhs.calibration.chromaticity import log_ratio_rms
+    from colourhs.calibration.chromaticity import log_ratio_rms, map_log_sigma
 
     with h5py.File(map_h5) as f, h5py.File(truth_h5) as g:
         t = np.concatenate([np.asarray(g[cam][()], float) for cam in cameras])
         p = np.concatenate([np.asarray(f[cam][()], float) for cam in cameras])
+        sigmas = [map_log_sigma(f, cam) for cam in cameras]
         sig = None
-        if all(f"sigma/{cam}" in f for cam in cameras):
-            sig = np.concatenate([np.asarray(f[f"sigma/{cam}"][()], float) for cam in cameras])
+        if all(s is not None for s in sigmas):
+            sig = np.concatenate([np.asarray(s, float) for s in sigmas])
     on = np.all(np.isfinite(t) & (t > 0), axis=-1)
     known = on & np.all(np.isfinite(p) & (p > 0), axis=-1)
     out = {

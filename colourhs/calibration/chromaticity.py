@@ -81,6 +81,7 @@ __all__ = [
     "log_ratio_rms",
     "log_sigma",
     "log_sigma_coverage",
+    "map_log_sigma",
     "chromaticity_map",
     "chromaticity_maps",
     "chromaticity_ratios",
@@ -352,6 +353,19 @@ def log_sigma_coverage(
         return None
     within = np.abs(d) / (s[ok] * np.sqrt(2.0 / 3.0))
     return float(np.median(s[ok])), [float(np.mean(within <= k)) for k in ks]
+
+
+def map_log_sigma(f: h5py.File, camera: str) -> np.ndarray | None:
+    """A chromaticity file's error bar of ``camera``'s map, its 1-sigma of log p: a
+    tracked map's ``p_sigma/<camera>`` (H, W, 3;
+    :func:`colourhs.calibration.chromaticity_tracking.tracked_log_sigma`), else the
+    file's ``sigma/<camera>`` (the calibrated map's, (H, W, 3), :func:`log_sigma`; or
+    a tracked map's match residual alone, (H, W), where its calibration had no error
+    bar); None without either."""
+    for name in (f"p_sigma/{camera}", f"sigma/{camera}"):
+        if name in f:
+            return f[name][()]
+    return None
 
 
 # --------------------------------------------------------------------------------------------

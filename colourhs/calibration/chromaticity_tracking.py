@@ -38,18 +38,25 @@ neighbour towards c only:
    unknown (NaN, as the calibration leaves a pixel it cannot measure): a surface that
    frame c did not show, a highlight, or a wrong prediction.
 5. p is sampled once from the calibrated map at the position (nearest: no colour is
-   mixed across a patch edge, and no blur accumulates); its 1-sigma of log p
-   (``sigma``) is the match's relative colour residual, ``|q_f - q_c| / |q_c|``.
+   mixed across a patch edge, and no blur accumulates). The match's relative colour
+   residual, ``|q_f - q_c| / |q_c|``, is the tracking's 1-sigma of log p (``sigma``:
+   the reconstruction weighs the channels by it). Where the calibrated map carries
+   its own error bar (:func:`colourhs.calibration.chromaticity.log_sigma`, the
+   chromatic captures' sensor noise), the tracked map's 1-sigma of log p per band
+   (``p_sigma``, :func:`tracked_log_sigma`) is that error bar at the position and the
+   residual in quadrature: the p sampled there carries the calibration's error, and
+   a wrong position a wrong colour.
 
 A static scene, or the chromatic frame itself, keeps the calibrated map unchanged
-(position the pixel itself, sigma 0): ``bayes_dyn`` there equals ``bayes_full``.
+(position the pixel itself, sigma 0, ``p_sigma`` the calibrated map's):
+``bayes_dyn`` there equals ``bayes_full``.
 """
 
 from __future__ import annotations
 
 import json
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import cv2
@@ -86,6 +93,7 @@ __all__ = [
     "track_camera",
     "track_chromaticity",
     "track_sequence",
+    "tracked_log_sigma",
     "tracking_neighbour",
 ]
 
@@ -144,13 +152,17 @@ class TrackedMap:
         frame, NaN where not tracked.
     position_sigma : (H, W) float32, how far the colour match moved the flow's
         prediction, pixels (0 in the chromatic frame).
-    sigma : (H, W) float32, 1-sigma of log p: the match's relative colour residual.
+    sigma : (H, W) float32, the tracking's 1-sigma of log p: the match's relative
+        colour residual.
+    p_sigma : (H, W, 3) float32 or None, each band's 1-sigma of log p of the map
+        (:func:`tracked_log_sigma`); None where the calibrated map has no error bar.
     """
 
     p: np.ndarray
     position: np.ndarray
     position_sigma: np.ndarray
     sigma: np.ndarray
+    p_sigma: np.ndarray | None = None
 
 
 def flow_image(rgb: np.ndarray) -> np.ndarray:
@@ -367,6 +379,17 @@ def track_camera(
     )
 
 
+def tracked_log_sigma(calibrated_sigma: np.ndarray, tracked: TrackedMap) -> np.ndarray:
+    """Step 5's error bar of a tracked map: each band's 1-sigma of log p (H, W, 3), the
+    calibrated map's (``calibrated_sigma``, (H, W, 3),
+    :func:`colourhs.calibration.chromaticity.log_sigma`) at the tracked position
+    (nearest, as p is sampled) and the match's residual (``tracked.sigma``) in
+    quadrature; NaN where either is unknown (beyond the paper)."""
+    x, y = tracked.position[..., 0], tracked.position[..., 1]
+    calibration = _remap(calibrated_sigma, x, y, nearest=True)
+    return np.hypot(calibration, tracked.sigma[..., None]).astype(np.float32)
+
+
 def tracking_neighbour(frames: tuple[str, ...], chromatic_frame: str, frame: str) -> str | None:
     """The frame whose map ``frame``'s is carried from: the next one towards the chromatic
     frame; None for the chromatic frame itself."""
@@ -383,6 +406,7 @@ def read_tracked(path: str | Path, camera: str) -> TrackedMap:
             f[f"position/{camera}"][()],
             f[f"position_sigma/{camera}"][()],
             f[f"sigma/{camera}"][()],
+            f[f"p_sigma/{camera}"][()] if f"p_sigma/{camera}" in f else None,
         )
 
 
@@ -403,7 +427,8 @@ def track_chromaticity(
     calibrated_h5 : the object's calibrated maps (``colourhs chromaticity``).
     out_h5 : the file to write: per camera ``<camera>`` (H, W, 3) p as the calibrated
         maps (so ``colourhs reconstruct --chromaticity`` reads it), ``position/<camera>``,
-        ``position_sigma/<camera>`` and ``sigma/<camera>`` (:class:`TrackedMap`); attributes
+        ``position_sigma/<camera>``, ``sigma/<camera>`` and, where ``calibrated_h5`` has
+        an error bar (``sigma/<camera>``), ``p_sigma/<camera>`` (:class:`TrackedMap`); attributes
         ``scene``, ``frame``, ``chromatic_frame``, ``neighbour`` and ``tracked`` (JSON:
         camera -> the frame's pixels with a p over the calibrated map's).
     neighbour_h5 : the neighbour frame's file (:func:`tracking_neighbour`); required but
@@ -436,6 +461,7 @@ def track_chromaticity(
 
     with h5py.File(calibrated_h5) as h:
         calibrated = {cam: h[cam][()] for cam in ds.rig.camera_names}
+        error_bar = {cam: h[f"sigma/{cam}"][()] for cam in calibrated if f"sigma/{cam}" in h}
     for cam in bar(ds.rig.camera_names, f"chromaticity {scene}/{frame}", unit="camera"):
         if neighbour is None:
             maps[cam] = calibrated_as_tracked(calibrated[cam])
@@ -447,6 +473,8 @@ def track_chromaticity(
                 image(neighbour, cam),
                 image(c, cam),
             )
+        if cam in error_bar:
+            maps[cam] = replace(maps[cam], p_sigma=tracked_log_sigma(error_bar[cam], maps[cam]))
         known = np.all(np.isfinite(calibrated[cam]), axis=-1).sum()
         tracked[cam] = float(np.all(np.isfinite(maps[cam].p), axis=-1).sum() / max(known, 1))
     attrs = {
@@ -463,6 +491,8 @@ def track_chromaticity(
             f[f"position/{cam}"] = m.position
             f[f"position_sigma/{cam}"] = m.position_sigma
             f[f"sigma/{cam}"] = m.sigma
+            if m.p_sigma is not None:
+                f[f"p_sigma/{cam}"] = m.p_sigma
         f.attrs.update(attrs)
     return attrs
 

@@ -12,7 +12,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from colourhs.calibration.chromaticity import log_ratio_rms
+from colourhs.calibration.chromaticity import log_ratio_rms, map_log_sigma
 from colourhs.common.files import note_read
 
 __all__ = ["chromaticity_drift", "tracked_maps"]
@@ -26,16 +26,21 @@ def tracked_maps(path: str | Path, camera: str | None) -> tuple[str, h5py.File]:
     return (camera if camera in cams else cams[0]), f
 
 
+def _ravel(sigma: np.ndarray | None) -> np.ndarray:
+    return np.full(1, np.nan) if sigma is None else np.asarray(sigma, float).ravel()
+
+
 def chromaticity_drift(
     tracked: Mapping[str, str | Path],
     truth: Mapping[str, str | Path] | None = None,
     calibrated: str | Path | None = None,
 ) -> dict[str, dict[str, float]]:
     """Per frame, over the cameras: the median 1-sigma of the tracked log p
-    (``sigma``), the share of the calibrated pixels tracked (``tracked``) and, with
-    ground truth (frame -> ``gt/chromaticity/<frame>.h5``), the RMS log-ratio error of
-    the tracked maps (``error``, :func:`colourhs.calibration.chromaticity.log_ratio_rms`)
-    and of the calibrated maps used unchanged (``static_error``, the paper's method)."""
+    (``sigma``, :func:`colourhs.calibration.chromaticity.map_log_sigma`), the share of
+    the calibrated pixels tracked (``tracked``) and, with ground truth (frame ->
+    ``gt/chromaticity/<frame>.h5``), the RMS log-ratio error of the tracked maps
+    (``error``, :func:`colourhs.calibration.chromaticity.log_ratio_rms`) and of the
+    calibrated maps used unchanged (``static_error``, the paper's method)."""
     static = {}
     if calibrated is not None:
         note_read(calibrated)
@@ -47,7 +52,7 @@ def chromaticity_drift(
         with h5py.File(h5) as f:
             cams = [k for k, v in f.items() if isinstance(v, h5py.Dataset)]
             maps = {c: f[c][()] for c in cams}
-            sigma = np.concatenate([f[f"sigma/{c}"][()].ravel() for c in cams])
+            sigma = np.concatenate([_ravel(map_log_sigma(f, c)) for c in cams])
             shares = json.loads(f.attrs.get("tracked", "{}"))
         row = {
             "sigma": float(np.nanmedian(sigma)) if np.isfinite(sigma).any() else float("nan"),
