@@ -124,7 +124,9 @@ class SurfaceGraph:
         out.pix, out.rows, out.cols = self.pix[sel], self.rows[sel], self.cols[sel]
         out.n = int(sel.sum())
         nbr = self.neighbours[:, sel]
-        out.neighbours = np.where(nbr >= 0, idx[np.maximum(nbr, 0)], -1)
+        # C order, as the constructor's: the compiled kernels that read it are then
+        # compiled for one layout only (the mask's indexing returns Fortran order).
+        out.neighbours = np.ascontiguousarray(np.where(nbr >= 0, idx[np.maximum(nbr, 0)], -1))
         out.surface = (np.cumsum(keep) - 1)[self.surface[sel]]
         out.n_surfaces = int(np.count_nonzero(keep))
         out.index = np.flatnonzero(sel)
