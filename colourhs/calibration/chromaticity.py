@@ -437,12 +437,10 @@ def read_chromatic_captures(
 
 def _matching_variance(noise, camera: str, intensities: dict[str, np.ndarray]) -> dict:
     """The noise model's variance of each colour's matching-channel intensity (H, W)."""
-    out = {}
-    for k, colour in enumerate(COLOURS):
-        rgb = np.zeros(intensities[colour].shape + (3,))
-        rgb[..., k] = intensities[colour]
-        out[colour] = noise.variance(camera, rgb)[..., k]
-    return out
+    return {
+        colour: noise.variance(camera, intensities[colour], channel=k)
+        for k, colour in enumerate(COLOURS)
+    }
 
 
 def _chromaticity_map(

@@ -56,10 +56,13 @@ class NoiseModel:
     gain: dict
     offset: dict
 
-    def variance(self, camera: str, image: np.ndarray) -> np.ndarray:
-        """Predicted variance (H, W, 3) of a linear image (H, W, 3) of ``camera``."""
+    def variance(self, camera: str, image: np.ndarray, channel: int | None = None) -> np.ndarray:
+        """Predicted variance (H, W, 3) of a linear image (H, W, 3) of ``camera``; with
+        ``channel`` (0-2), that of one channel's intensities (any shape)."""
         g = np.asarray(self.gain[camera], float)
         o = np.asarray(self.offset[camera], float)
+        if channel is not None:
+            g, o = g[channel], o[channel]
         return np.clip(np.asarray(image, float), 0.0, None) * g + o
 
 

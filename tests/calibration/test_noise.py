@@ -54,6 +54,12 @@ def test_variance_of_the_model():
     m = NoiseModel({"a": np.array([1e-4, 2e-4, 3e-4])}, {"a": np.array([1e-6, 0, 0])})
     img = np.full((2, 2, 3), 0.5)
     assert np.allclose(m.variance("a", img)[0, 0], [0.5e-4 + 1e-6, 1e-4, 1.5e-4])
+    # One channel's intensities alone: that channel's gain and offset.
+    one = np.array([[0.5, -0.1], [0.2, 1.0]])
+    np.testing.assert_allclose(
+        m.variance("a", one, channel=0), [[0.5e-4 + 1e-6, 1e-6], [0.2e-4 + 1e-6, 1e-4 + 1e-6]]
+    )
+    np.testing.assert_allclose(m.variance("a", one, channel=2), 3e-4 * np.clip(one, 0, None))
 
 
 def test_noise_free_captures_give_the_quantisation_floor():
