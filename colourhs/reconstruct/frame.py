@@ -205,7 +205,7 @@ def reconstruct(
     limit = MAX_SIGMA * np.abs(z) if opts.max_sigma_mm is None else opts.max_sigma_mm * 1e-3
     with np.errstate(invalid="ignore"):
         uncertain = ok & (sigma > limit)  # an unknown (NaN) sigma flags nothing
-    ok &= ~uncertain
+    ok = ok & ~uncertain  # a new array: the last of ``stages`` may be ``ok`` itself
     z[~ok] = np.nan
     nrm[~ok] = np.nan
     conf[~ok] = 0.0

@@ -182,6 +182,31 @@ def test_bayesian_hs_accuracy(tiny_dataset, calib, scene, normal_max_deg, depth_
     assert depth_med < depth_max_mm
 
 
+def test_a_depth_too_uncertain_is_dropped_as_uncertain(tiny_dataset, calib):
+    """A limit on sigma (``max_sigma_mm``, here about the median sigma of ML HS on the
+    tiny plane) drops the depths above it, and each is coded ``uncertain``: the limit
+    is applied after every method's stages (for Bayesian HS after the rims'), and
+    the stage before it once kept those pixels (its mask was changed in place, so
+    ML's were coded ``data_term`` and Bayesian HS's ``rims``)."""
+    from colourhs.common.depthfile import DROP_REASONS
+
+    fr = load_frame(tiny_dataset, "plane", "000000", **calib)
+    free = reconstruct(fr, "ml")
+    # Halfway between two sigmas about their median (no depth at the limit, whose
+    # float32 copy might round to either side).
+    sigmas = np.unique(free.depth_sigma[free.mask & np.isfinite(free.depth_sigma)])
+    limit_mm = float(sigmas[len(sigmas) // 2 : len(sigmas) // 2 + 2].mean()) * 1e3
+    held = reconstruct(fr, "ml", max_sigma_mm=limit_mm)
+    # The depths kept, or dropped by the default limit (5 % of the depth).
+    over = (free.mask | free.uncertain) & (free.depth_sigma * 1e3 > limit_mm)
+    print(f"{over.sum()} of {free.mask.sum()} over the limit")
+    assert over.sum() > 0.15 * free.mask.sum()  # measured 907 of 3770 (the rest: sigma NaN)
+    np.testing.assert_array_equal(held.mask, free.mask & ~over)
+    np.testing.assert_array_equal(held.uncertain, over)
+    assert np.all(held.dropped[over] == DROP_REASONS.index("uncertain") + 1)
+    np.testing.assert_array_equal(held.dropped[~over], free.dropped[~over])
+
+
 def test_ml_is_clearly_worse_than_bayes(tiny_dataset, calib, capsys):
     fr = load_frame(tiny_dataset, "plane", "000000", **calib)
     _, ml_depth, ml_normal, _ = _evaluate(tiny_dataset, "plane", fr, reconstruct(fr, "ml"))
