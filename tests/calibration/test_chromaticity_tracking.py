@@ -332,6 +332,17 @@ def test_the_moving_toys_colours_follow_it(moving_toy, tmp_path, capsys):
         for f, h5 in (("000000", out["000000"]), ("000003", out["000003"]), ("000003", calibrated))
     ]
     assert borrows == [False, True, False]
+    # The variance the reconstruction reads: widened by (i sigma)^2 in every channel,
+    # sigma the tracking's (the match residual, 0 in the chromatic frame), not by the
+    # map's error bar p_sigma (measured mixed for bayes_dyn: issue 38's notes).
+    for f in ("000000", "000003"):
+        plain = load_frame(data, "moving-toy", f)
+        fr = load_frame(data, "moving-toy", f, chromaticity_h5=out[f])
+        with h5py.File(out[f]) as t:
+            residual = np.stack([t[f"sigma/{c}"][()] for c in fr.rig.camera_names])
+        expected = plain.variance + (fr.images * np.nan_to_num(residual)[:, None]) ** 2
+        np.testing.assert_allclose(fr.variance, expected, rtol=1e-6)
+        assert (f == "000000") == np.array_equal(fr.variance, plain.variance)
 
 
 @pytest.mark.slow
