@@ -334,7 +334,7 @@ def test_the_moving_toys_colours_follow_it(moving_toy, tmp_path, capsys):
     assert borrows == [False, True, False]
     # The variance the reconstruction reads: widened by (i sigma)^2 in every channel,
     # sigma the tracking's (the match residual, 0 in the chromatic frame), not by the
-    # map's error bar p_sigma (measured mixed for bayes_dyn: issue 38's notes).
+    # map's error bar p_sigma.
     for f in ("000000", "000003"):
         plain = load_frame(data, "moving-toy", f)
         fr = load_frame(data, "moving-toy", f, chromaticity_h5=out[f])
