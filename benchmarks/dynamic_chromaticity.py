@@ -220,8 +220,8 @@ CHROMA_SIGMA_COLUMNS = (
 
 
 def chroma_sigma_error(p: np.ndarray, truth: np.ndarray, sigma: np.ndarray) -> dict:
-    """:data:`CHROMA_SIGMA_COLUMNS` of a map ``p`` (N, 3) whose 1-sigma of log p is
-    ``sigma`` (N, 3) per band (or (N,), the same in each), against ``truth`` (N, 3)
+    """:data:`CHROMA_SIGMA_COLUMNS` of a map ``p`` (..., 3) whose 1-sigma of log p is
+    ``sigma`` (..., 3) per band (or (...), the same in each), against ``truth`` (..., 3)
     (:func:`colourhs.calibration.chromaticity.log_sigma_coverage`); None where no pixel
     has all three."""
     from colourhs.calibration.chromaticity import log_sigma_coverage
@@ -262,9 +262,7 @@ def chroma_error(map_h5: Path, truth_h5: Path, cameras) -> dict:
     }
     if sig is None:
         return out | dict.fromkeys(CHROMA_SIGMA_COLUMNS)
-    return out | chroma_sigma_error(
-        p.reshape(-1, 3), t.reshape(-1, 3), sig.reshape(len(t.reshape(-1, 3)), -1)
-    )
+    return out | chroma_sigma_error(p, t, sig)
 
 
 #: The tracking's position columns (:func:`position_error`), None where not measured.

@@ -26,10 +26,6 @@ def tracked_maps(path: str | Path, camera: str | None) -> tuple[str, h5py.File]:
     return (camera if camera in cams else cams[0]), f
 
 
-def _ravel(sigma: np.ndarray | None) -> np.ndarray:
-    return np.full(1, np.nan) if sigma is None else np.asarray(sigma, float).ravel()
-
-
 def chromaticity_drift(
     tracked: Mapping[str, str | Path],
     truth: Mapping[str, str | Path] | None = None,
@@ -52,7 +48,7 @@ def chromaticity_drift(
         with h5py.File(h5) as f:
             cams = [k for k, v in f.items() if isinstance(v, h5py.Dataset)]
             maps = {c: f[c][()] for c in cams}
-            sigma = np.concatenate([_ravel(map_log_sigma(f, c)) for c in cams])
+            sigma = np.concatenate([np.ravel(map_log_sigma(f, c)) for c in cams])
             shares = json.loads(f.attrs.get("tracked", "{}"))
         row = {
             "sigma": float(np.nanmedian(sigma)) if np.isfinite(sigma).any() else float("nan"),
