@@ -7,10 +7,13 @@ whole suite is what CI runs. ``slurm``, ``bench`` and ``mitsuba`` mark tests
 that need what a plain run lacks: they run only when ``-m`` names them
 (``pytest -m slurm``) and are skipped, with the reason, otherwise.
 
-The suite runs in two pytest-xdist workers (``addopts`` in ``pyproject.toml``):
-the session fixtures that render a dataset (:func:`built_once`) are rendered once
-for the whole run, by the first worker that asks; ``pytest -n 0`` runs the tests in
-one process.
+The suite runs in two pytest-xdist workers (``addopts`` in ``pyproject.toml``),
+each with its share of the cores for numba's and OpenBLAS's threads: the session
+fixtures that render a dataset (:func:`built_once`) are rendered once for the whole
+run, by the first worker that asks; a file's tests run on one worker
+(``--dist loadfile``), so its module fixtures are built once, and the tests of
+``whole_job`` are all in ``workflow/test_workflow.py``; ``pytest -n 0`` runs the
+tests in one process.
 """
 
 from __future__ import annotations
@@ -22,11 +25,26 @@ import shutil
 from collections.abc import Callable
 from pathlib import Path
 
-import pytest
-from logging_helpers import kept_logging
 
-from colourhs.synth.simulated_rig import Nuisances
-from colourhs.synth.synthesise import PARTS, Preset, RenderSelection, synthesise
+def _share_the_cores() -> None:
+    """Under pytest-xdist, give each worker its share of the machine's cores for numba's
+    and OpenBLAS's threads (unless the environment already sets them): every worker
+    otherwise starts one thread per core, and the workers' threads contend for the
+    same cores. Set before numpy and numba are imported, which read them once."""
+    workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
+    if workers > 1:
+        share = str(max(1, (os.cpu_count() or 1) // workers))
+        for var in ("NUMBA_NUM_THREADS", "OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS"):
+            os.environ.setdefault(var, share)
+
+
+_share_the_cores()
+
+import pytest  # noqa: E402
+from logging_helpers import kept_logging  # noqa: E402
+
+from colourhs.synth.simulated_rig import Nuisances  # noqa: E402
+from colourhs.synth.synthesise import PARTS, Preset, RenderSelection, synthesise  # noqa: E402
 
 #: Markers whose tests run only when ``-m`` names them, and why they are opt-in.
 OPT_IN = {
@@ -108,8 +126,8 @@ def tiny_dataset(tmp_path_factory):
 
 @pytest.fixture(scope="session")
 def whole_job(tiny_dataset, tmp_path_factory):
-    """`colourhs run` of every stage on a copy of the tiny dataset, shared by
-    test_cli.py and test_workflow.py (tests/whole_job.py)."""
+    """`colourhs run` of every stage on a copy of the tiny dataset (tests/whole_job.py),
+    for workflow/test_workflow.py."""
     from whole_job import run_whole_job
 
     return run_whole_job(tiny_dataset, tmp_path_factory.mktemp("workflow"))

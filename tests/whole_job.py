@@ -3,9 +3,9 @@
 `colourhs run` on a copy of the tiny dataset: every stage, variants vh, bayes_ph and
 bayes_full, all four scenes, 68 jobs (measured on 2 cores shared with another job,
 fixture setup with the tiny dataset: 134 s with numba's cache empty, 103-109 s with
-it filled, up to 206 s under load; most of a tiny job is its imports). test_cli.py
-checks what it made, test_workflow.py what changes would rerun: one run instead of
-two (test_workflow's own run of 36 jobs took 64-74 s, 125 s under load; the two
+it filled, up to 206 s under load; most of a tiny job is its imports).
+workflow/test_workflow.py checks what it made and what changes would rerun: one run
+instead of two (test_workflow's own run of 36 jobs took 64-74 s, 125 s under load; the two
 files went from 240 s to 173 s with numba's cache empty, 199 s to 145 s filled).
 The dataset copy and the run's folder have spaces in their paths ("my capture",
 "my run"): every rule's shell command must quote them. Every job records the

@@ -13,7 +13,6 @@ from types import SimpleNamespace
 import pandas as pd
 import pytest
 import yaml
-from whole_job import VARIANTS, snapshot
 
 from colourhs.cli.parser import PROJECT_ROOT, _input_problem, main
 from colourhs.common.depthfile import DepthResult, write_depth
@@ -77,110 +76,6 @@ def test_validate_names_every_problem_at_once_with_near_misses(tiny_dataset, tmp
     assert any(f"{frame / 'cam1.png'}: missing image" in t and "found cam1.TIF" in t for t in lines)
     assert any(str(truncated) in t for t in lines)
     assert any(str(bad / "scenes" / "plane" / "scene.json") in t for t in lines)
-
-
-# The session's one `colourhs run` of every stage on the tiny preset (tests/whole_job.py:
-# variants vh, bayes_ph and bayes_full; dataset and run folders with spaces in their
-# paths), shared with tests/workflow/test_workflow.py; the tests below each check one
-# thing of it. ml_full and bayes_nocalib are left out for the suite's time: ML HS is
-# tested in test_exact.py and test_reconstruct.py, the uncalibrated variant and the
-# ablation in test_reconstruct.py (test_calibrations_help), their workflow inputs in
-# test_workflow_plan.py.
-
-
-def test_whole_job_runs_every_stage_reading_only_its_declared_inputs(whole_job):
-    """68 jobs = validation, 6 calibrations (marker poses, cross-talk, noise,
-    photometric, the statue's and the toy's chromaticity), the recorded config, 6
-    frames x (hull + bayes_ph + bayes_full (copied on plane and sheet) + 3 meshes + 3
-    evaluations), the metrics table, 4 figure folders and the report; every one read
-    only what its rule declares."""
-    assert whole_job.done.returncode == 0, whole_job.done.stderr[-2000:]
-    n_jobs, problems = whole_job.audit
-    assert n_jobs == 68 and not problems, "\n".join(sorted(problems))
-    work = whole_job.workdir
-    summary = json.loads((work / "results" / "t" / "capture" / "summary.json").read_text())
-    # 7 poses x 3 cameras + 3 chromatic objects x 3 colours x 3 + 6 frames x 3 + 18 masks
-    # + 15 geometric poses x 3 cameras.
-    assert summary["images"] == 21 + 27 + 18 + 18 + 45
-
-
-def _metrics(whole_job) -> pd.DataFrame:
-    return pd.read_csv(whole_job.workdir / "reports" / "t" / "metrics.csv", dtype={"frame": str})
-
-
-def test_whole_job_writes_a_metrics_row_and_a_mesh_per_frame_and_variant(whole_job):
-    """4 scenes, 6 frames, the 3 variants: one metrics row and one mesh each."""
-    metrics = _metrics(whole_job)
-    assert len(metrics) == 6 * len(VARIANTS)
-    assert set(metrics["variant"]) == set(VARIANTS)
-    res = whole_job.workdir / "results" / "t"
-    for scene, frame, variant in metrics[["scene", "frame", "variant"]].itertuples(index=False):
-        assert (res / scene / variant / "mesh" / f"{frame}.ply").exists()
-
-
-def test_whole_job_accuracy_against_ground_truth(whole_job):
-    """The sheet with Bayesian HS and photometric calibration (Hausdorff RMS measured
-    0.44 mm) is a hundred times better than the visual hull (121 mm); bayes_full,
-    with the pipeline's own chromaticity maps, beats bayes_ph on the coloured objects
-    (statue 1.77 against 7.36 mm, toy 1.87 against 16.5 mm)."""
-    metrics = _metrics(whole_job)
-    sheet = metrics[metrics["scene"] == "sheet"].groupby("variant")["hausdorff_rms_mm"].mean()
-    assert sheet["bayes_ph"] < 0.7
-    assert 100 * sheet["bayes_ph"] < sheet["vh"]
-    chromatic = metrics.set_index(["scene", "variant"])["hausdorff_rms_mm"]
-    for scene in ("statue", "toy"):
-        full, ph = chromatic[(scene, "bayes_full")], chromatic[(scene, "bayes_ph")]
-        assert full < 2.5 and 3 * full < ph, (scene, full, ph)
-
-
-def test_whole_job_copies_bayes_full_where_there_is_no_chromatic_object(whole_job):
-    """bayes_full on the scenes without a chromatic object (plane, sheet) is
-    bayes_ph, computed once and copied byte for byte; the chromatic ones are
-    computed."""
-    full = _metrics(whole_job)
-    full = full[full["variant"] == "bayes_full"].set_index(["scene", "frame"])
-    copied = full["same_as"].fillna("")
-    assert set(copied[copied == "bayes_ph"].index.get_level_values(0)) == {"plane", "sheet"}
-    assert set(copied[copied == ""].index.get_level_values(0)) == {"statue", "toy"}
-    res = whole_job.workdir / "results" / "t"
-    for scene, frame in copied[copied == "bayes_ph"].index:
-        for kind in (f"depth/{frame}.h5", f"mesh/{frame}.ply"):
-            a, b = res / scene / "bayes_full" / kind, res / scene / "bayes_ph" / kind
-            assert a.read_bytes() == b.read_bytes()
-
-
-def test_whole_job_report_has_provenance_diagnostics_views_and_timings(whole_job):
-    """The report links its figures, names the workflow command and the rig, has
-    the calibration diagnostics and a 3D view per scene (the report rule passes
-    --calib and --view), times every stage under its rule's name, and says where
-    bayes_full is bayes_ph; the sheet gets its animation."""
-    work = whole_job.workdir
-    html = (work / "reports" / "t" / "index.html").read_text()
-    assert "bayes_full" in html and "base64," not in html and 'src="figures/sheet/' in html
-    assert "workflow command" in html and "frames per scene" in html  # provenance, rig
-    assert '<div class="diagnostics">' in html and "marker" in html
-    assert html.count('<div class="viewer"') == 4
-    bench = work / "benchmarks" / "snakemake"
-    for rule in ("validate_dataset", "marker_poses", "crosstalk", "noise_model"):
-        assert (bench / rule / "t.tsv").exists(), rule
-    assert (bench / "reconstruct_frame" / "t" / "sheet" / "bayes_ph" / "000000.tsv").exists()
-    assert "<td>reconstruct_frame</td>" in html or ">reconstruct_frame<" in html
-    assert "<code>bayes_full</code> is <code>bayes_ph</code> on this scene" in html
-    assert (work / "reports" / "t" / "figures" / "sheet" / "animation.gif").exists()
-
-
-def test_whole_job_second_run_does_nothing_and_snakemake_reports_it(whole_job):
-    """A second run does nothing; Snakemake's own report (with the captions on the key
-    outputs) builds; neither writes an output (test_workflow.py shares the run)."""
-    work, cmd = whole_job.workdir, whole_job.cmd
-    again = subprocess.run(cmd, capture_output=True, text=True)
-    assert again.returncode == 0
-    assert "Nothing to be done" in again.stdout + again.stderr
-    report = work / "snakemake_report.html"
-    done = subprocess.run(cmd + ["--", "--report", str(report)], capture_output=True, text=True)
-    assert done.returncode == 0, done.stderr[-2000:]
-    assert report.stat().st_size > 10000
-    assert snapshot(work) == whole_job.first
 
 
 def test_workflow_lint_is_clean(tmp_path):

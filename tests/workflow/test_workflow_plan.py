@@ -213,7 +213,7 @@ def test_variants_targets_and_options(data):
     )
     assert plan.reconstruct_options("d", "wave", "vh") == "--method vh --n-labels 7"
     # The paper's ablation without calibration: the noise model only (the whole-job
-    # test in test_cli.py leaves this variant out for time).
+    # tests in test_workflow.py leave this variant out for time).
     assert plan.variant_calibration("d", "toy", "bayes_nocalib") == {
         "noise": "results/d/calib/noise.json"
     }
