@@ -18,7 +18,11 @@ neighbour towards c only:
    slide over a glossy surface; DIS at a coarse scale on the image's colour
    (:func:`colour_flow`), which sees the surface's colour edges and not its shading;
    and no motion. Each pixel takes the candidate whose colour, compared over a
-   window, best matches the neighbour's there (:func:`select_flow`).
+   window, best matches the neighbour's there (:func:`select_flow`). The same flow
+   from frame f straight to frame c gives a second prediction, which does not add up
+   the small errors of each step; each pixel takes the one whose colour in frame c,
+   compared over the same window, best matches its own, the direct one where they
+   match equally (:func:`predict_from_both`).
 2. Shading: the image colour (:func:`image_colour`: the channels over their sum, all
    lights on) is p times each band's shading, and the shading of each band changes as
    the surface turns under its light. A smooth gain per band (:func:`shading_gain`,
@@ -36,7 +40,10 @@ neighbour towards c only:
    not only where the object shows the chromatic pose again.
 4. A pixel whose best match still differs by more than :data:`COLOUR_TOL` is left
    unknown (NaN, as the calibration leaves a pixel it cannot measure): a surface that
-   frame c did not show, a highlight, or a wrong prediction.
+   frame c did not show, a highlight, or a wrong prediction. Its point keeps the
+   prediction as its position, so that the next frame's flow carries it on and the
+   colour can confirm it again once the highlight has passed (a lost point's position
+   would otherwise fall back to no motion and stay behind the surface).
 5. p is sampled once from the calibrated map at the position (nearest: no colour is
    mixed across a patch edge, and no blur accumulates). The match's relative colour
    residual, ``|q_f - q_c| / |q_c|``, is the tracking's 1-sigma of log p (``sigma``:
@@ -85,6 +92,7 @@ __all__ = [
     "colour_flow",
     "flow_image",
     "image_colour",
+    "predict_from_both",
     "predict_positions",
     "prediction_flow",
     "read_tracked",
@@ -149,7 +157,9 @@ class TrackedMap:
     ----------
     p : (H, W, 3) float32, (p_R, p_G, p_B) summing to 3, NaN where unknown.
     position : (H, W, 2) float32, each pixel's point as a pixel (x, y) of the chromatic
-        frame, NaN where not tracked.
+        frame: the colour match's where p is known, the prediction where the colour
+        did not confirm it; NaN where the pixel is dark (nothing seen to track) or,
+        in the chromatic frame, where the calibration has no p.
     position_sigma : (H, W) float32, how far the colour match moved the flow's
         prediction, pixels (0 in the chromatic frame).
     sigma : (H, W) float32, the tracking's 1-sigma of log p: the match's relative
@@ -311,6 +321,22 @@ def predict_positions(neighbour: TrackedMap, forward: np.ndarray) -> np.ndarray:
     return np.where(np.isfinite(moved), moved, np.stack([gx, gy], axis=-1)).astype(np.float32)
 
 
+def predict_from_both(
+    chained: np.ndarray, frame_rgb: np.ndarray, anchor_rgb: np.ndarray
+) -> np.ndarray:
+    """Step 1's prediction (H, W, 2), positions in the chromatic frame: per pixel, the
+    ``chained`` one (:func:`predict_positions`, carried from the neighbour frame) or the
+    pixel moved by the flow straight to the chromatic frame (:func:`prediction_flow` of
+    ``frame_rgb`` to ``anchor_rgb``), whichever :func:`select_flow` finds the colours
+    agree with; the direct one wins a tie (inside a patch of one colour, where the
+    colours cannot tell them apart), since it has no earlier step's error to carry
+    (beyond the paper)."""
+    colour, anchor = image_colour(frame_rgb), image_colour(anchor_rgb)
+    grid = np.stack(_grid(colour.shape), axis=-1)
+    direct = prediction_flow(frame_rgb, anchor_rgb)
+    return grid + select_flow([direct, chained - grid], colour, anchor)
+
+
 def colour_match(
     predicted: np.ndarray, colour: np.ndarray, anchor_colour: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -358,7 +384,8 @@ def track_camera(
     frame_rgb, neighbour_rgb, anchor_rgb : (H, W, 3) linear images (all lights on) of
         the frame, of its neighbour and of the chromatic frame.
     """
-    predicted = predict_positions(neighbour, prediction_flow(frame_rgb, neighbour_rgb))
+    chained = predict_positions(neighbour, prediction_flow(frame_rgb, neighbour_rgb))
+    predicted = predict_from_both(chained, frame_rgb, anchor_rgb)
     colour, anchor = image_colour(frame_rgb), image_colour(anchor_rgb)
     colour = colour * np.exp(-shading_gain(colour, anchor, predicted))
     colour /= colour.sum(axis=-1, keepdims=True)
@@ -370,8 +397,9 @@ def track_camera(
     p = _remap(calibrated, x, y, nearest=True)
     lost = ~(distance <= COLOUR_TOL) | ~np.all(np.isfinite(p), axis=-1) | ~np.isfinite(sigma)
     p[lost] = np.nan
-    position[lost] = np.nan
     moved = np.linalg.norm(position - predicted, axis=-1)
+    seen_here = np.all(np.isfinite(colour), axis=-1)
+    position[lost] = np.where(seen_here[lost, None], predicted[lost], np.nan)
     moved[lost] = np.nan
     sigma[lost] = np.nan
     return TrackedMap(
