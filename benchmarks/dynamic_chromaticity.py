@@ -82,7 +82,8 @@ the chromaticity error of the map used against the frame's truth
   ground-truth meshes, which share one triangulation), pooled over the cameras'
   pixels with both, pixels; ``track_motion_px``: the median true motion since the
   chromatic frame, pixels, and ``track_position_known``: the share of the pixels
-  with a true position that have a tracked one. A p can be right with a wrong
+  with a true position that have a tracked one (with or without a p: a point the
+  colour did not confirm keeps the flow's position). A p can be right with a wrong
   position (inside a uniform patch), so this is the tracking's own error.
 
 The summary (``dynamic_chromaticity_summary<TAG>.md`` / ``.json``) gives per
