@@ -322,19 +322,17 @@ def predict_positions(neighbour: TrackedMap, forward: np.ndarray) -> np.ndarray:
 
 
 def predict_from_both(
-    chained: np.ndarray, frame_rgb: np.ndarray, anchor_rgb: np.ndarray
+    chained: np.ndarray, direct: np.ndarray, colour: np.ndarray, anchor_colour: np.ndarray
 ) -> np.ndarray:
     """Step 1's prediction (H, W, 2), positions in the chromatic frame: per pixel, the
     ``chained`` one (:func:`predict_positions`, carried from the neighbour frame) or the
-    pixel moved by the flow straight to the chromatic frame (:func:`prediction_flow` of
-    ``frame_rgb`` to ``anchor_rgb``), whichever :func:`select_flow` finds the colours
-    agree with; the direct one wins a tie (inside a patch of one colour, where the
-    colours cannot tell them apart), since it has no earlier step's error to carry
-    (beyond the paper)."""
-    colour, anchor = image_colour(frame_rgb), image_colour(anchor_rgb)
+    pixel moved by ``direct``, the flow (H, W, 2) straight to the chromatic frame
+    (:func:`prediction_flow`), whichever :func:`select_flow` finds the frame's
+    ``colour`` agrees with in ``anchor_colour`` (:func:`image_colour` of each); the
+    direct one wins a tie (inside a patch of one colour, where the colours cannot tell
+    them apart), since it has no earlier step's error to carry (beyond the paper)."""
     grid = np.stack(_grid(colour.shape), axis=-1)
-    direct = prediction_flow(frame_rgb, anchor_rgb)
-    return grid + select_flow([direct, chained - grid], colour, anchor)
+    return grid + select_flow([direct, chained - grid], colour, anchor_colour)
 
 
 def colour_match(
@@ -384,9 +382,9 @@ def track_camera(
     frame_rgb, neighbour_rgb, anchor_rgb : (H, W, 3) linear images (all lights on) of
         the frame, of its neighbour and of the chromatic frame.
     """
-    chained = predict_positions(neighbour, prediction_flow(frame_rgb, neighbour_rgb))
-    predicted = predict_from_both(chained, frame_rgb, anchor_rgb)
     colour, anchor = image_colour(frame_rgb), image_colour(anchor_rgb)
+    chained = predict_positions(neighbour, prediction_flow(frame_rgb, neighbour_rgb))
+    predicted = predict_from_both(chained, prediction_flow(frame_rgb, anchor_rgb), colour, anchor)
     colour = colour * np.exp(-shading_gain(colour, anchor, predicted))
     colour /= colour.sum(axis=-1, keepdims=True)
     position, distance = colour_match(predicted, colour, anchor)
