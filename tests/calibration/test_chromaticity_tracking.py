@@ -66,6 +66,14 @@ def _image(p: np.ndarray, shading: np.ndarray) -> np.ndarray:
     return np.nan_to_num(p)[..., :] * shading[..., None]
 
 
+def _inner(margin: int) -> np.ndarray:
+    """The pixels at least ``margin`` from the image's border (H, W): on the object in
+    every frame of a test."""
+    inner = np.zeros((H, W), bool)
+    inner[margin:-margin, margin:-margin] = True
+    return inner
+
+
 def test_the_chromatic_frame_keeps_the_calibrated_map():
     p = _patches()
     m = calibrated_as_tracked(p)
@@ -92,8 +100,7 @@ def test_a_moving_surface_carries_its_colours_with_it():
         maps.append(track_camera(p, maps[-1], images[k], images[k - 1], images[0]))
     last = maps[-1]
     moved = _moved(np.where(np.isfinite(p), p, -1.0), 4 * step[0], 4 * step[1])
-    inner = np.zeros((H, W), bool)
-    inner[20:-20, 20:-20] = True  # the object in every frame
+    inner = _inner(20)  # the object in every frame
     right = np.all(np.abs(last.p - moved) < 1e-3, axis=-1)[inner]
     known = np.all(np.isfinite(last.p), axis=-1)[inner]
     print(
@@ -134,12 +141,6 @@ def test_a_tracked_maps_error_bar_carries_the_calibrations_at_its_position():
     assert np.all(np.isnan(s[~known]))
 
 
-def _inner(margin=30) -> np.ndarray:
-    inner = np.zeros((H, W), bool)
-    inner[margin:-margin, margin:-margin] = True
-    return inner
-
-
 def test_a_drifted_chain_is_re_anchored_by_the_flow_to_the_chromatic_frame():
     """The neighbour frame's positions have drifted 2 px to the right (each step's small
     flow errors added up) while the surface has moved 1 px right since the chromatic
@@ -156,11 +157,12 @@ def test_a_drifted_chain_is_re_anchored_by_the_flow_to_the_chromatic_frame():
     drifted = replace(drifted, position=drifted.position + np.float32([1.0, 0.0]))
     m = track_camera(p, drifted, images[1], images[1], images[0])
     gy, gx = np.mgrid[:H, :W]
-    error = np.hypot(m.position[..., 0] - (gx - 1.0), m.position[..., 1] - gy)[_inner()]
+    inner = _inner(30)
+    error = np.hypot(m.position[..., 0] - (gx - 1.0), m.position[..., 1] - gy)[inner]
     chained = np.hypot(drifted.position[..., 0] - (gx - 1.0), drifted.position[..., 1] - gy)
     within = np.mean(error < 0.5), np.mean(error < 1.01)
-    print(f"chained {np.nanmedian(chained[_inner()]):.2f} px off; within 0.5, 1 px: {within}")
-    assert np.nanmedian(chained[_inner()]) > 1.9
+    print(f"chained {np.nanmedian(chained[inner]):.2f} px off; within 0.5, 1 px: {within}")
+    assert np.nanmedian(chained[inner]) > 1.9
     assert within[0] > 0.65 and within[1] > 0.85
 
 
@@ -197,8 +199,7 @@ def test_a_colour_the_chromatic_frame_does_not_show_is_left_unknown():
     m = track_camera(
         p, calibrated_as_tracked(p), _image(other, shading), _image(p, shading), _image(p, shading)
     )
-    inner = np.zeros((H, W), bool)
-    inner[20:-20, 20:-20] = True
+    inner = _inner(20)
     known = np.all(np.isfinite(m.p), axis=-1)[inner]
     print(f"known share where the colours changed: {known.mean():.3f} (tol {COLOUR_TOL})")
     assert known.mean() < 0.1
@@ -222,8 +223,7 @@ def test_a_change_of_each_bands_shading_keeps_the_colours():
     p, shading = _patches(), _shading()
     band = _band_shading(np.log(1.4))
     before, after = _image(p, shading), _image(p, shading) * band
-    inner = np.zeros((H, W), bool)
-    inner[20:-20, 20:-20] = True
+    inner = _inner(20)
     q0, q1 = image_colour(before), image_colour(after)
     moved = np.linalg.norm(q1 - q0, axis=-1)[inner]
     m = track_camera(p, calibrated_as_tracked(p), after, before, before)
@@ -257,8 +257,7 @@ def test_the_flow_follows_the_surface_not_its_highlights():
         blob = 3.0 * np.exp(-((gx - 50 - 4 * k) ** 2 + (gy - 60) ** 2) / (2 * 12.0**2))
         return _image(p, shading) + blob[..., None]
 
-    inner = np.zeros((H, W), bool)
-    inner[20:-20, 20:-20] = True
+    inner = _inner(20)
     near = inner & ((gx - 54) ** 2 + (gy - 60) ** 2 < 20**2)
     bright = np.linalg.norm(dense_flow(flow_image(frame(1)), flow_image(frame(0))), axis=-1)
     chosen = np.linalg.norm(prediction_flow(frame(1), frame(0)), axis=-1)

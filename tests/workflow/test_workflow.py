@@ -278,18 +278,18 @@ def test_every_job_reads_only_its_declared_inputs(run):
     assert not problems, "\n".join(sorted(problems))
 
 
-def test_the_run_saw_every_capture(run):
-    """7 poses x 3 cameras, 3 chromatic objects x 3 colours x 3 cameras, 6 frames x 3
-    cameras and their 18 masks, 15 geometric poses x 3 cameras."""
-    path = run.workdir / "results" / NAME / "capture" / "summary.json"
-    assert json.loads(path.read_text())["images"] == 21 + 27 + 18 + 18 + 45
-
-
 # What the run made (the CLI's `colourhs run`, tests/whole_job.py): variants vh, bayes_ph
 # and bayes_full. ml_full and bayes_nocalib are left out for the suite's time: ML HS is
 # tested in test_exact.py and test_reconstruct.py, the uncalibrated variant and the
 # ablation in test_reconstruct.py (test_calibrations_help), their workflow inputs in
 # test_workflow_plan.py.
+
+
+def test_the_run_saw_every_capture(run):
+    """7 poses x 3 cameras, 3 chromatic objects x 3 colours x 3 cameras, 6 frames x 3
+    cameras and their 18 masks, 15 geometric poses x 3 cameras."""
+    path = run.workdir / "results" / NAME / "capture" / "summary.json"
+    assert json.loads(path.read_text())["images"] == 21 + 27 + 18 + 18 + 45
 
 
 def _metrics(run: WholeJob) -> pd.DataFrame:
@@ -350,7 +350,7 @@ def test_whole_job_report_has_provenance_diagnostics_views_and_timings(run):
     assert html.count('<div class="viewer"') == 4
     bench = work / "benchmarks" / "snakemake"
     for rule in ("validate_dataset", "marker_poses", "crosstalk", "noise_model"):
-        assert (bench / rule / "t.tsv").exists(), rule
+        assert (bench / rule / f"{NAME}.tsv").exists(), rule
     assert (bench / "reconstruct_frame" / NAME / "sheet" / "bayes_ph" / "000000.tsv").exists()
     assert "<td>reconstruct_frame</td>" in html or ">reconstruct_frame<" in html
     assert "<code>bayes_full</code> is <code>bayes_ph</code> on this scene" in html
