@@ -90,8 +90,12 @@ The summary (``dynamic_chromaticity_summary<TAG>.md`` / ``.json``) gives per
 scene x variant and metric the median over seeds and the worst seed of the
 per-frame figure on the chromatic frame and, per seed, the median over the
 moved frames (every other frame) and their worst frame; and per frame the
-median over seeds and the worst seed. Run times per seed (render, calibration,
-reconstruction) are in both.
+median over seeds and the worst seed. With a tracked map, it counts the frames and
+scenes that meet the bounds a tracked chromaticity is judged by
+(:func:`tracking_targets`: the chroma drift to the last frame, the depth drift from
+the chromatic frame, the gain over the static map), beside the true map's own drift
+and the tracked map's depth against the true map's on the same frame (the bound of
+any tracking). Run times per seed (render, calibration, reconstruction) are in both.
 
 A tiny preset (160x120) takes minutes per seed on 2 cores; ``random-dynamic``
 (640x480) far longer: score fewer frames with ``--evaluate`` (``--frames`` renders
@@ -503,7 +507,188 @@ def summarise(table: pd.DataFrame) -> dict:
         empty = g[~np.isfinite(g["depth_median_mm"].astype(float))]
         entry["empty_frames"] = [f"{int(r.seed)}/{int(r.frame):06d}" for r in empty.itertuples()]
         out["scenes"].setdefault(scene, {})[variant] = entry
+    out["targets"] = tracking_targets(table)
     return out
+
+
+#: The bounds a tracked chromaticity is judged by on a moving coloured sequence: its
+#: chromaticity error in the last frame against the chromatic frame's, ``bayes_dyn``'s
+#: depth on every moved frame against its chromatic frame's, and ``bayes_full`` with the
+#: static map against ``bayes_dyn`` on the moved frames (a gain).
+CHROMA_DRIFT_BOUND = 1.5
+DEPTH_DRIFT_BOUND = 1.5
+STATIC_GAIN_BOUND = 3.0
+"""Why these bounds hold on any rig: each is a ratio of one figure to the same figure
+of the same rig and scene (its chromatic frame, or another map on the same frame), so
+the rig's own accuracy divides out; the values are the targets the tracking is set."""
+
+
+def _ratio(a, b) -> float | None:
+    """``a / b`` as a float; None where either is missing or ``b`` is not positive."""
+    a, b = float(a), float(b)
+    return a / b if np.isfinite(a) and np.isfinite(b) and b > 0 else None
+
+
+def _verdict(value: float | None, ok) -> bool | None:
+    """``ok(value)``; None (no verdict) where the value is missing."""
+    return None if value is None else bool(ok(value))
+
+
+def _count(verdicts: list) -> dict:
+    """How many verdicts are met (``met``) of those given (``of``; None is none)."""
+    have = [v for v in verdicts if v is not None]
+    return {"met": sum(have), "of": len(have)}
+
+
+def _against(dyn: float, other: float, ran: bool, ok, empty_meets: bool) -> bool | None:
+    """Whether the tracked variant's depth median ``dyn`` meets ``ok(other, dyn)`` against
+    another variant's ``other`` on one frame: no verdict where the other did not run (or
+    reconstructed nothing, unless ``empty_meets``); a tracked variant that reconstructed
+    nothing misses."""
+    if not ran or (not np.isfinite(other) and not empty_meets):
+        return None
+    if not np.isfinite(dyn):
+        return False
+    return True if not np.isfinite(other) else bool(ok(other, dyn))
+
+
+def tracking_targets(table: pd.DataFrame, tracked: str = "bayes_dyn") -> dict:
+    """The bounds above, per preset x seed x scene with a ``tracked`` variant, and how
+    many meet them.
+
+    Per preset x seed x scene (``scenes``): ``chroma_drift``, the tracked map's
+    ``chroma_rms_log`` in the scene's last scored frame over the chromatic frame's. Per
+    moved frame (``frames``): ``depth_drift``, the tracked variant's depth median over its
+    chromatic frame's; ``static_gain``, ``bayes_full_static``'s over the tracked
+    variant's; for the true chromaticity (``bayes_full_true``), the bound of any
+    tracking, ``true_depth_drift`` (its own drift) and ``tracked_over_true`` (the tracked
+    variant's depth median over the true map's on the same frame); None where a figure
+    is missing; ``static_empty`` and ``true_empty`` where that map ran and
+    reconstructed nothing. ``met``: per bound, how many meet it of how many are judged:
+    a frame the tracked variant reconstructs nothing of misses every depth bound, a
+    static map that reconstructs nothing is a gain, and a frame without the other
+    variant (or where the true map reconstructs nothing) is not judged against it.
+    Empty where the table has no ``tracked`` rows.
+    """
+    out = {"scenes": [], "frames": [], "met": {}}
+    if "variant" not in table or not (table["variant"] == tracked).any():
+        return out
+    keys = ["preset", "seed", "scene", "frame", "variant"]
+    depth = {
+        tuple(k): float(v)
+        for k, v in zip(table[keys].to_numpy(), table["depth_median_mm"], strict=True)
+    }
+
+    def at(key, frame, variant) -> float:
+        return depth.get((*key, frame, variant), float("nan"))
+
+    names = (
+        "chroma_drift",
+        "depth_drift",
+        "static_gain",
+        "true_depth_drift",
+        "tracked_within_true",
+    )
+    verdicts = {k: [] for k in names}
+    rows = table[table["variant"] == tracked]
+    for key, g in rows.groupby(["preset", "seed", "scene"]):
+        home = int(g["chromatic_frame"].iloc[0])
+        by_frame = g.set_index("frame")
+        if home not in by_frame.index:
+            continue
+        preset, seed, scene = key
+        last = int(by_frame.index.max())
+        chroma = None
+        if "chroma_rms_log" in g:
+            chroma = _ratio(
+                by_frame.at[last, "chroma_rms_log"], by_frame.at[home, "chroma_rms_log"]
+            )
+        head = {"preset": preset, "seed": int(seed), "scene": scene}
+        out["scenes"].append(head | {"last_frame": last, "chroma_drift": chroma})
+        verdicts["chroma_drift"].append(_verdict(chroma, lambda v: v <= CHROMA_DRIFT_BOUND))
+        for frame in sorted(int(f) for f in by_frame.index if int(f) != home):
+            dyn = at(key, frame, tracked)
+            static, true = at(key, frame, "bayes_full_static"), at(key, frame, "bayes_full_true")
+            ran_static = (*key, frame, "bayes_full_static") in depth
+            ran_true = (*key, frame, "bayes_full_true") in depth
+            r = head | {
+                "frame": frame,
+                "depth_drift": _ratio(dyn, at(key, home, tracked)),
+                "static_gain": _ratio(static, dyn),
+                "true_depth_drift": _ratio(true, at(key, home, "bayes_full_true")),
+                "tracked_over_true": _ratio(dyn, true),
+                "static_empty": ran_static and not np.isfinite(static),
+                "true_empty": ran_true and not np.isfinite(true),
+            }
+            out["frames"].append(r)
+            drift = r["depth_drift"]
+            verdicts["depth_drift"].append(drift is not None and drift <= DEPTH_DRIFT_BOUND)
+            verdicts["static_gain"].append(
+                _against(dyn, static, ran_static, lambda o, d: o >= STATIC_GAIN_BOUND * d, True)
+            )
+            verdicts["true_depth_drift"].append(
+                _verdict(r["true_depth_drift"], lambda v: v <= DEPTH_DRIFT_BOUND)
+            )
+            verdicts["tracked_within_true"].append(
+                _against(dyn, true, ran_true, lambda o, d: d <= DEPTH_DRIFT_BOUND * o, False)
+            )
+    out["met"] = {k: _count(v) for k, v in verdicts.items()}
+    return out
+
+
+def targets_markdown(targets: dict) -> list[str]:
+    """:func:`tracking_targets` as markdown lines: how many meet each bound, then the
+    ratios per seed x scene and per moved frame; none without targets."""
+    if not targets["scenes"]:
+        return []
+    m = targets["met"]
+
+    def cell(key):
+        return f"{m[key]['met']} of {m[key]['of']}"
+
+    def num(v):
+        return "-" if v is None else f"{v:.2f}"
+
+    lines = [
+        "",
+        "## Targets of the tracked chromaticity",
+        "",
+        "| bound | met |",
+        "|---|---|",
+        f"| chroma RMS, last frame <= {CHROMA_DRIFT_BOUND}x the chromatic frame's "
+        f"| {cell('chroma_drift')} scenes |",
+        f"| depth median, each moved frame <= {DEPTH_DRIFT_BOUND}x the chromatic frame's "
+        f"| {cell('depth_drift')} frames |",
+        f"| static map's depth median >= {STATIC_GAIN_BOUND}x the tracked one's "
+        f"| {cell('static_gain')} frames |",
+        f"| the true map's own depth drift <= {DEPTH_DRIFT_BOUND}x (any tracking's bound) "
+        f"| {cell('true_depth_drift')} frames |",
+        f"| tracked depth median <= {DEPTH_DRIFT_BOUND}x the true map's on the same frame "
+        f"| {cell('tracked_within_true')} frames |",
+        "",
+        "| preset | seed | scene | last frame | chroma drift |",
+        "|---|---|---|---|---|",
+    ]
+    lines += [
+        f"| {r['preset']} | {r['seed']} | {r['scene']} | {r['last_frame']:06d} "
+        f"| {num(r['chroma_drift'])} |"
+        for r in targets["scenes"]
+    ]
+    lines += [
+        "",
+        "| preset | seed | scene | frame | depth drift | static / tracked | true map's drift "
+        "| tracked / true |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    lines += [
+        f"| {r['preset']} | {r['seed']} | {r['scene']} | {r['frame']:06d} "
+        f"| {num(r['depth_drift'])} "
+        f"| {'static: nothing' if r['static_empty'] else num(r['static_gain'])} "
+        f"| {num(r['true_depth_drift'])} "
+        f"| {'true: nothing' if r['true_empty'] else num(r['tracked_over_true'])} |"
+        for r in targets["frames"]
+    ]
+    return lines
 
 
 def _pair(e: dict | None, fmt: str) -> str:
@@ -584,6 +769,7 @@ def summarise_markdown(summary: dict) -> str:
                 pf = e["per_frame"].get(str(frame), {})
                 cells = [_pair(pf.get(col), fmt) for col, _, fmt, _ in METRICS]
                 lines.append("| " + " | ".join([f"{frame:06d}", variant, *cells]) + " |")
+    lines += targets_markdown(summary["targets"])
     lines += ["", "## Seconds per seed", "", "| seed | render | calibration | reconstruction |"]
     lines.append("|---|---|---|---|")
     for seed, s in summary["seconds"].items():

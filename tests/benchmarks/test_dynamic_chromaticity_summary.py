@@ -132,3 +132,85 @@ def test_chroma_sigma_calibration_against_the_truth():
     )
     none = dyn.chroma_sigma_error(p[:1], truth[:1], sigma[:1])
     assert all(v is None for v in none.values())
+
+
+#: One seed of a coloured sequence, chromatic frame 0, per frame: depth median (mm) of
+#: the tracked map, the static map and the true map (NaN: nothing reconstructed) and
+#: the tracked map's chroma RMS.
+TARGET_ROWS = {
+    0: (1.0, 1.0, 1.0, 0.04),
+    4: (1.4, 6.0, 1.2, 0.05),  # every bound met
+    8: (2.0, 5.0, 2.0, 0.07),  # drifted 2x (the true map 2x too); 2.5x better than static
+    11: (1.2, np.nan, np.nan, 0.08),  # only the static and true maps reconstruct nothing
+}
+
+
+def _target_table(tracked_lost_frame: int | None = None) -> pd.DataFrame:
+    rows = []
+    for frame, (dyn_mm, static_mm, true_mm, chroma) in TARGET_ROWS.items():
+        if frame == tracked_lost_frame:
+            dyn_mm = np.nan
+        for variant, depth in (
+            ("bayes_dyn", dyn_mm),
+            ("bayes_full_static", static_mm),
+            ("bayes_full_true", true_mm),
+        ):
+            rows.append(
+                {
+                    "preset": "random-dynamic-tiny",
+                    "seed": 3,
+                    "scene": "cloth",
+                    "frame": frame,
+                    "chromatic_frame": 0,
+                    "variant": variant,
+                    "depth_median_mm": depth,
+                    "chroma_rms_log": chroma if variant == "bayes_dyn" else 0.0,
+                }
+            )
+    return pd.DataFrame(rows)
+
+
+def test_the_tracking_targets_are_counted_per_frame_and_scene():
+    """dyn.tracking_targets on a hand-made sequence: the chroma drift is the last frame's
+    RMS over the chromatic frame's (0.08 / 0.04); each moved frame's depth drift, gain
+    over the static map and ratio to the true map's depth are counted against their
+    bounds; a static or true map that reconstructs nothing is a win for the tracked map
+    and no comparison, a tracked map that reconstructs nothing misses."""
+    t = dyn.tracking_targets(_target_table())
+    assert t["scenes"] == [
+        {
+            "preset": "random-dynamic-tiny",
+            "seed": 3,
+            "scene": "cloth",
+            "last_frame": 11,
+            "chroma_drift": pytest.approx(2.0),
+        }
+    ]
+    by_frame = {r["frame"]: r for r in t["frames"]}
+    assert sorted(by_frame) == [4, 8, 11]
+    assert by_frame[4]["depth_drift"] == pytest.approx(1.4)
+    assert by_frame[4]["static_gain"] == pytest.approx(6.0 / 1.4)
+    assert by_frame[8]["true_depth_drift"] == pytest.approx(2.0)
+    assert by_frame[8]["tracked_over_true"] == pytest.approx(1.0)
+    assert by_frame[11]["static_empty"] and by_frame[11]["true_empty"]
+    assert by_frame[11]["static_gain"] is None
+    assert t["met"] == {
+        "chroma_drift": {"met": 0, "of": 1},
+        "depth_drift": {"met": 2, "of": 3},
+        "static_gain": {"met": 2, "of": 3},
+        "true_depth_drift": {"met": 1, "of": 2},
+        "tracked_within_true": {"met": 2, "of": 2},
+    }
+    lost = dyn.tracking_targets(_target_table(tracked_lost_frame=4))["met"]
+    assert lost["depth_drift"] == {"met": 1, "of": 3}
+    assert lost["static_gain"] == {"met": 1, "of": 3}
+    assert lost["tracked_within_true"] == {"met": 1, "of": 2}
+    seconds = {"render_s": 1.0, "calib_s": 1.0, "reconstruct_s": 1.0}
+    md = dyn.summarise_markdown(dyn.summarise(_target_table().assign(**seconds)))
+    assert "| static map's depth median >= 3.0x the tracked one's | 2 of 3 frames |" in md
+    assert "| random-dynamic-tiny | 3 | cloth | 000011 | 1.20 | static: nothing |" in md
+    alone = dyn.tracking_targets(_table())["met"]  # no static or true map: not judged
+    assert alone["static_gain"] == alone["tracked_within_true"] == {"met": 0, "of": 0}
+    assert alone["depth_drift"] == {"met": 4, "of": 6}
+    untracked = _table().assign(variant="bayes_full_static")
+    assert dyn.tracking_targets(untracked) == {"scenes": [], "frames": [], "met": {}}
