@@ -10,7 +10,9 @@ from scipy.ndimage import gaussian_filter
 from colourhs.reconstruct.bayes.uncertainty import (
     correlated_gain,
     filled_sigma,
+    flat_valley_sigma,
     rim_valley_pull,
+    surface_depth_sigma,
     valley_sigma,
 )
 from colourhs.reconstruct.sides import (
@@ -125,6 +127,71 @@ def test_filled_sigma_extrapolates_the_nearest_measured_one():
     hole[:, 2:4] = True
     out = filled_sigma(sigma.ravel(), hole.ravel(), (5, 6))
     assert np.allclose(out.reshape(5, 2), [[2e-3, 6e-3]] * 5)
+
+
+def test_flat_valley_sigma_is_half_the_depths_e_cannot_rule_out():
+    """16 blocks whose energy differences from the best depth are mu(d) = 1e5 d^2
+    plus +-1 alternating over the blocks (standard error sqrt(16 / 15 * 16) = 4.13):
+    at 2 standard errors the depths within 0.0075 are not ruled out (mu 5.6) and
+    those at 0.01 are (mu 10), so the sigma is 0.00375; a farther depth where E is
+    lower is not ruled out either and widens it; one block gives inf."""
+    G = 16
+    groups = np.arange(G)
+    noise = np.where(groups % 2 == 0, 1.0, -1.0)
+    tried = {0.0: (np.zeros(G), 0.0, None)}
+    for d in (-0.01, -0.0075, -0.005, 0.005, 0.0075, 0.01, 0.015):
+        tried[d] = (1e5 * d**2 / G + noise, 0.0, None)
+    assert np.isclose(flat_valley_sigma(tried, 0.0, groups), 0.00375)
+    tried[0.02] = (-3.0 / G + noise, 0.0, None)
+    assert np.isclose(flat_valley_sigma(tried, 0.0, groups), 0.01)
+    assert flat_valley_sigma(tried, 0.0, np.zeros(G, np.int64)) == np.inf
+
+
+def test_filled_sigma_inherits_an_infinite_one():
+    """A hole nearest a surface without an error bar has none either, while one
+    nearer a measured sigma takes twice that; with no sigma at all it is NaN."""
+    sigma = np.full((3, 6), np.nan)
+    sigma[:, 0] = np.inf
+    sigma[:, 5] = 1e-3
+    hole = np.zeros((3, 6), bool)
+    hole[:, 1:5] = True
+    out = filled_sigma(sigma.ravel(), hole.ravel(), (3, 6)).reshape(3, 4)
+    np.testing.assert_array_equal(out[:, :2], np.inf)
+    np.testing.assert_allclose(out[:, 2:], 2e-3)
+    assert np.isnan(filled_sigma(np.full(4, np.nan), np.ones(4, bool), (2, 2))).all()
+
+
+def test_a_surface_without_a_valley_sigma_has_no_error_bar():
+    """Three surfaces: a measured depth mode (1 %), one E does not fix (inf) and a
+    one-block fragment (NaN). The first's pixels add the local sigma and the mode's
+    in quadrature, at least the robust pull, NaN where the rows were unusable; every
+    pixel of the second is infinite and of the third NaN (left to
+    :func:`filled_sigma`), whatever its local sigma."""
+    surface = np.array([0, 0, 0, 1, 1, 2, 2])
+    z = np.full(7, 0.8)
+    local = np.array([6e-3, np.nan, 1e-3, 1e-3, np.nan, 1e-3, 1e-3])
+    pull = np.array([0.0, 0.0, 0.02, 0.0, 0.0, 0.0, 0.0])
+    out = surface_depth_sigma(local, z, np.array([0.01, np.inf, np.nan]), surface, pull)
+    np.testing.assert_allclose(out[0], 0.01)  # hypot(6 mm, 8 mm)
+    assert np.isnan(out[1])
+    np.testing.assert_allclose(out[2], 0.02)  # the pull
+    np.testing.assert_array_equal(out[3:5], np.inf)
+    assert np.isnan(out[5:]).all()
+
+
+def test_a_fragment_is_at_least_as_uncertain_as_its_gap_to_the_nearest_depth():
+    """Two fragments beside a measured surface (sigma 1 mm at 0.8 m): one at its
+    depth takes twice its sigma, one 50 mm nearer at least that gap."""
+    sigma = np.full((4, 8), np.nan)
+    z = np.full((4, 8), 0.8)
+    sigma[:, :4] = 1e-3
+    frag = np.zeros((4, 8), bool)
+    frag[1:3, 5] = True
+    frag[1:3, 7] = True
+    z[1:3, 7] = 0.75
+    out = filled_sigma(sigma.ravel(), frag.ravel(), (4, 8), z.ravel()).reshape(2, 2)
+    np.testing.assert_allclose(out[:, 0], 2e-3)
+    np.testing.assert_allclose(out[:, 1], 0.05)
 
 
 def test_samples_clear_of_every_edge():

@@ -44,6 +44,7 @@ from colourhs.reconstruct.bayes.uncertainty import (
     depth_sigma,
     filled_sigma,
     robust_scale_pull,
+    surface_depth_sigma,
     valley_blocks,
 )
 from colourhs.reconstruct.bayes.valley import depth_search, search_stride
@@ -529,10 +530,13 @@ def refine_surface(
     info : ``valid`` (H*W,) pixels of the result (without the surfaces
         that :func:`explained_surfaces` leaves out), ``weights`` (H*W,) final
         robust weights (0 where the rows were unusable), ``sigma`` (H*W,) each
-        depth's 1-sigma uncertainty (:func:`depth_sigma`, the depth search's
-        :func:`.uncertainty.valley_sigma` with its pulls, and at least the
-        move of :func:`.uncertainty.robust_scale_pull`, metres; :func:`filled_sigma`
-        where the rows were unusable and in filled holes), ``filled`` (H*W,)
+        depth's 1-sigma uncertainty (:func:`.uncertainty.surface_depth_sigma`:
+        :func:`depth_sigma`, the depth search's :func:`.uncertainty.valley_sigma`
+        with its pulls, and at least the move of
+        :func:`.uncertainty.robust_scale_pull`, metres; infinite on a surface
+        whose depth mode has no error bar; :func:`filled_sigma` where the rows
+        were unusable, in filled holes and on a surface within one block, there
+        at least its depth's distance from the nearest measured one), ``filled`` (H*W,)
         filled holes, ``energy`` after each step, ``depth_factors`` (the
         search's scale per surface), ``robust_pull_m`` (per surface, the median
         of :func:`.uncertainty.robust_scale_pull`'s move, metres; None without a
@@ -600,7 +604,7 @@ def refine_surface(
         local = depth_sigma(problem, c, opts.sigma_samples)
         say("refinement: the surface's move under a tighter robust scale")
         pull = np.abs(robust_scale_pull(problem, c))
-        sigma[graph.pix] = np.maximum(np.hypot(local, z * valley[graph.surface]), pull)
+        sigma[graph.pix] = surface_depth_sigma(local, z, valley, graph.surface, pull)
         for k in range(graph.n_surfaces):
             on = np.isfinite(local) & (graph.surface == k)
             pull_median[k] = float(np.median(pull[on])) if on.any() else None
@@ -610,8 +614,15 @@ def refine_surface(
         filled = np.isfinite(zh) & (zh > 0)
         out_z[filled] = zh[filled]
         valid |= filled
-    # Filled holes and pixels whose rows were unusable: extrapolated depths.
-    guessed = valid & ~np.isfinite(sigma)
+    # Fragments too small to measure their depth mode, then filled holes and pixels
+    # whose rows were unusable: from the nearest measured depth. An infinite sigma
+    # (a surface without an error bar) is a measured one, and spreads.
+    sigma[~valid] = np.nan  # no depth: no evidence for a neighbour's
+    fragment = np.zeros(H * W, bool)
+    fragment[graph.pix] = np.isnan(valley[graph.surface])
+    fragment &= valid & np.isnan(sigma)
+    sigma[fragment] = filled_sigma(sigma, fragment, shape, out_z)
+    guessed = valid & np.isnan(sigma)
     sigma[guessed] = filled_sigma(sigma, guessed, shape)
     if not converged:  # E's minimum was not reached: no depth of it is known
         sigma[valid] = np.inf

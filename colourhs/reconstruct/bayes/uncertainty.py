@@ -5,15 +5,19 @@ Beyond the paper, which gives no error bar. Bayesian HS
 the Gauss-Newton covariance of the spline's control points
 (:func:`depth_sigma`, with the sides' correlated noise,
 :func:`correlated_gain`), the depth mode that E fixes weakly from the depth
-search's own trial energies (:func:`valley_sigma`) and the pull of the rows
+search's own trial energies (:func:`valley_sigma`; where E does not curve
+upwards about it, the depths E's noise cannot rule out,
+:func:`flat_valley_sigma`) and the pull of the rows
 at the edges of unusable regions on it, a model error
 (:func:`rim_valley_pull`), and the move of that mode that the calibrated
 pair ratios' uncertainty allows (:func:`ratio_sensitivity`, the ratios'
 sigma from :func:`colourhs.calibration.photometric_solve.pair_ratio_sigma`), filled
-holes from their nearest measured depth
-(:func:`filled_sigma`); the parts add in variance, and the sum is at least
+holes and fragments too small for a valley sigma from their nearest measured
+depth (:func:`filled_sigma`); the parts add in variance, and the sum is at least
 the move of the surface when E's robust scale is tightened, a model error
-that sensor noise lets into the fit (:func:`robust_scale_pull`). ML HS: the
+that sensor noise lets into the fit (:func:`robust_scale_pull`), and it is
+infinite on a surface whose depth mode has no error bar
+(:func:`surface_depth_sigma`). ML HS: the
 curvature of its chi-square cost along the ray (:func:`ml_sigma`).
 """
 
@@ -25,6 +29,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from colourhs.common.linalg import _factor
+from colourhs.reconstruct.bayes.restart import RESTART_TEST, energy_difference
 from colourhs.reconstruct.sides import HelmholtzSides, noise_correlation, with_side_scaled
 
 VALLEY_BLOCK = 4  # blocks of the valley's uncertainty, in spline control spacings
@@ -89,6 +94,34 @@ def valley_sigma(tried: dict, best: float, groups: np.ndarray, span: float) -> f
     if not curvature > 0:
         return float("inf")
     return float(np.sqrt(G / (G - 1) * np.sum((b - b.mean()) ** 2)) / curvature)
+
+
+def flat_valley_sigma(tried: dict, best: float, groups: np.ndarray, test=RESTART_TEST) -> float:
+    """Relative 1-sigma of a surface's depth factor where E does not curve upwards
+    about its minimum (:func:`valley_sigma` inf): E's own noise decides.
+
+    Beyond the paper. Where E along the valley is flat within its noise at the
+    search's step, no quadratic measures the minimum's scatter, but E's difference
+    between two depths has a standard error (cluster-robust over the blocks
+    ``groups``, :func:`colourhs.reconstruct.bayes.restart.energy_difference`, over
+    the pixels usable at both). A trial depth (``tried``: delta -> (per-pixel rho,
+    prior energy, ...)) whose E is not above ``best``'s by ``test`` standard errors
+    is not ruled out, and the set of such depths, a ``test``-standard-error
+    interval, is about two sigmas either side of the minimum: the sigma is half its
+    largest distance from ``best``. A lower bound where the farthest trial depth on
+    a side is not ruled out (the search stopped where E stopped falling, not where
+    it rose beyond its noise). Inf with fewer than two blocks of common pixels.
+    """
+    r0, p0 = tried[best][0], tried[best][1]
+    one = np.zeros(len(groups), np.int64)
+    width = 0.0
+    for d, (rho, prior, *_) in tried.items():
+        diff, se = energy_difference(r0, rho, [p0], [prior], one, groups, 1)
+        if not np.isfinite(se[0]):
+            return float("inf")
+        if not diff[0] > test * se[0]:
+            width = max(width, abs(d - best))
+    return 0.5 * width
 
 
 def rim_valley_pull(
@@ -313,17 +346,49 @@ an extrapolation whose error is at least the ring's and grows inside it:
 twice the nearest measured pixel's sigma bounds it without a figure of the rig."""
 
 
-def filled_sigma(sigma: np.ndarray, filled: np.ndarray, shape) -> np.ndarray:
+def surface_depth_sigma(
+    local: np.ndarray, z: np.ndarray, valley: np.ndarray, surface: np.ndarray, pull: np.ndarray
+) -> np.ndarray:
+    """Each pixel's depth 1-sigma (n,), metres, from its parts: the ``local`` one
+    (n,, :func:`depth_sigma`) and its surface's depth mode, ``z`` (n,) times the
+    relative ``valley`` sigma (n_surfaces,, :func:`valley_sigma` with its pulls) of
+    its ``surface`` (n,), in quadrature; at least ``pull`` (n,,
+    :func:`robust_scale_pull`). NaN where ``local`` is (the pixel's rows were
+    unusable: :func:`filled_sigma` extrapolates it).
+
+    Beyond the paper: infinite on a surface whose valley sigma is infinite (not
+    even E's noise could be told, :func:`flat_valley_sigma`: the depth has no
+    error bar, and the reconstruction flags it); NaN on one whose valley sigma is
+    NaN (it lies in one block, so that no scatter of the blocks' minima measures
+    its mode: a fragment, whose error bar :func:`filled_sigma` takes from the
+    nearest measured depth, with its depth's distance from it).
+    """
+    mode = np.asarray(valley, float)[surface]
+    sigma = np.maximum(np.hypot(local, z * mode), pull)
+    return np.where(np.isinf(mode), np.inf, sigma)
+
+
+def filled_sigma(
+    sigma: np.ndarray, filled: np.ndarray, shape, z: np.ndarray | None = None
+) -> np.ndarray:
     """Sigmas (k,) of the ``filled`` pixels (H*W,): ``FILL_SIGMA`` times that of
-    the nearest pixel with a finite ``sigma`` (H*W,); NaN where there is none."""
+    the nearest pixel with a measured ``sigma`` (H*W,; infinite where E does not fix
+    the depth, which a pixel next to it inherits); NaN where there is none. With
+    the depths ``z`` (H*W,), at least each pixel's depth's distance from that
+    pixel's (beyond the paper: a fragment too small to measure its own depth mode
+    has only its nearest measured neighbour as evidence, and a fragment at another
+    depth than it has none)."""
     from scipy.ndimage import distance_transform_edt
 
-    known = np.isfinite(sigma).reshape(shape)
+    known = ~np.isnan(sigma).reshape(shape)
     if not known.any():
         return np.full(int(filled.sum()), np.nan)
     _, (ii, jj) = distance_transform_edt(~known, return_indices=True)
     nearest = (ii * shape[1] + jj).ravel()[filled]
-    return FILL_SIGMA * sigma[nearest]
+    out = FILL_SIGMA * sigma[nearest]
+    if z is not None:
+        out = np.maximum(out, np.abs(z[filled] - z[nearest]))
+    return out
 
 
 ML_SIGMA_STEP = 1e-4  # the curvature's half-step, relative to the depth (0.08 mm at 0.8 m)

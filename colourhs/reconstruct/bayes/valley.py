@@ -16,6 +16,7 @@ import copy
 import numpy as np
 
 from colourhs.reconstruct.bayes.uncertainty import (
+    flat_valley_sigma,
     ratio_sensitivity,
     rim_valley_pull,
     valley_blocks,
@@ -90,7 +91,8 @@ def depth_search(
 
     Returns the control points at each surface's best depth (shape re-fitted),
     the factors (n_surfaces,) applied and the relative 1-sigma uncertainty
-    of each factor (:func:`valley_sigma`, from the trial depths' energies;
+    of each factor (:func:`valley_sigma`, from the trial depths' energies, or
+    :func:`flat_valley_sigma` where E does not curve upwards about its minimum;
     with ``clear_sides``, the sides with only the samples clear of every
     edge usable, the rim rows' bias :func:`rim_valley_pull` added in
     variance; with ``ratio_sigma`` (P,), each pair's log-ratio uncertainty
@@ -175,6 +177,8 @@ def depth_search(
     g = problem.graph
     groups = valley_blocks(g.rows, g.cols, g.shape[1], problem.spline.spacing)
     sigma = np.array([valley_sigma(tried[k], best[k], groups[pixels[k]], step) for k in range(n)])
+    for k in np.flatnonzero(np.isinf(sigma)):  # E flat within its noise at this step
+        sigma[k] = flat_valley_sigma(tried[k], best[k], groups[pixels[k]])
     if clear_sides is not None:  # the rim rows' pull on each surface's depth mode
         alt = copy.copy(problem)
         alt.sides = clear_sides
@@ -183,7 +187,8 @@ def depth_search(
             rim_valley_pull(tried[k], best[k], step, clear[pixels[k]], groups[pixels[k]])
             for k in range(n)
         ]
-        sigma = np.hypot(sigma, np.asarray(pull))
+        # NaN where E over every pixel does not curve upwards: the flat valley's sigma.
+        sigma = np.hypot(sigma, np.nan_to_num(np.asarray(pull), nan=0.0))
     if ratio_sigma is not None and np.any(np.isfinite(ratio_sigma)):
         # The calibrated pair ratios' uncertainty, through each depth mode's gain.
         gain = ratio_sensitivity(problem, tried, best, step, pixels, at, sc)
