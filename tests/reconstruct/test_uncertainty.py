@@ -15,6 +15,7 @@ from colourhs.reconstruct.bayes.uncertainty import (
     surface_depth_sigma,
     valley_sigma,
 )
+from colourhs.reconstruct.bayes.valley import walk_out
 from colourhs.reconstruct.sides import (
     RIM_SUPPORT,
     HelmholtzSides,
@@ -145,6 +146,34 @@ def test_flat_valley_sigma_is_half_the_depths_e_cannot_rule_out():
     tried[0.02] = (-3.0 / G + noise, 0.0, None)
     assert np.isclose(flat_valley_sigma(tried, 0.0, groups), 0.01)
     assert flat_valley_sigma(tried, 0.0, np.zeros(G, np.int64)) == np.inf
+
+
+def test_walk_out_tries_depths_until_e_rises_beyond_its_noise():
+    """E flat (within +-1 per block, 16 blocks: standard error 4.13) out to 0.02 of
+    the depth, then rising by 2000 per step: walking a step of 0.005 at a time from
+    +-0.005, each side stops at the first depth E rules out (0.025), and the flat
+    valley's sigma is half the farthest depth not ruled out (0.01); with one step
+    per side it reaches 0.01 only, and the sigma (0.005) is a lower bound."""
+    G, step = 16, 0.005
+    groups = np.arange(G)
+    noise = np.where(groups % 2 == 0, 1.0, -1.0)
+
+    def energy(d):
+        return 2000.0 * max(0.0, abs(d) - 0.02) / step / G + noise * (d != 0)
+
+    for max_steps, sigma in ((12, 0.01), (1, 0.005)):
+        tried = [{round(d, 9): (energy(d), 0.0, None) for d in (-step, 0.0, step)}]
+
+        def run(deltas, record, tried=tried):
+            for k in np.flatnonzero(record):
+                tried[k][round(float(deltas[k]), 9)] = (energy(deltas[k]), 0.0, None)
+
+        walk_out(tried, np.zeros(1), [groups], np.ones(1, bool), step, max_steps, run)
+        assert np.isclose(flat_valley_sigma(tried[0], 0.0, groups), sigma)
+        reach = 0.025 if max_steps == 12 else 0.01
+        assert max(tried[0]) == reach and min(tried[0]) == -reach
+    tried = [{0.0: (np.zeros(G), 0.0, None), step: (np.zeros(G), 0.0, None)}]
+    walk_out(tried, np.zeros(1), [groups], np.zeros(1, bool), step, 12, None)  # not flat
 
 
 def test_filled_sigma_inherits_an_infinite_one():

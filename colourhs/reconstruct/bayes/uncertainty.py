@@ -108,20 +108,31 @@ def flat_valley_sigma(tried: dict, best: float, groups: np.ndarray, test=RESTART
     prior energy, ...)) whose E is not above ``best``'s by ``test`` standard errors
     is not ruled out, and the set of such depths, a ``test``-standard-error
     interval, is about two sigmas either side of the minimum: the sigma is half its
-    largest distance from ``best``. A lower bound where the farthest trial depth on
-    a side is not ruled out (the search stopped where E stopped falling, not where
-    it rose beyond its noise). Inf with fewer than two blocks of common pixels.
+    largest distance from ``best``. :func:`colourhs.reconstruct.bayes.valley.depth_search`
+    walks out on both sides until E rises beyond its noise; where a side's walk
+    ends first (its steps spent) this is a lower bound. Inf with fewer than two
+    blocks of common pixels.
     """
-    r0, p0 = tried[best][0], tried[best][1]
-    one = np.zeros(len(groups), np.int64)
     width = 0.0
-    for d, (rho, prior, *_) in tried.items():
-        diff, se = energy_difference(r0, rho, [p0], [prior], one, groups, 1)
-        if not np.isfinite(se[0]):
+    for d in tried:
+        rise, se = energy_rise(tried, best, d, groups)
+        if not np.isfinite(se):
             return float("inf")
-        if not diff[0] > test * se[0]:
+        if not rise > test * se:
             width = max(width, abs(d - best))
     return 0.5 * width
+
+
+def energy_rise(tried: dict, best: float, delta: float, groups: np.ndarray) -> tuple[float, float]:
+    """E at the trial depth ``delta`` less E at ``best`` (``tried``: delta -> (per-pixel
+    rho, prior energy, ...)), over the pixels usable at both, and its cluster-robust
+    standard error over the blocks ``groups``
+    (:func:`colourhs.reconstruct.bayes.restart.energy_difference`; inf with fewer
+    than two blocks)."""
+    (r0, p0, *_), (r1, p1, *_) = tried[best], tried[delta]
+    one = np.zeros(len(groups), np.int64)
+    rise, se = energy_difference(r0, r1, [p0], [p1], one, groups, 1)
+    return float(rise[0]), float(se[0])
 
 
 def rim_valley_pull(

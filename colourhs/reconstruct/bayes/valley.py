@@ -12,10 +12,13 @@ the pixels it uses at high resolution. Called by
 from __future__ import annotations
 
 import copy
+from functools import partial
 
 import numpy as np
 
+from colourhs.reconstruct.bayes.restart import RESTART_TEST
 from colourhs.reconstruct.bayes.uncertainty import (
+    energy_rise,
     flat_valley_sigma,
     ratio_sensitivity,
     rim_valley_pull,
@@ -64,6 +67,32 @@ def search_stride(spacing: float) -> int:
     return max(1, int(spacing // SEARCH_CELL_PX))
 
 
+def walk_out(tried, best, blocks, flat, step, max_steps, run) -> None:
+    """Trial depths beyond E's flat minimum, until E rises beyond its noise (beyond the paper).
+
+    For each surface ``flat`` (n,) bool (E does not curve upwards about its
+    ``best`` (n,) depth factor), on each side in turn, ``run(deltas, record)``
+    tries a step ``step`` beyond its farthest trial depth on that side (``deltas``
+    (n,), ``best`` for the others; ``record`` (n,) the surfaces it adds to
+    ``tried``, surface -> delta -> (per-pixel rho, prior energy, ...)), until E
+    there is above E at ``best`` by ``RESTART_TEST`` standard errors
+    (:func:`energy_rise` over the surface's pixels' ``blocks``), at most
+    ``max_steps`` steps: :func:`flat_valley_sigma` then measures the depths E's
+    noise cannot rule out instead of the few the search tried.
+    """
+    n = len(best)
+    for side in (-1.0, 1.0):
+        walking = np.asarray(flat, bool).copy()
+        for _ in range(max_steps):
+            far = np.array([side * max(side * d for d in tried[k]) for k in range(n)])
+            for k in np.flatnonzero(walking):
+                rise, se = energy_rise(tried[k], best[k], far[k], blocks[k])
+                walking[k] = not rise > RESTART_TEST * se
+            if not walking.any():
+                break
+            run(np.where(walking, far + side * step, best), walking)
+
+
 def depth_search(
     problem,
     c,
@@ -91,8 +120,10 @@ def depth_search(
 
     Returns the control points at each surface's best depth (shape re-fitted),
     the factors (n_surfaces,) applied and the relative 1-sigma uncertainty
-    of each factor (:func:`valley_sigma`, from the trial depths' energies, or
-    :func:`flat_valley_sigma` where E does not curve upwards about its minimum;
+    of each factor (:func:`valley_sigma`, from the trial depths' energies, or,
+    where E does not curve upwards about its minimum, :func:`flat_valley_sigma`
+    after a walk out on each side, a step at a time, until E rises beyond its
+    noise, at most ``max_steps`` steps;
     with ``clear_sides``, the sides with only the samples clear of every
     edge usable, the rim rows' bias :func:`rim_valley_pull` added in
     variance; with ``ratio_sigma`` (P,), each pair's log-ratio uncertainty
@@ -177,7 +208,10 @@ def depth_search(
     g = problem.graph
     groups = valley_blocks(g.rows, g.cols, g.shape[1], problem.spline.spacing)
     sigma = np.array([valley_sigma(tried[k], best[k], groups[pixels[k]], step) for k in range(n)])
-    for k in np.flatnonzero(np.isinf(sigma)):  # E flat within its noise at this step
+    flat = np.isinf(sigma)  # E flat within its noise at this step: walk out until it rises
+    blocks = [groups[pixels[k]] for k in range(n)]
+    walk_out(tried, best, blocks, flat, step, max_steps, partial(trial, at(best), best))
+    for k in np.flatnonzero(flat):
         sigma[k] = flat_valley_sigma(tried[k], best[k], groups[pixels[k]])
     if clear_sides is not None:  # the rim rows' pull on each surface's depth mode
         alt = copy.copy(problem)
