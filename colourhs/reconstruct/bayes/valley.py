@@ -207,19 +207,18 @@ def depth_search(
         best = pick(list(zip(best, vertex, strict=True)))
     g = problem.graph
     groups = valley_blocks(g.rows, g.cols, g.shape[1], problem.spline.spacing)
-    sigma = np.array([valley_sigma(tried[k], best[k], groups[pixels[k]], step) for k in range(n)])
-    flat = np.isinf(sigma)  # E flat within its noise at this step: walk out until it rises
     blocks = [groups[pixels[k]] for k in range(n)]
+    sigma = np.array([valley_sigma(tried[k], best[k], blocks[k], step) for k in range(n)])
+    flat = np.isinf(sigma)  # E flat within its noise at this step: walk out until it rises
     walk_out(tried, best, blocks, flat, step, max_steps, partial(trial, at(best), best))
     for k in np.flatnonzero(flat):
-        sigma[k] = flat_valley_sigma(tried[k], best[k], groups[pixels[k]])
+        sigma[k] = flat_valley_sigma(tried[k], best[k], blocks[k])
     if clear_sides is not None:  # the rim rows' pull on each surface's depth mode
         alt = copy.copy(problem)
         alt.sides = clear_sides
         clear = np.isfinite(alt.state(at(best), sc)[0])
         pull = [
-            rim_valley_pull(tried[k], best[k], step, clear[pixels[k]], groups[pixels[k]])
-            for k in range(n)
+            rim_valley_pull(tried[k], best[k], step, clear[pixels[k]], blocks[k]) for k in range(n)
         ]
         # NaN where E over every pixel does not curve upwards: the flat valley's sigma.
         sigma = np.hypot(sigma, np.nan_to_num(np.asarray(pull), nan=0.0))
