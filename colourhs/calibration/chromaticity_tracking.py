@@ -54,6 +54,15 @@ neighbour towards c only:
    residual in quadrature: the p sampled there carries the calibration's error, and
    a wrong position a wrong colour.
 
+The map keeps the tracking's own holes. Where the reconstruction reads it for a
+moved frame, a pixel of its reference camera without p that shows the colour of a
+pixel near it with one (in that frame's image, :func:`colour_match` within
+:data:`COLOUR_TOL`) takes that pixel's p, :data:`FILL_ROUNDS` times, each reaching on
+from the last (:func:`fill_from_colour`,
+:func:`colourhs.reconstruct.inputs.fill_reference_holes`; beyond the paper): within a
+patch of one colour, the same p, where a lost point (a highlight passed, a surface
+turned into view) or a point the calibration could not measure would drop the pixel.
+
 A static scene, or the chromatic frame itself, keeps the calibrated map unchanged
 (position the pixel itself, sigma 0, ``p_sigma`` the calibrated map's):
 ``bayes_dyn`` there equals ``bayes_full``.
@@ -79,6 +88,7 @@ log = logging.getLogger(__name__)
 __all__ = [
     "COLOUR_FLOW_WIDTH_PX",
     "COLOUR_TOL",
+    "FILL_ROUNDS",
     "GAIN_OUTLIER",
     "GAIN_SIGMA_PX",
     "GAIN_SUPPORT",
@@ -90,6 +100,7 @@ __all__ = [
     "colour_match",
     "dense_flow",
     "colour_flow",
+    "fill_from_colour",
     "flow_image",
     "image_colour",
     "predict_from_both",
@@ -147,6 +158,15 @@ COLOUR_FLOW_WIDTH_PX = 80
 640-pixel image, its patches of 16 pixels a fifth of that): the colour's edges, not its
 shading or highlights, at any image size; the brightness flow gives the fine detail
 where it is right."""
+
+
+FILL_ROUNDS = 4
+"""Rounds of the hole fill (:func:`fill_from_colour`), each reaching on two pixels
+where the colours are equal (:func:`colour_match`'s cost of a displacement,
+:data:`PROXIMITY`, stays within :data:`COLOUR_TOL`): a hole up to 16 pixels across is
+filled from both sides. In pixels, as the search: the fill follows a patch of one
+colour pixel by pixel, and its reach bounds how far a p is carried from where the
+colour match confirmed it, at any image size."""
 
 
 @dataclass(frozen=True)
@@ -403,6 +423,33 @@ def track_camera(
     return TrackedMap(
         p.astype(np.float32), position, moved.astype(np.float32), sigma.astype(np.float32)
     )
+
+
+def fill_from_colour(
+    p: np.ndarray, sigma: np.ndarray, colour: np.ndarray, rounds: int = FILL_ROUNDS
+) -> tuple[np.ndarray, np.ndarray]:
+    """A map's unknown pixels (``p`` (H, W, 3) NaN) given the p of
+    the pixel within :data:`SEARCH_PX` whose ``colour`` (H, W, 3, :func:`image_colour`
+    of the same image) best matches theirs, where it is within :data:`COLOUR_TOL`;
+    ``rounds`` times, so a filled pixel may pass its p on. ``sigma`` (H, W), the
+    tracking's 1-sigma of log p: the source's and the relative colour difference
+    ``|q - q_source| / |q_source|`` in quadrature. Returns new ``p`` and ``sigma``."""
+    p, sigma = p.copy(), sigma.copy()
+    grid = np.stack(_grid(colour.shape), axis=-1)
+    seen = np.all(np.isfinite(colour), axis=-1)
+    for _ in range(rounds):
+        known = np.all(np.isfinite(p), axis=-1)
+        source, distance = colour_match(grid, colour, np.where(known[..., None], colour, np.nan))
+        new = ~known & seen & (distance <= COLOUR_TOL)
+        if not new.any():
+            break
+        x, y = source[new, 0], source[new, 1]
+        xi, yi = np.round(x).astype(np.int64), np.round(y).astype(np.int64)
+        q = colour[yi, xi]
+        residual = np.linalg.norm(colour[new] - q, axis=-1) / np.linalg.norm(q, axis=-1)
+        p[new] = p[yi, xi]
+        sigma[new] = np.hypot(sigma[yi, xi], residual)
+    return p, sigma
 
 
 def tracked_log_sigma(calibrated_sigma: np.ndarray, tracked: TrackedMap) -> np.ndarray:

@@ -40,7 +40,13 @@ from colourhs.common.progress import bar, stage
 from colourhs.reconstruct.bayes.integrate import IntegrationOptions, initial_surface
 from colourhs.reconstruct.dataterm import INVALID_COST, data_term, pair_arrays, prepare_images
 from colourhs.reconstruct.drops import drop_codes, reference_unusable
-from colourhs.reconstruct.inputs import CalibrationFiles, Frame, RayGrid, load_frame
+from colourhs.reconstruct.inputs import (
+    CalibrationFiles,
+    Frame,
+    RayGrid,
+    fill_reference_holes,
+    load_frame,
+)
 from colourhs.reconstruct.options import (
     MAX_SIGMA,
     WORKING_RADIUS,
@@ -179,6 +185,7 @@ def reconstruct(
     names = list(rig.camera_names)
     ref_i = names.index(rig.camera(reference).name) if reference else 0
     ref = rig.cameras[ref_i]
+    frame = fill_reference_holes(frame, ref_i)  # a tracked map's: beyond the paper
     H, W = rig.image.height, rig.image.width
     depths = depth_hypotheses(
         rig, ref, opts.n_labels, depth_range, opts.working_radius, opts.working_radius_m

@@ -9,7 +9,7 @@ refinement read.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import h5py
@@ -73,6 +73,41 @@ class Frame:
     # its chromatic frame, whose holes are mostly where the tracking lost the surface
     # (in the chromatic frame they are the calibration's); see colourhs.reconstruct.dataterm
     chroma_tracked: bool = False
+    # A map tracked away from its chromatic frame: its tracking sigma (C, H, W) and each
+    # camera's image colour as recorded (C, H, W, 3; chromaticity_tracking.image_colour),
+    # for the reference camera's hole fill (fill_reference_holes); None otherwise
+    chroma_sigma: np.ndarray | None = None
+    chroma_colour: np.ndarray | None = None
+
+
+def fill_reference_holes(frame: Frame, reference: int) -> Frame:
+    """``frame`` with the holes of its ``reference`` camera's tracked map filled from a
+    near pixel of the same image colour
+    (:func:`colourhs.calibration.chromaticity_tracking.fill_from_colour`) and that
+    camera's variance widened by the filled pixels' tracking sigma as
+    :func:`load_frame` widens it; unchanged without a tracked map (beyond the paper).
+
+    Only the reference camera's: a hole there drops the pixel, while another camera's
+    sample without p takes the reference pixel's, the same surface point's, which a
+    near pixel's p can only approach.
+    """
+    needs = (frame.chroma_colour, frame.chroma, frame.chroma_sigma, frame.variance)
+    if any(x is None for x in needs):
+        return frame
+    from colourhs.calibration.chromaticity_tracking import fill_from_colour
+
+    p = frame.chroma[reference].transpose(1, 2, 0)
+    before = np.all(np.isfinite(p), axis=-1)
+    filled, sigma = fill_from_colour(
+        p, frame.chroma_sigma[reference], frame.chroma_colour[reference]
+    )
+    chroma, chroma_sigma = frame.chroma.copy(), frame.chroma_sigma.copy()
+    chroma[reference] = filled.transpose(2, 0, 1)
+    chroma_sigma[reference] = sigma
+    variance = frame.variance.copy()
+    new = np.all(np.isfinite(filled), axis=-1) & ~before
+    variance[reference][:, new] += (frame.images[reference][:, new] * sigma[new]) ** 2
+    return replace(frame, chroma=chroma, chroma_sigma=chroma_sigma, variance=variance)
 
 
 def load_frame(
@@ -95,17 +130,20 @@ def load_frame(
     own, :func:`colourhs.calibration.chromaticity.log_sigma`) widens that variance by
     ``(i sigma)^2`` per channel: eq. 3 divides each intensity by its p, so a relative
     error of p is one of the intensity (beyond the paper); and where one camera's
-    map, tracked away from the chromatic frame, has no p, the reconstruction
-    takes the reference pixel's (``Frame.chroma_tracked``).
+    map, tracked away from the chromatic frame, has no p, the reconstruction takes
+    the reference pixel's (``Frame.chroma_tracked``), and the reference camera's own
+    holes that of a near pixel of the same colour in its image
+    (:func:`fill_reference_holes`).
     """
     ds = dataset_of(dataset_dir, scenes=[scene])
     rig = ds.rig
     mixing = load_crosstalk(crosstalk_json) if crosstalk_json else {}
-    imgs, sats, sils, inputs = [], [], [], []
+    imgs, sats, sils, inputs, raw = [], [], [], [], []
     sc = ds.scene(scene)
     for cam in rig.camera_names:
         path = ds.frame_image(scene, frame, cam)
         img, sat = read_image(path, rig.image)
+        raw.append(img.transpose(2, 0, 1))
         imgs.append((unmix(img, mixing[cam]) if cam in mixing else img).transpose(2, 0, 1))
         sats.append(sat)
         inputs.append(path)
@@ -146,6 +184,11 @@ def load_frame(
         if extra:
             inputs.append(Path(extra))
     images = np.stack(imgs).astype(np.float32)
+    colour = None
+    if moved:  # for the reference camera's hole fill (fill_reference_holes)
+        from colourhs.calibration.chromaticity_tracking import image_colour
+
+        colour = np.stack([image_colour(r.transpose(1, 2, 0)) for r in raw])
     model = load_noise(noise_json) if noise_json else None
     variance = []
     for c, cam in enumerate(rig.camera_names):
@@ -169,4 +212,6 @@ def load_frame(
         inputs,
         ratio_sigma,
         moved,
+        chroma_sigma if moved else None,
+        colour,
     )
