@@ -495,14 +495,15 @@ def test_exact_data_carry_each_patchs_colour_exactly(tmp_path):
 
 
 def test_a_hole_takes_the_p_of_its_patch_and_not_of_another_colour():
-    """Step 6: a map whose p is unknown over a 10-pixel-wide band across two patches (a
-    lost highlight) and over a patch of a colour no known pixel shows. The band takes
-    each patch's own p (exactly, with the source's sigma: the colours are equal), two
-    pixels further each round; the other colour stays unknown."""
+    """The hole fill (fill_from_colour): a map whose p is unknown over a 10-pixel-wide
+    band across two patches (a lost highlight) and over a patch of a colour no known
+    pixel shows. The band takes each patch's own p (exactly, with the source's sigma:
+    the colours are equal), two pixels further each round; the other colour stays
+    unknown."""
     p = np.ones((40, 60, 3), np.float32)
     p[:, 30:] = [1.4, 0.8, 0.8]  # two patches, left and right
     p[25:, :] = [0.6, 0.6, 1.8]  # a third, below
-    colour = (p / 3.0)[..., [0, 1, 2]] * np.float32(1.0)
+    colour = p / 3.0  # the image colour of a uniformly lit surface
     tracked = p.copy()
     tracked[:20, 24:34] = np.nan  # a band across the two patches
     tracked[25:] = np.nan  # no pixel of the third colour is known
