@@ -1,8 +1,8 @@
 """Moving coloured objects: what a chromaticity map calibrated in one pose costs.
 
 Run: ``.venv/bin/python benchmarks/dynamic_chromaticity.py [--preset random-dynamic-tiny]
-[--seeds 0-3] [--frames 0-11/2] [--evaluate 0,5,11] [--raw-truth] [--tracked] [--keep DIR]
-[--tag SUFFIX]``.
+[--seeds 0-3] [--frames 0-11/2] [--evaluate 0,5,11] [--raw-truth] [--tracked] [--oracle]
+[--keep DIR] [--tag SUFFIX]``.
 
 Why: the paper calibrates the surface chromaticity p (eq. 4, Section III-D) per
 camera pixel from chromatic captures of the object in one pose, and the
@@ -46,6 +46,10 @@ function ``(data, scene, files) -> {frame: chromaticity h5}`` (None: no map).
 A tracked chromaticity is one more source: ``tracked_variant(track)`` with
 ``track(data, scene, files) -> {frame: h5 path}`` gives the variant
 ``bayes_dyn``; ``--tracked`` adds the workflow's (:func:`tracked_source`).
+``--oracle`` adds it and two oracles that split its gap to ``bayes_full_true``:
+the tracked map with the true p in its holes (``bayes_dyn_truth_in_holes``) and
+with the true p where it has one, its holes kept (``bayes_dyn_truth_where_known``)
+(:func:`with_truth`).
 
 Figures per seed x scene x frame x variant (``benchmarks/results/
 dynamic_chromaticity_seeds<TAG>.csv``, written after every seed): the
@@ -200,6 +204,62 @@ def tracked_source(data: Path, scene: str, files: dict) -> dict[str, Path]:
     return track_sequence(data, scene, files[f"chroma/{_chromatic_object(data, scene)}"], out)
 
 
+def once_per_scene(source: MapSource) -> MapSource:
+    """``source``, run once per dataset and scene: later calls return the first call's
+    maps (the variants that build on one tracking share it)."""
+    done: dict[tuple[str, str], dict[str, Path]] = {}
+
+    def source_once(data: Path, scene: str, files: dict) -> dict[str, Path]:
+        key = (str(data), scene)
+        if key not in done:
+            done[key] = source(data, scene, files)
+        return done[key]
+
+    return source_once
+
+
+def put_truth(tracked_h5: Path, truth_h5: Path, out_h5: Path, part: str) -> Path:
+    """A tracked map (:func:`tracked_source`) with the true p of its frame (as
+    :func:`true_source` writes it) in one part of each camera's map: ``"holes"``, the
+    pixels where the tracking left no p, or ``"known"``, those where it has one (in
+    either, only where the truth has a p: the object covers the pixel). The rest,
+    the tracking's sigma and the attributes (a moved frame stays one: the
+    reconstruction's fill and borrowed p act as on the tracked map) are the tracked
+    map's; written to ``out_h5``."""
+    import h5py
+
+    if part not in ("holes", "known"):
+        raise ValueError(f"part {part!r}: 'holes' or 'known'")
+    out_h5.parent.mkdir(parents=True, exist_ok=True)
+    shutil.copyfile(tracked_h5, out_h5)
+    with h5py.File(out_h5, "a") as f, h5py.File(truth_h5) as t:
+        for cam in t:
+            p, truth = f[cam][()], t[cam][()]
+            hole = ~np.isfinite(p).all(axis=-1)
+            where = (hole if part == "holes" else ~hole) & np.isfinite(truth).all(axis=-1)
+            p[where] = truth[where]
+            f[cam][...] = p
+    return out_h5
+
+
+def with_truth(track: MapSource, part: str) -> MapSource:
+    """The maps of ``track`` with each frame's true p in one ``part`` of them
+    (:func:`put_truth`), written beside the calibration files
+    (``tracked_with_truth_<part>/<scene>/<frame>.h5``): an oracle that splits the
+    gap between a tracked map and the true one (``bayes_full_true``) into what its
+    holes cost and what its wrong p cost."""
+
+    def source(data: Path, scene: str, files: dict) -> dict[str, Path]:
+        truth = true_source(data, scene, files)
+        out = Path(files["photometric"]).parent / f"tracked_with_truth_{part}" / scene
+        return {
+            frame: put_truth(h5, truth[frame], out / f"{frame}.h5", part)
+            for frame, h5 in track(data, scene, files).items()
+        }
+
+    return source
+
+
 def tracked_variant(track: MapSource, name: str = "bayes_dyn") -> Variant:
     """The variant of a tracked chromaticity: ``track(data, scene, files) -> {frame: h5}``."""
     return Variant(name, "bayes_full", track)
@@ -213,6 +273,16 @@ VARIANTS = (
 )
 #: ``--raw-truth``: the true chromaticity as the dataset holds it, not normalised.
 RAW_TRUTH = Variant("bayes_full_true_raw", "bayes_full", true_raw_source)
+
+
+def oracle_variants(track: MapSource) -> tuple[Variant, ...]:
+    """``--oracle``: ``bayes_dyn_truth_in_holes`` and ``bayes_dyn_truth_where_known``,
+    the tracked map of ``track`` with the true p in its holes or where it has a p
+    (:func:`with_truth`)."""
+    return (
+        Variant("bayes_dyn_truth_in_holes", "bayes_full", with_truth(track, "holes")),
+        Variant("bayes_dyn_truth_where_known", "bayes_full", with_truth(track, "known")),
+    )
 
 
 #: The chromaticity map's own error bar against the truth (:func:`chroma_sigma_error`).
@@ -815,6 +885,12 @@ def main(argv=None) -> dict:
         action="store_true",
         help="also bayes_dyn: the calibrated map carried through the sequence (the workflow's)",
     )
+    p.add_argument(
+        "--oracle",
+        action="store_true",
+        help="also bayes_dyn and the tracked map with the true p in its holes "
+        "(bayes_dyn_truth_in_holes) or where it has a p (bayes_dyn_truth_where_known)",
+    )
     p.add_argument("--keep", type=Path, default=None, help="keep datasets and results here")
     p.add_argument("--tag", default="", help="suffix of the output files")
     p.add_argument(
@@ -835,7 +911,9 @@ def main(argv=None) -> dict:
         show_progress()
         frames, evaluate = select_frames(args.frames), select_frames(args.evaluate)
         variants = VARIANTS + ((RAW_TRUTH,) if args.raw_truth else ())
-        variants += (tracked_variant(tracked_source),) if args.tracked else ()
+        track = once_per_scene(tracked_source)
+        variants += (tracked_variant(track),) if args.tracked or args.oracle else ()
+        variants += oracle_variants(track) if args.oracle else ()
         rows = seeds_in_temp(
             frame_indices(args.seeds),
             "colourhs-dynchroma",
