@@ -80,6 +80,14 @@ class Frame:
     chroma_colour: np.ndarray | None = None
 
 
+def chroma_variance(images: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+    """The variance (as ``images``, (..., 3, H, W)) that a relative error ``sigma`` of p
+    ((..., H, W), the same in every channel; NaN: none) adds to each intensity: eq. 3
+    divides each intensity by its p, so a relative error of p is one of the intensity
+    (beyond the paper)."""
+    return (images * np.nan_to_num(sigma, nan=0.0)[..., None, :, :]) ** 2
+
+
 def fill_reference_holes(frame: Frame, reference: int) -> Frame:
     """``frame`` with the holes of its ``reference`` camera's tracked map filled from a
     near pixel of the same image colour
@@ -106,7 +114,7 @@ def fill_reference_holes(frame: Frame, reference: int) -> Frame:
     chroma_sigma[reference] = sigma
     variance = frame.variance.copy()
     new = np.all(np.isfinite(filled), axis=-1) & ~before
-    variance[reference][:, new] += (frame.images[reference][:, new] * sigma[new]) ** 2
+    variance[reference] += chroma_variance(frame.images[reference], np.where(new, sigma, 0.0))
     return replace(frame, chroma=chroma, chroma_sigma=chroma_sigma, variance=variance)
 
 
@@ -200,7 +208,7 @@ def load_frame(
             variance.append(model.variance(cam, rgb))
     variance = np.stack(variance).transpose(0, 3, 1, 2).astype(np.float32)
     if chroma_sigma is not None:  # (C, H, W): the same relative error in every channel
-        variance += (images * np.nan_to_num(chroma_sigma, nan=0.0)[:, None]) ** 2
+        variance += chroma_variance(images, chroma_sigma)
     return Frame(
         rig,
         images,
