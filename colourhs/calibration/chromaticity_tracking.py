@@ -44,12 +44,13 @@ neighbour towards c only:
    prediction as its position, so that the next frame's flow carries it on and the
    colour can confirm it again once the highlight has passed (a lost point's position
    would otherwise fall back to no motion and stay behind the surface).
-5. p is sampled once from the calibrated map at the position (nearest: no colour is
-   mixed across a patch edge, and no blur accumulates). The match's relative colour
-   residual, ``|q_f - q_c| / |q_c|``, is the tracking's 1-sigma of log p (``sigma``:
-   the reconstruction weighs the channels by it). Where the calibrated map carries
-   its own error bar (:func:`colourhs.calibration.chromaticity.log_sigma`, the
-   chromatic captures' sensor noise), the tracked map's 1-sigma of log p per band
+5. p is sampled once from the calibrated map at the position (:func:`sample_at`,
+   nearest: no colour is mixed across a patch edge, and no blur accumulates). The
+   match's relative colour residual, ``|q_f - q_c| / |q_c|``, is the tracking's 1-sigma
+   of log p (``sigma``: the reconstruction weighs the channels by it). Where the
+   calibrated map carries its own error bar
+   (:func:`colourhs.calibration.chromaticity.log_sigma`, the chromatic captures'
+   sensor noise), the tracked map's 1-sigma of log p per band
    (``p_sigma``, :func:`tracked_log_sigma`) is that error bar at the position and the
    residual in quadrature: the p sampled there carries the calibration's error, and
    a wrong position a wrong colour.
@@ -107,6 +108,7 @@ __all__ = [
     "predict_positions",
     "prediction_flow",
     "read_tracked",
+    "sample_at",
     "select_flow",
     "shading_gain",
     "track_camera",
@@ -318,6 +320,14 @@ def _remap(values: np.ndarray, x: np.ndarray, y: np.ndarray, nearest=False) -> n
     return out[..., 0] if np.ndim(values) == 2 else out
 
 
+def sample_at(values: np.ndarray, position: np.ndarray) -> np.ndarray:
+    """Step 5's sampling: ``values`` (H, W) or (H, W, C) of the chromatic frame at each
+    pixel's ``position`` there ((H', W', 2), x and y), the nearest pixel's (no colour is
+    mixed across a patch edge, and no blur accumulates); NaN outside the image or where
+    the position is NaN."""
+    return _remap(values, position[..., 0], position[..., 1], nearest=True)
+
+
 def image_colour(rgb: np.ndarray) -> np.ndarray:
     """An image's colour (H, W, 3): each pixel's channels over their sum (NaN where it
     is dark), smoothed by a Gaussian of 1 pixel against the noise."""
@@ -408,11 +418,10 @@ def track_camera(
     colour = colour * np.exp(-shading_gain(colour, anchor, predicted))
     colour /= colour.sum(axis=-1, keepdims=True)
     position, distance = colour_match(predicted, colour, anchor)
-    x, y = position[..., 0], position[..., 1]
-    seen = _remap(anchor, x, y, nearest=True)
+    seen = sample_at(anchor, position)
     with np.errstate(invalid="ignore", divide="ignore"):
         sigma = np.linalg.norm(colour - seen, axis=-1) / np.linalg.norm(seen, axis=-1)
-    p = _remap(calibrated, x, y, nearest=True)
+    p = sample_at(calibrated, position)
     lost = ~(distance <= COLOUR_TOL) | ~np.all(np.isfinite(p), axis=-1) | ~np.isfinite(sigma)
     p[lost] = np.nan
     moved = np.linalg.norm(position - predicted, axis=-1)
@@ -458,8 +467,7 @@ def tracked_log_sigma(calibrated_sigma: np.ndarray, tracked: TrackedMap) -> np.n
     :func:`colourhs.calibration.chromaticity.log_sigma`) at the tracked position
     (nearest, as p is sampled) and the match's residual (``tracked.sigma``) in
     quadrature; NaN where either is unknown (beyond the paper)."""
-    x, y = tracked.position[..., 0], tracked.position[..., 1]
-    calibration = _remap(calibrated_sigma, x, y, nearest=True)
+    calibration = sample_at(calibrated_sigma, tracked.position)
     return np.hypot(calibration, tracked.sigma[..., None]).astype(np.float32)
 
 

@@ -1,5 +1,7 @@
-"""benchmarks/dynamic_chromaticity.py's oracles: a tracked map with the true p in its
-holes or where it has a p, and a map source run once per scene. Nothing is rendered."""
+"""benchmarks/dynamic_chromaticity.py's oracles and truths: a tracked map with the true p
+in its holes or where it has a p, the calibrated map at the true positions, the carried
+truth's chroma error (the floor of any carried map), the tracking's position error, and
+a map source run once per scene. Nothing is rendered."""
 
 from __future__ import annotations
 
@@ -69,3 +71,123 @@ def test_a_source_shared_by_the_oracles_runs_once_per_scene(tmp_path):
     assert once(tmp_path, "cloth", {}) is first
     once(tmp_path, "moving-toy", {})
     assert calls == [(tmp_path, "cloth"), (tmp_path, "moving-toy")]
+
+
+W, H = 80, 60
+#: A plane at 1 m seen by one pinhole camera (f 100 px): moved 5 cm along x between
+#: the chromatic frame 000000 and frame 000001, 5 px in the image.
+SHIFT_PX = 5
+
+
+def _moved_plane(tmp_path: Path):
+    """The plane's ground-truth meshes under ``tmp_path/scenes/plane/gt`` and a one-camera
+    rig (``camera_names``, ``image``, ``camera``) that sees them."""
+    from types import SimpleNamespace
+
+    from capture_helpers import pinhole
+
+    from colourhs.common.ply import write_ply
+
+    cam = pinhole(100.0, 40.0, 30.0)
+    rig = SimpleNamespace(
+        camera_names=("A",), image=SimpleNamespace(width=W, height=H), camera=lambda name: cam
+    )
+    gt = tmp_path / "scenes" / "plane" / "gt"
+    gt.mkdir(parents=True)
+    v = np.array([[-0.4, -0.4, 1.0], [0.4, -0.4, 1.0], [0.4, 0.4, 1.0], [-0.4, 0.4, 1.0]])
+    tri = np.array([[0, 1, 2], [0, 2, 3]])
+    write_ply(gt / "000000.ply", v, tri)
+    write_ply(gt / "000001.ply", v + [SHIFT_PX / 100.0, 0.0, 0.0], tri)
+    return rig
+
+
+def _pattern(shift: int = 0) -> np.ndarray:
+    """A map (H, W, 3) of vertical stripes, each column its own colour, moved ``shift``
+    columns to the right (NaN where nothing moved in)."""
+    x = np.arange(W) - shift
+    p = np.stack([1.0 + 0.5 * np.sin(x), np.ones(W), 1.0 + 0.5 * np.cos(0.7 * x)], -1)
+    p[x < 0] = np.nan
+    return np.broadcast_to(p, (H, W, 3)).astype(np.float32).copy()
+
+
+def test_position_error_of_a_tracked_map_against_the_meshes(tmp_path):
+    """dyn.position_error: a tracked map that saw no motion is 5 px off, one that
+    followed it 0 px; a map without positions (the calibrated one) has none."""
+    rig = _moved_plane(tmp_path)
+    gx, gy = np.meshgrid(np.arange(W, dtype=np.float32), np.arange(H, dtype=np.float32))
+    for name, dx in (("still", 0.0), ("followed", -SHIFT_PX)):
+        with h5py.File(tmp_path / f"{name}.h5", "w") as m:
+            m["A"] = np.ones((H, W, 3), np.float32)
+            m["position/A"] = np.stack([gx + dx, gy], axis=-1)
+    args = (tmp_path, "plane", "000001", "000000", rig)
+    still = dyn.position_error(tmp_path / "still.h5", *args)
+    assert still["track_position_px"] == pytest.approx(SHIFT_PX, abs=1e-3)
+    assert still["track_motion_px"] == pytest.approx(SHIFT_PX, abs=1e-3)
+    assert still["track_position_known"] == 1.0
+    followed = dyn.position_error(tmp_path / "followed.h5", *args)
+    assert followed["track_position_px"] == pytest.approx(0.0, abs=1e-3)
+    with h5py.File(tmp_path / "calibrated.h5", "w") as m:
+        m["A"] = np.ones((H, W, 3), np.float32)
+    none = dyn.position_error(tmp_path / "calibrated.h5", *args)
+    assert none == dict.fromkeys(dyn.POSITION_COLUMNS)
+
+
+def test_the_calibrated_map_is_sampled_where_each_point_truly_was(tmp_path):
+    """dyn.at_true_positions: on the moved frame each pixel takes the calibrated p (and
+    its error bar) 5 px to its left, where its point was in the chromatic frame, with
+    the tracking's sigma 0; nothing where the point was outside the image; the tracked
+    map's attributes kept and its file untouched."""
+    rig = _moved_plane(tmp_path)
+    calibrated, tracked = tmp_path / "calibrated.h5", tmp_path / "tracked.h5"
+    error_bar = np.broadcast_to(np.linspace(0.01, 0.08, W)[:, None], (W, 3))
+    with h5py.File(calibrated, "w") as f:
+        f["A"] = _pattern()
+        f["sigma/A"] = np.broadcast_to(error_bar, (H, W, 3)).astype(np.float32)
+    with h5py.File(tracked, "w") as f:
+        f.attrs["frame"], f.attrs["chromatic_frame"] = "000001", "000000"
+        f["A"] = np.full((H, W, 3), 2.0, np.float32)
+        for key, shape in (("position", (H, W, 2)), ("position_sigma", (H, W))):
+            f[f"{key}/A"] = np.full(shape, 9.0, np.float32)
+        f["sigma/A"] = np.full((H, W), 0.3, np.float32)
+        f["p_sigma/A"] = np.full((H, W, 3), 0.3, np.float32)
+    truth = dyn.true_position_maps(tmp_path, "plane", "000001", "000000", rig)
+    out = dyn.at_true_positions(tracked, calibrated, truth, tmp_path / "out" / "000001.h5")
+    with h5py.File(out) as f:
+        np.testing.assert_allclose(f["A"][()], _pattern(SHIFT_PX), atol=1e-6)
+        known = np.isfinite(f["A"][()]).all(-1)
+        assert known[:, SHIFT_PX:].all() and not known[:, :SHIFT_PX].any()
+        np.testing.assert_array_equal(f["sigma/A"][()][known], 0.0)
+        assert np.isnan(f["sigma/A"][()][~known]).all()
+        np.testing.assert_allclose(
+            f["position/A"][()][..., 0][known], np.nonzero(known)[1] - SHIFT_PX, atol=1e-4
+        )
+        expected_bar = np.broadcast_to(error_bar[: W - SHIFT_PX], (H, W - SHIFT_PX, 3))
+        np.testing.assert_allclose(f["p_sigma/A"][()][:, SHIFT_PX:], expected_bar, rtol=1e-6)
+        assert (f.attrs["frame"], f.attrs["chromatic_frame"]) == ("000001", "000000")
+    with h5py.File(tracked) as f:
+        np.testing.assert_array_equal(f["A"][()], 2.0)
+
+
+def _truths(tmp_path: Path, moved: np.ndarray) -> None:
+    folder = tmp_path / "scenes" / "plane" / "gt" / "chromaticity"
+    folder.mkdir(parents=True, exist_ok=True)
+    for frame, p in (("000000", _pattern()), ("000001", moved)):
+        with h5py.File(folder / f"{frame}.h5", "w") as f:
+            f["A"] = p
+
+
+def test_the_chroma_floor_is_the_carried_truths_error(tmp_path):
+    """dyn.chroma_floor: a truth that moved with the plane is carried exactly (floor 0);
+    one drawn where the plane was not (the chromatic frame's pattern unmoved) costs the
+    carried pattern's error against it; the chromatic frame's floor is 0."""
+    rig = _moved_plane(tmp_path)
+    _truths(tmp_path, _pattern(SHIFT_PX))
+    args = (tmp_path, "plane", "000001", "000000", rig)
+    assert dyn.chroma_floor(*args) == pytest.approx(0.0, abs=1e-6)
+    assert dyn.chroma_floor(tmp_path, "plane", "000000", "000000", rig) == 0.0
+    _truths(tmp_path, _pattern())
+    from colourhs.calibration.chromaticity import log_ratio_rms
+
+    expected = log_ratio_rms(_pattern(SHIFT_PX), _pattern())
+    assert expected > 0.2
+    assert dyn.chroma_floor(*args) == pytest.approx(expected, rel=1e-5)

@@ -71,46 +71,6 @@ def test_the_error_bars_calibration_is_summarised_beside_the_depth():
     assert "within 3 sigma, chromatic / moved" in head
 
 
-def test_position_error_of_a_tracked_map_against_the_meshes(tmp_path):
-    """dyn.position_error: a plane at 1 m moved 5 cm (5 px at f 100 px) between the
-    chromatic frame and the frame; a tracked map that saw no motion is 5 px off,
-    one that followed it 0 px; a map without positions (the calibrated one) has none."""
-    from types import SimpleNamespace
-
-    import h5py
-    from capture_helpers import pinhole
-
-    from colourhs.common.ply import write_ply
-
-    w, h = 80, 60
-    cam = pinhole(100.0, 40.0, 30.0)
-    rig = SimpleNamespace(
-        camera_names=("A",), image=SimpleNamespace(width=w, height=h), camera=lambda name: cam
-    )
-    gt = tmp_path / "scenes" / "plane" / "gt"
-    gt.mkdir(parents=True)
-    v = np.array([[-0.4, -0.4, 1.0], [0.4, -0.4, 1.0], [0.4, 0.4, 1.0], [-0.4, 0.4, 1.0]])
-    tri = np.array([[0, 1, 2], [0, 2, 3]])
-    write_ply(gt / "000000.ply", v, tri)
-    write_ply(gt / "000001.ply", v + [0.05, 0.0, 0.0], tri)
-    gx, gy = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
-    for name, dx in (("still", 0.0), ("followed", -5.0)):
-        with h5py.File(tmp_path / f"{name}.h5", "w") as m:
-            m["A"] = np.ones((h, w, 3), np.float32)
-            m["position/A"] = np.stack([gx + dx, gy], axis=-1)
-    args = (tmp_path, "plane", "000001", "000000", rig)
-    still = dyn.position_error(tmp_path / "still.h5", *args)
-    assert still["track_position_px"] == pytest.approx(5.0, abs=1e-3)
-    assert still["track_motion_px"] == pytest.approx(5.0, abs=1e-3)
-    assert still["track_position_known"] == 1.0
-    followed = dyn.position_error(tmp_path / "followed.h5", *args)
-    assert followed["track_position_px"] == pytest.approx(0.0, abs=1e-3)
-    with h5py.File(tmp_path / "calibrated.h5", "w") as m:
-        m["A"] = np.ones((h, w, 3), np.float32)
-    none = dyn.position_error(tmp_path / "calibrated.h5", *args)
-    assert none == dict.fromkeys(dyn.POSITION_COLUMNS)
-
-
 def test_chroma_sigma_calibration_against_the_truth():
     """A map whose log p errs by independent Gaussian noise of its stated sigma in each
     band (and by an arbitrary scale per pixel, which the calibration cannot measure)
@@ -135,26 +95,31 @@ def test_chroma_sigma_calibration_against_the_truth():
 
 
 #: One seed of a coloured sequence, chromatic frame 0, per frame: depth median (mm) of
-#: the tracked map, the static map and the true map (NaN: nothing reconstructed) and
-#: the tracked map's chroma RMS.
+#: the tracked map, the static map and the true map (NaN: nothing reconstructed), the
+#: tracked map's chroma RMS and the truth carried by the true motion's (its floor).
 TARGET_ROWS = {
-    0: (1.0, 1.0, 1.0, 0.04),
-    4: (1.4, 6.0, 1.2, 0.05),  # every bound met
-    8: (2.0, 5.0, 2.0, 0.07),  # drifted 2x (the true map 2x too); 2.5x better than static
-    11: (1.2, np.nan, np.nan, 0.08),  # only the static and true maps reconstruct nothing
+    0: (1.0, 1.0, 1.0, 0.04, 0.0),
+    4: (1.4, 6.0, 1.2, 0.05, 0.02),  # every bound met
+    8: (2.0, 5.0, 2.0, 0.07, 0.03),  # drifted 2x (the true map 2x too); 2.5x better than static
+    11: (1.2, np.nan, np.nan, 0.08, 0.05),  # only the static and true maps reconstruct nothing
 }
+#: An oracle's depth median (mm) and chroma RMS per frame: every bound met.
+ORACLE_ROWS = {0: (1.0, 0.04), 4: (1.1, 0.05), 8: (1.5, 0.05), 11: (1.3, 0.05)}
 
 
-def _target_table(tracked_lost_frame: int | None = None) -> pd.DataFrame:
+def _target_table(tracked_lost_frame: int | None = None, oracle: bool = False) -> pd.DataFrame:
     rows = []
-    for frame, (dyn_mm, static_mm, true_mm, chroma) in TARGET_ROWS.items():
+    for frame, (dyn_mm, static_mm, true_mm, chroma, floor) in TARGET_ROWS.items():
         if frame == tracked_lost_frame:
             dyn_mm = np.nan
-        for variant, depth in (
-            ("bayes_dyn", dyn_mm),
-            ("bayes_full_static", static_mm),
-            ("bayes_full_true", true_mm),
-        ):
+        variants = [
+            ("bayes_dyn", dyn_mm, chroma),
+            ("bayes_full_static", static_mm, 0.0),
+            ("bayes_full_true", true_mm, 0.0),
+        ]
+        if oracle:
+            variants.append(("bayes_dyn_true_positions", *ORACLE_ROWS[frame]))
+        for variant, depth, rms in variants:
             rows.append(
                 {
                     "preset": "random-dynamic-tiny",
@@ -164,7 +129,8 @@ def _target_table(tracked_lost_frame: int | None = None) -> pd.DataFrame:
                     "chromatic_frame": 0,
                     "variant": variant,
                     "depth_median_mm": depth,
-                    "chroma_rms_log": chroma if variant == "bayes_dyn" else 0.0,
+                    "chroma_rms_log": rms,
+                    "chroma_floor_rms_log": floor,
                 }
             )
     return pd.DataFrame(rows)
@@ -172,7 +138,8 @@ def _target_table(tracked_lost_frame: int | None = None) -> pd.DataFrame:
 
 def test_the_tracking_targets_are_counted_per_frame_and_scene():
     """dyn.tracking_targets on a hand-made sequence: the chroma drift is the last frame's
-    RMS over the chromatic frame's (0.08 / 0.04); each moved frame's depth drift, gain
+    RMS over the chromatic frame's (0.08 / 0.04), its floor's the carried truth's RMS
+    over the same (0.05 / 0.04); each moved frame's depth drift, gain
     over the static map and ratio to the true map's depth are counted against their
     bounds; a static or true map that reconstructs nothing is a win for the tracked map
     and no comparison, a tracked map that reconstructs nothing misses."""
@@ -184,6 +151,7 @@ def test_the_tracking_targets_are_counted_per_frame_and_scene():
             "scene": "cloth",
             "last_frame": 11,
             "chroma_drift": pytest.approx(2.0),
+            "floor_drift": pytest.approx(1.25),
         }
     ]
     by_frame = {r["frame"]: r for r in t["frames"]}
@@ -196,6 +164,7 @@ def test_the_tracking_targets_are_counted_per_frame_and_scene():
     assert by_frame[11]["static_gain"] is None
     assert t["met"] == {
         "chroma_drift": {"met": 0, "of": 1},
+        "floor_drift": {"met": 1, "of": 1},
         "depth_drift": {"met": 2, "of": 3},
         "static_gain": {"met": 2, "of": 3},
         "true_depth_drift": {"met": 1, "of": 2},
@@ -209,8 +178,31 @@ def test_the_tracking_targets_are_counted_per_frame_and_scene():
     md = dyn.summarise_markdown(dyn.summarise(_target_table().assign(**seconds)))
     assert "| static map's depth median >= 3.0x the tracked one's | 2 of 3 frames |" in md
     assert "| random-dynamic-tiny | 3 | cloth | 000011 | 1.20 | static: nothing |" in md
+    assert "| random-dynamic-tiny | 3 | cloth | 000011 | 2.00 | 1.25 |" in md
     alone = dyn.tracking_targets(_table())["met"]  # no static or true map: not judged
     assert alone["static_gain"] == alone["tracked_within_true"] == {"met": 0, "of": 0}
     assert alone["depth_drift"] == {"met": 4, "of": 6}
     untracked = _table().assign(variant="bayes_full_static")
     assert dyn.tracking_targets(untracked) == {"scenes": [], "frames": [], "met": {}}
+
+
+def test_an_oracle_is_judged_by_the_same_bounds_beside_the_tracked_map():
+    """dyn.summarise with an oracle (a ``bayes_dyn_*`` variant): its own count of every
+    bound that judges the tracked map, in a column of its own beside bayes_dyn's (the
+    bounds that judge the scene, the carried truth's and the true map's drift, once);
+    the per-frame ratios stay bayes_dyn's."""
+    seconds = {"render_s": 1.0, "calib_s": 1.0, "reconstruct_s": 1.0}
+    s = dyn.summarise(_target_table(oracle=True).assign(**seconds))
+    assert list(s["oracle_targets"]) == ["bayes_dyn_true_positions"]
+    oracle = s["oracle_targets"]["bayes_dyn_true_positions"]
+    assert {k: v["met"] for k, v in oracle.items()} == {
+        "chroma_drift": 1,
+        "depth_drift": 3,
+        "static_gain": 3,
+        "tracked_within_true": 2,
+    }
+    assert s["targets"]["met"]["depth_drift"] == {"met": 2, "of": 3}
+    md = dyn.summarise_markdown(s)
+    assert "| bound | met | bayes_dyn_true_positions |" in md
+    assert "| 2 of 3 frames | 3 of 3 frames |" in md
+    assert "(any carry's bound) | 1 of 1 scenes | - |" in md
