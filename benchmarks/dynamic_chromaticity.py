@@ -439,22 +439,19 @@ def true_position_maps(data: Path, scene: str, frame: str, chromatic: str, rig) 
     return {c: true_positions(now, then, rig.camera(c), w, h) for c in rig.camera_names}
 
 
-def position_error(map_h5: Path, data: Path, scene: str, frame: str, chromatic: str, rig) -> dict:
+def position_error(map_h5: Path, truth: dict | None, cameras) -> dict:
     """:data:`POSITION_COLUMNS` of a tracked map (one with ``position/<camera>``) against
-    the true positions (:func:`true_position_maps`), pooled over the rig's cameras; None
-    where the map has no positions or the meshes no common triangulation."""
+    the true positions (``truth``, :func:`true_position_maps`), pooled over ``cameras``;
+    None where the map has no positions or there are no true ones (``truth`` None)."""
     import h5py
 
     from colourhs.evaluation.tracking_errors import position_summary
 
     with h5py.File(map_h5) as f:
-        if "position" not in f:
+        if "position" not in f or truth is None:
             return dict.fromkeys(POSITION_COLUMNS)
-        pos = np.stack([f[f"position/{cam}"][()] for cam in rig.camera_names])
-    truth = true_position_maps(data, scene, frame, chromatic, rig)
-    if truth is None:
-        return dict.fromkeys(POSITION_COLUMNS)
-    s = position_summary(pos, np.stack([truth[c] for c in rig.camera_names]))
+        pos = np.stack([f[f"position/{cam}"][()] for cam in cameras])
+    s = position_summary(pos, np.stack([truth[c] for c in cameras]))
     return {
         "track_position_px": s["position_median_px"],
         "track_position_p90_px": s["position_p90_px"],
@@ -463,16 +460,18 @@ def position_error(map_h5: Path, data: Path, scene: str, frame: str, chromatic: 
     }
 
 
-def chroma_floor(data: Path, scene: str, frame: str, chromatic: str, rig) -> float | None:
+def chroma_floor(
+    data: Path, scene: str, frame: str, chromatic: str, truth: dict | None, cameras
+) -> float | None:
     """``chroma_floor_rms_log``: the chromatic frame's true chromaticity carried to the
-    frame by the true positions (:func:`true_position_maps`, sampled as a tracking samples
-    the calibrated map,
+    frame by the true positions (``truth``, :func:`true_position_maps`, sampled as a
+    tracking samples the calibrated map,
     :func:`colourhs.calibration.chromaticity_tracking.sample_at`) against the frame's
-    truth, ``chroma_rms_log`` pooled over the cameras: what carrying a map on the pixel
+    truth, ``chroma_rms_log`` pooled over ``cameras``: what carrying a map on the pixel
     grid costs with neither a tracking nor a calibration error (a pixel whose point lies
     within half a pixel of a patch edge in the chromatic frame takes the other patch's
-    p), the floor of any carried map's error. 0 on the chromatic frame; None where
-    the meshes share no triangulation."""
+    p), the floor of any carried map's error. 0 on the chromatic frame; None without
+    true positions (``truth`` None)."""
     import h5py
 
     from colourhs.calibration.chromaticity import log_ratio_rms
@@ -480,13 +479,12 @@ def chroma_floor(data: Path, scene: str, frame: str, chromatic: str, rig) -> flo
 
     if frame == chromatic:
         return 0.0
-    truth = true_position_maps(data, scene, frame, chromatic, rig)
     if truth is None:
         return None
     folder = data / "scenes" / scene / "gt" / "chromaticity"
     with h5py.File(folder / f"{chromatic}.h5") as home, h5py.File(folder / f"{frame}.h5") as now:
-        carried = np.concatenate([sample_at(home[c][()], truth[c]) for c in rig.camera_names])
-        true = np.concatenate([now[c][()] for c in rig.camera_names])
+        carried = np.concatenate([sample_at(home[c][()], truth[c]) for c in cameras])
+        true = np.concatenate([now[c][()] for c in cameras])
     rms = log_ratio_rms(carried, true)
     return rms if np.isfinite(rms) else None
 
@@ -570,7 +568,9 @@ def run_seed(
             if evaluate is not None and int(frame) not in evaluate and i != chroma_index:
                 continue
             truth = data / "scenes" / scene / "gt" / "chromaticity" / f"{frame}.h5"
-            floor = chroma_floor(data, scene, frame, sc.chromatic_frame, ds.rig)
+            # the true positions once per frame, for the floor and every map's position error
+            positions = true_position_maps(data, scene, frame, sc.chromatic_frame, ds.rig)
+            floor = chroma_floor(data, scene, frame, sc.chromatic_frame, positions, cameras)
             for v in variants:
                 map_h5 = None if v.source is None else maps[v.name].get(frame)
                 if v.source is not None and map_h5 is None:
@@ -587,9 +587,7 @@ def run_seed(
                 err |= dict.fromkeys(POSITION_COLUMNS)
                 if map_h5 is not None:
                     err |= chroma_error(Path(map_h5), truth, cameras)
-                    err |= position_error(
-                        Path(map_h5), data, scene, frame, sc.chromatic_frame, ds.rig
-                    )
+                    err |= position_error(Path(map_h5), positions, cameras)
                 rows.append(
                     {
                         "preset": preset,

@@ -112,14 +112,16 @@ def _pattern(shift: int = 0) -> np.ndarray:
 
 def test_position_error_of_a_tracked_map_against_the_meshes(tmp_path):
     """dyn.position_error: a tracked map that saw no motion is 5 px off, one that
-    followed it 0 px; a map without positions (the calibrated one) has none."""
+    followed it 0 px; a map without positions (the calibrated one), or a frame without
+    true positions, has none."""
     rig = _moved_plane(tmp_path)
     gx, gy = np.meshgrid(np.arange(W, dtype=np.float32), np.arange(H, dtype=np.float32))
     for name, dx in (("still", 0.0), ("followed", -SHIFT_PX)):
         with h5py.File(tmp_path / f"{name}.h5", "w") as m:
             m["A"] = np.ones((H, W, 3), np.float32)
             m["position/A"] = np.stack([gx + dx, gy], axis=-1)
-    args = (tmp_path, "plane", "000001", "000000", rig)
+    truth = dyn.true_position_maps(tmp_path, "plane", "000001", "000000", rig)
+    args = (truth, rig.camera_names)
     still = dyn.position_error(tmp_path / "still.h5", *args)
     assert still["track_position_px"] == pytest.approx(SHIFT_PX, abs=1e-3)
     assert still["track_motion_px"] == pytest.approx(SHIFT_PX, abs=1e-3)
@@ -130,6 +132,8 @@ def test_position_error_of_a_tracked_map_against_the_meshes(tmp_path):
         m["A"] = np.ones((H, W, 3), np.float32)
     none = dyn.position_error(tmp_path / "calibrated.h5", *args)
     assert none == dict.fromkeys(dyn.POSITION_COLUMNS)
+    untold = dyn.position_error(tmp_path / "followed.h5", None, rig.camera_names)
+    assert untold == dict.fromkeys(dyn.POSITION_COLUMNS)
 
 
 def test_the_calibrated_map_is_sampled_where_each_point_truly_was(tmp_path):
@@ -179,12 +183,16 @@ def _truths(tmp_path: Path, moved: np.ndarray) -> None:
 def test_the_chroma_floor_is_the_carried_truths_error(tmp_path):
     """dyn.chroma_floor: a truth that moved with the plane is carried exactly (floor 0);
     one drawn where the plane was not (the chromatic frame's pattern unmoved) costs the
-    carried pattern's error against it; the chromatic frame's floor is 0."""
+    carried pattern's error against it; the chromatic frame's floor is 0, and a moved
+    frame without true positions has none."""
     rig = _moved_plane(tmp_path)
     _truths(tmp_path, _pattern(SHIFT_PX))
-    args = (tmp_path, "plane", "000001", "000000", rig)
+    truth = dyn.true_position_maps(tmp_path, "plane", "000001", "000000", rig)
+    args = (tmp_path, "plane", "000001", "000000", truth, rig.camera_names)
     assert dyn.chroma_floor(*args) == pytest.approx(0.0, abs=1e-6)
-    assert dyn.chroma_floor(tmp_path, "plane", "000000", "000000", rig) == 0.0
+    home = (tmp_path, "plane", "000000", "000000", None, rig.camera_names)
+    assert dyn.chroma_floor(*home) == 0.0
+    assert dyn.chroma_floor(*args[:4], None, rig.camera_names) is None
     _truths(tmp_path, _pattern())
     from colourhs.calibration.chromaticity import log_ratio_rms
 
