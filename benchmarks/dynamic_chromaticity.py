@@ -317,7 +317,7 @@ def with_true_positions(track: MapSource) -> MapSource:
     def source(data: Path, scene: str, files: dict) -> dict[str, Path]:
         ds = open_dataset(data, check_images=False)
         sc = ds.scenes[scene]
-        calibrated = files[f"chroma/{_chromatic_object(data, scene)}"]
+        calibrated = files[f"chroma/{sc.chromatic}"]
         out = Path(files["photometric"]).parent / "tracked_at_true_positions" / scene
         maps = {}
         for frame, h5 in track(data, scene, files).items():

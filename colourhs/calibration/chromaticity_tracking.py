@@ -284,7 +284,7 @@ def shading_gain(
     without the pixels farther than :data:`GAIN_OUTLIER` from that average (another
     patch, a highlight), ``iterations`` times in all.
     """
-    seen = _remap(anchor_colour, predicted[..., 0], predicted[..., 1], nearest=True)
+    seen = sample_at(anchor_colour, predicted)
     with np.errstate(invalid="ignore", divide="ignore"):
         ratio = np.log(colour) - np.log(seen)
     known = np.all(np.isfinite(ratio), axis=-1)
@@ -377,7 +377,7 @@ def colour_match(
     for dy in range(-r, r + 1):
         for dx in range(-r, r + 1):
             cand = predicted + np.array([dx, dy], np.float32)
-            seen = _remap(anchor_colour, cand[..., 0], cand[..., 1], nearest=True)
+            seen = sample_at(anchor_colour, cand)
             cost = np.sum((colour - seen) ** 2, axis=-1) + PROXIMITY * (dx * dx + dy * dy)
             better = cost < best  # False where NaN
             best[better] = cost[better]
