@@ -105,8 +105,9 @@ median over seeds and the worst seed. With a tracked map, it counts the frames a
 scenes that meet the bounds a tracked chromaticity is judged by
 (:func:`tracking_targets`: the chroma drift to the last frame, the depth drift from
 the chromatic frame, the gain over the static map), beside the true map's own drift
-and the tracked map's depth against the true map's on the same frame (the bound of
-any tracking). Run times per seed (render, calibration, reconstruction) are in both.
+and gain over the static map (the bounds of any chromaticity, however it is found)
+and the tracked map's depth against the true map's on the same frame, pooled and per
+scene. Run times per seed (render, calibration, reconstruction) are in both.
 
 A tiny preset (160x120) takes minutes per seed on 2 cores; ``random-dynamic``
 (640x480) far longer: score fewer frames with ``--evaluate`` (``--frames`` renders
@@ -712,9 +713,9 @@ the rig's own accuracy divides out; the values are the targets the tracking is s
 
 
 #: The bounds that judge the scene, not the tracked map (:func:`tracking_targets`): the
-#: carried truth's chroma drift and the true map's depth drift, left out of an oracle's
-#: counts (``oracle_targets``).
-SHARED_BOUNDS = ("floor_drift", "true_depth_drift")
+#: carried truth's chroma drift and the true map's depth drift and gain over the static
+#: map, left out of an oracle's counts (``oracle_targets``).
+SHARED_BOUNDS = ("floor_drift", "true_depth_drift", "true_static_gain")
 
 
 def _ratio(a, b) -> float | None:
@@ -732,6 +733,12 @@ def _count(verdicts: list) -> dict:
     """How many verdicts are met (``met``) of those given (``of``; None is none)."""
     have = [v for v in verdicts if v is not None]
     return {"met": sum(have), "of": len(have)}
+
+
+def _gains(static: float, depth: float) -> bool:
+    """Whether the static map's depth median ``static`` is at least
+    :data:`STATIC_GAIN_BOUND` times ``depth``."""
+    return static >= STATIC_GAIN_BOUND * depth
 
 
 def _against(dyn: float, other: float, ran: bool, ok, empty_meets: bool) -> bool | None:
@@ -756,17 +763,19 @@ def tracking_targets(table: pd.DataFrame, tracked: str = "bayes_dyn") -> dict:
     any carried map: the truth carried by the true motion, :func:`chroma_floor`). Per
     moved frame (``frames``): ``depth_drift``, the tracked variant's depth median over its
     chromatic frame's; ``static_gain``, ``bayes_full_static``'s over the tracked
-    variant's; for the true chromaticity (``bayes_full_true``), the bound of any
-    tracking, ``true_depth_drift`` (its own drift) and ``tracked_over_true`` (the tracked
-    variant's depth median over the true map's on the same frame); None where a figure
-    is missing; ``static_empty`` and ``true_empty`` where that map ran and
-    reconstructed nothing. ``met``: per bound, how many meet it of how many are judged:
-    a frame the tracked variant reconstructs nothing of misses every depth bound, a
-    static map that reconstructs nothing is a gain, and a frame without the other
-    variant (or where the true map reconstructs nothing) is not judged against it.
-    Empty where the table has no ``tracked`` rows.
+    variant's; for the true chromaticity (``bayes_full_true``), the bounds of any
+    tracking, ``true_depth_drift`` (its own drift) and ``true_static_gain``
+    (``bayes_full_static``'s over the true map's: the most any chromaticity gains), and
+    ``tracked_over_true`` (the tracked variant's depth median over the true map's on the
+    same frame); None where a figure is missing; ``static_empty`` and ``true_empty``
+    where that map ran and reconstructed nothing. ``met``: per bound, how many meet it
+    of how many are judged: a frame the tracked variant (or, for the true map's own
+    bounds, the true map) reconstructs nothing of misses every depth bound, a static
+    map that reconstructs nothing is a gain, and a frame without the other variant (or
+    where the true map reconstructs nothing) is not judged against it. ``met_by_scene``:
+    the same counts per scene. Empty where the table has no ``tracked`` rows.
     """
-    out = {"scenes": [], "frames": [], "met": {}}
+    out = {"scenes": [], "frames": [], "met": {}, "met_by_scene": {}}
     if "variant" not in table or not (table["variant"] == tracked).any():
         return out
     keys = ["preset", "seed", "scene", "frame", "variant"]
@@ -784,9 +793,16 @@ def tracking_targets(table: pd.DataFrame, tracked: str = "bayes_dyn") -> dict:
         "depth_drift",
         "static_gain",
         "true_depth_drift",
+        "true_static_gain",
         "tracked_within_true",
     )
     verdicts = {k: [] for k in names}
+    by_scene: dict[str, dict[str, list]] = {}
+
+    def judge(scene: str, name: str, verdict: bool | None) -> None:
+        verdicts[name].append(verdict)
+        by_scene.setdefault(scene, {k: [] for k in names})[name].append(verdict)
+
     rows = table[table["variant"] == tracked]
     for key, g in rows.groupby(["preset", "seed", "scene"]):
         home = int(g["chromatic_frame"].iloc[0])
@@ -805,8 +821,8 @@ def tracking_targets(table: pd.DataFrame, tracked: str = "bayes_dyn") -> dict:
         out["scenes"].append(
             head | {"last_frame": last, "chroma_drift": chroma, "floor_drift": floor}
         )
-        verdicts["chroma_drift"].append(_verdict(chroma, lambda v: v <= CHROMA_DRIFT_BOUND))
-        verdicts["floor_drift"].append(_verdict(floor, lambda v: v <= CHROMA_DRIFT_BOUND))
+        judge(scene, "chroma_drift", _verdict(chroma, lambda v: v <= CHROMA_DRIFT_BOUND))
+        judge(scene, "floor_drift", _verdict(floor, lambda v: v <= CHROMA_DRIFT_BOUND))
         for frame in sorted(int(f) for f in by_frame.index if int(f) != home):
             dyn = at(key, frame, tracked)
             static, true = at(key, frame, "bayes_full_static"), at(key, frame, "bayes_full_true")
@@ -817,23 +833,34 @@ def tracking_targets(table: pd.DataFrame, tracked: str = "bayes_dyn") -> dict:
                 "depth_drift": _ratio(dyn, at(key, home, tracked)),
                 "static_gain": _ratio(static, dyn),
                 "true_depth_drift": _ratio(true, at(key, home, "bayes_full_true")),
+                "true_static_gain": _ratio(static, true),
                 "tracked_over_true": _ratio(dyn, true),
                 "static_empty": ran_static and not np.isfinite(static),
                 "true_empty": ran_true and not np.isfinite(true),
             }
             out["frames"].append(r)
             drift = r["depth_drift"]
-            verdicts["depth_drift"].append(drift is not None and drift <= DEPTH_DRIFT_BOUND)
-            verdicts["static_gain"].append(
-                _against(dyn, static, ran_static, lambda o, d: o >= STATIC_GAIN_BOUND * d, True)
+            judge(scene, "depth_drift", drift is not None and drift <= DEPTH_DRIFT_BOUND)
+            judge(scene, "static_gain", _against(dyn, static, ran_static, _gains, True))
+            judge(
+                scene,
+                "true_depth_drift",
+                _verdict(r["true_depth_drift"], lambda v: v <= DEPTH_DRIFT_BOUND),
             )
-            verdicts["true_depth_drift"].append(
-                _verdict(r["true_depth_drift"], lambda v: v <= DEPTH_DRIFT_BOUND)
+            judge(
+                scene,
+                "true_static_gain",
+                _against(true, static, ran_static, _gains, True) if ran_true else None,
             )
-            verdicts["tracked_within_true"].append(
-                _against(dyn, true, ran_true, lambda o, d: d <= DEPTH_DRIFT_BOUND * o, False)
+            judge(
+                scene,
+                "tracked_within_true",
+                _against(dyn, true, ran_true, lambda o, d: d <= DEPTH_DRIFT_BOUND * o, False),
             )
     out["met"] = {k: _count(v) for k, v in verdicts.items()}
+    out["met_by_scene"] = {
+        scene: {k: _count(v) for k, v in vs.items()} for scene, vs in by_scene.items()
+    }
     return out
 
 
@@ -870,8 +897,13 @@ def targets_markdown(targets: dict, others: dict | None = None) -> list[str]:
         f"| {cell('static_gain', 'frames')} |",
         f"| the true map's own depth drift <= {DEPTH_DRIFT_BOUND}x (any tracking's bound) "
         f"| {cell('true_depth_drift', 'frames')} |",
+        f"| static map's depth median >= {STATIC_GAIN_BOUND}x the true map's (any "
+        f"chromaticity's bound) | {cell('true_static_gain', 'frames')} |",
         f"| tracked depth median <= {DEPTH_DRIFT_BOUND}x the true map's on the same frame "
         f"| {cell('tracked_within_true', 'frames')} |",
+    ]
+    lines += _by_scene_lines(targets.get("met_by_scene") or {})
+    lines += [
         "",
         "| preset | seed | scene | last frame | chroma drift | carried truth's drift |",
         "|---|---|---|---|---|---|",
@@ -884,17 +916,46 @@ def targets_markdown(targets: dict, others: dict | None = None) -> list[str]:
     lines += [
         "",
         "| preset | seed | scene | frame | depth drift | static / tracked | true map's drift "
-        "| tracked / true |",
-        "|---|---|---|---|---|---|---|---|",
+        "| static / true | tracked / true |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     lines += [
         f"| {r['preset']} | {r['seed']} | {r['scene']} | {r['frame']:06d} "
         f"| {num(r['depth_drift'])} "
         f"| {'static: nothing' if r['static_empty'] else num(r['static_gain'])} "
         f"| {num(r['true_depth_drift'])} "
+        f"| {'true: nothing' if r['true_empty'] else num(r.get('true_static_gain'))} "
         f"| {'true: nothing' if r['true_empty'] else num(r['tracked_over_true'])} |"
         for r in targets["frames"]
     ]
+    return lines
+
+
+#: Each bound's short name in the per-scene table (:func:`targets_markdown`).
+BOUND_NAMES = {
+    "chroma_drift": "chroma drift",
+    "floor_drift": "carried truth's chroma drift",
+    "depth_drift": "depth drift",
+    "static_gain": "gain over the static map",
+    "true_depth_drift": "true map's depth drift",
+    "true_static_gain": "true map's gain over the static map",
+    "tracked_within_true": "within the true map",
+}
+
+
+def _by_scene_lines(by_scene: dict) -> list[str]:
+    """The tracked variant's counts per bound (rows) and scene (columns), as markdown
+    lines; none without scenes: a scene that no map of any chromaticity can meet a bound
+    on shows it beside one where the tracking misses it."""
+    if not by_scene:
+        return []
+    scenes = list(by_scene)
+    lines = ["", "| bound | " + " | ".join(scenes) + " |", "|---|" + "---|" * len(scenes)]
+    for key, name in BOUND_NAMES.items():
+        counts = [by_scene[s].get(key, {"met": 0, "of": 0}) for s in scenes]
+        if not any(c["of"] for c in counts):
+            continue
+        lines.append(f"| {name} | " + " | ".join(f"{c['met']} of {c['of']}" for c in counts) + " |")
     return lines
 
 

@@ -141,8 +141,10 @@ def test_the_tracking_targets_are_counted_per_frame_and_scene():
     RMS over the chromatic frame's (0.08 / 0.04), its floor's the carried truth's RMS
     over the same (0.05 / 0.04); each moved frame's depth drift, gain
     over the static map and ratio to the true map's depth are counted against their
-    bounds; a static or true map that reconstructs nothing is a win for the tracked map
-    and no comparison, a tracked map that reconstructs nothing misses."""
+    bounds, and so are the true map's own drift and gain over the static map (the bounds
+    of any chromaticity), per scene too; a static or true map that reconstructs nothing
+    is a win for the tracked map and no comparison, a tracked map that reconstructs
+    nothing misses, and so does a true map that reconstructs nothing on its own bounds."""
     t = dyn.tracking_targets(_target_table())
     assert t["scenes"] == [
         {
@@ -160,6 +162,8 @@ def test_the_tracking_targets_are_counted_per_frame_and_scene():
     assert by_frame[4]["static_gain"] == pytest.approx(6.0 / 1.4)
     assert by_frame[8]["true_depth_drift"] == pytest.approx(2.0)
     assert by_frame[8]["tracked_over_true"] == pytest.approx(1.0)
+    assert by_frame[4]["true_static_gain"] == pytest.approx(5.0)
+    assert by_frame[8]["true_static_gain"] == pytest.approx(2.5)
     assert by_frame[11]["static_empty"] and by_frame[11]["true_empty"]
     assert by_frame[11]["static_gain"] is None
     assert t["met"] == {
@@ -168,8 +172,10 @@ def test_the_tracking_targets_are_counted_per_frame_and_scene():
         "depth_drift": {"met": 2, "of": 3},
         "static_gain": {"met": 2, "of": 3},
         "true_depth_drift": {"met": 1, "of": 2},
+        "true_static_gain": {"met": 1, "of": 3},
         "tracked_within_true": {"met": 2, "of": 2},
     }
+    assert t["met_by_scene"] == {"cloth": t["met"]}
     lost = dyn.tracking_targets(_target_table(tracked_lost_frame=4))["met"]
     assert lost["depth_drift"] == {"met": 1, "of": 3}
     assert lost["static_gain"] == {"met": 1, "of": 3}
@@ -179,11 +185,16 @@ def test_the_tracking_targets_are_counted_per_frame_and_scene():
     assert "| static map's depth median >= 3.0x the tracked one's | 2 of 3 frames |" in md
     assert "| random-dynamic-tiny | 3 | cloth | 000011 | 1.20 | static: nothing |" in md
     assert "| random-dynamic-tiny | 3 | cloth | 000011 | 2.00 | 1.25 |" in md
+    assert "the true map's (any chromaticity's bound) | 1 of 3 frames |" in md
+    assert "| random-dynamic-tiny | 3 | cloth | 000008 | 2.00 | 2.50 | 2.00 | 2.50 | 1.00 |" in md
+    assert "| bound | cloth |\n|---|---|\n| chroma drift | 0 of 1 |\n" in md
+    assert "| true map's gain over the static map | 1 of 3 |" in md
     alone = dyn.tracking_targets(_table())["met"]  # no static or true map: not judged
     assert alone["static_gain"] == alone["tracked_within_true"] == {"met": 0, "of": 0}
     assert alone["depth_drift"] == {"met": 4, "of": 6}
     untracked = _table().assign(variant="bayes_full_static")
-    assert dyn.tracking_targets(untracked) == {"scenes": [], "frames": [], "met": {}}
+    empty = {"scenes": [], "frames": [], "met": {}, "met_by_scene": {}}
+    assert dyn.tracking_targets(untracked) == empty
 
 
 def test_an_oracle_is_judged_by_the_same_bounds_beside_the_tracked_map():
@@ -206,3 +217,4 @@ def test_an_oracle_is_judged_by_the_same_bounds_beside_the_tracked_map():
     assert "| bound | met | bayes_dyn_true_positions |" in md
     assert "| 2 of 3 frames | 3 of 3 frames |" in md
     assert "(any carry's bound) | 1 of 1 scenes | - |" in md
+    assert "(any chromaticity's bound) | 1 of 3 frames | - |" in md
