@@ -631,6 +631,27 @@ def test_energy_difference_and_its_cluster_standard_error():
     assert np.isclose(se[0], np.sqrt(2.0 * (1.5**2 + 1.5**2))) and np.isinf(se[1])
 
 
+def test_restart_verdicts_take_a_better_start_and_keep_open_what_the_data_leave_open():
+    """refine.restart_verdicts: a start E prefers beyond its noise is taken where the
+    surface keeps its pixels there; a tie (within RESTART_TEST standard errors) keeps
+    the surface open; so does a start E prefers beyond its noise where the surface
+    loses too many pixels to take it (a contest: the sigma must cover it), but not
+    one E prefers within its noise there, nor one E rejects; a scanned start must win
+    beyond the noise; a start with no usable pixel is nothing."""
+    from colourhs.reconstruct.bayes.refine import RESTART_KEEP, restart_verdicts
+
+    u0 = np.full(7, 100)
+    lost = int(RESTART_KEEP * 100) - 30  # too few kept to compare
+    u1 = np.array([100, 100, lost, lost, lost, 100, 0])
+    diff = np.array([-10.0, 1.0, -10.0, 10.0, -1.0, -1.0, -10.0])
+    se = np.ones(7)
+    lower = diff < 0
+    scanned = np.array([False, False, False, False, False, True, False])
+    better, unsettled = restart_verdicts(u0, u1, lower, diff, se, scanned)
+    assert better.tolist() == [True, False, False, False, False, False, False]
+    assert unsettled.tolist() == [False, True, True, False, False, True, False]
+
+
 def test_restart_brings_an_island_started_beyond_the_search(plane_sides):
     """Beyond the paper: a half of the plane whose start is 25 % off (beyond the
     depth search's 6 % and the coarse stage's reach) reaches the truth from its

@@ -365,8 +365,10 @@ def restart_round(
 
     Where E's difference between the two depths is within ``RESTART_TEST``
     of its standard error (:func:`.restart.energy_difference`), the data do
-    not rule either out: half their relative distance is the surface's
-    ``spread``, which joins its depth factor's sigma.
+    not rule either out; where E prefers the other depth beyond that but the
+    surface loses too many pixels there to take it, they contest its own
+    (:func:`restart_verdicts`). Either way half their relative distance is the
+    surface's ``spread``, which joins its depth factor's sigma.
 
     Returns the control points, the depth factors and their relative sigmas
     (n_surfaces,; the new search's where a surface was restarted), the
@@ -410,17 +412,13 @@ def restart_round(
         e0, e1 = sub.compare([s0, s1])
         u0 = np.bincount(sub.graph.surface, np.isfinite(s0[0]), sub.n)
         u1 = np.bincount(sub.graph.surface, np.isfinite(s1[0]), sub.n)
-        comparable = (u1 >= RESTART_KEEP * u0) & (u1 > 0)
-        # Where E cannot rule the other depth out, the sigma must cover it.
         sg = sub.graph
         blocks = valley_blocks(sg.rows, sg.cols, sg.shape[1], sub.spline.spacing)
         diff, se = energy_difference(s0[0], s1[0], s0[1], s1[1], sg.surface, blocks, sub.n)
-        clear = ~scanned[cand] | (diff < -RESTART_TEST * se)
-        better = (e1 < e0) & comparable & clear
+        better, unsettled = restart_verdicts(u0, u1, e1 < e0, diff, se, scanned[cand])
         z0, z1 = sub.B @ c0, sub.B @ alt
         apart = np.abs(median(z1 / z0 - 1.0, sg.surface, np.arange(sub.n)))
-        tied = comparable & (np.abs(diff) < RESTART_TEST * se)
-        spread[cand] = np.maximum(spread[cand], np.where(tied, 0.5 * apart, 0.0))
+        spread[cand] = np.maximum(spread[cand], np.where(unsettled, 0.5 * apart, 0.0))
         c = c.copy()
         c[mine] = np.where(better[sub.ctrl_surface], alt, c0)
         taken[cand] |= better
@@ -429,6 +427,32 @@ def restart_round(
         valley[cand] = np.where(better, va, valley[cand])
         settled_all &= bool(settled or not better.any())
     return c, factors, valley, taken, settled_all, spread
+
+
+def restart_verdicts(u0, u1, lower, diff, se, scanned) -> tuple[np.ndarray, np.ndarray]:
+    """What :func:`restart_round` makes of each surface's second start (beyond the paper).
+
+    ``u0``, ``u1`` (n,): the surface's usable pixels at its own depth and at the
+    start's end; ``lower`` (n,): E is lower there (:meth:`_Problem.compare`);
+    ``diff``, ``se`` (n,): E's difference (the start's less its own) over the pixels
+    usable at both and its standard error (:func:`.restart.energy_difference`);
+    ``scanned`` (n,): the start is a scan's guess (:func:`.restart.with_scan`).
+
+    Returns ``better`` (n,), the start is taken: E is lower, the surface keeps
+    ``RESTART_KEEP`` of its usable pixels (a depth compared on what is left of
+    them holds false minima), and a scanned start wins beyond E's noise
+    (``RESTART_TEST`` standard errors); and ``unsettled`` (n,): the data do not settle
+    the surface at its depth, so its sigma must cover the other: E's difference is
+    within its noise where the two are comparable (a tie), or E prefers the start
+    beyond its noise where the surface loses too many pixels there to take it (a
+    contest: the surface keeps a depth the pixels usable at both reject).
+    """
+    comparable = (u1 >= RESTART_KEEP * u0) & (u1 > 0)
+    clear = ~scanned | (diff < -RESTART_TEST * se)
+    better = lower & comparable & clear
+    tied = comparable & (np.abs(diff) < RESTART_TEST * se)
+    contested = ~comparable & (u1 > 0) & (diff < -RESTART_TEST * se)
+    return better, tied | contested
 
 
 def explained_surfaces(chi2, usable, surface, scale) -> np.ndarray:
