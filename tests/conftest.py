@@ -11,7 +11,8 @@ The suite runs in two pytest-xdist workers (``addopts`` in ``pyproject.toml``),
 each with its share of the cores for numba's and OpenBLAS's threads: the session
 fixtures that render a dataset (:func:`built_once`) are rendered once for the whole
 run, by the first worker that asks; a file's tests run on one worker
-(``--dist loadfile``), so its module fixtures are built once, and the tests of
+(``--dist loadfile``, the files with the most slow tests first), so its module
+fixtures are built once, and the tests of
 ``whole_job`` are all in ``workflow/test_workflow.py``; ``pytest -n 0`` runs the
 tests in one process.
 """
@@ -74,7 +75,8 @@ SLOW_FIXTURES = {
 @pytest.hookimpl(tryfirst=True)  # before -m selects on the markers added here
 def pytest_collection_modifyitems(config, items):
     """Mark ``slow`` the tests that use a :data:`SLOW_FIXTURES` fixture; skip the tests
-    of an opt-in marker unless ``-m`` asks for it (not negated)."""
+    of an opt-in marker unless ``-m`` asks for it (not negated); and put the files
+    with the most slow tests first (:func:`_slowest_files_first`)."""
     expr = config.getoption("markexpr") or ""
     wanted = {m for m in OPT_IN if re.search(rf"(?<!not )\b{m}\b", expr)}
     for item in items:
@@ -83,6 +85,25 @@ def pytest_collection_modifyitems(config, items):
         for marker, why in OPT_IN.items():
             if marker not in wanted and item.get_closest_marker(marker):
                 item.add_marker(pytest.mark.skip(reason=f"opt-in: pytest -m {marker} ({why})"))
+    items[:] = _slowest_files_first(items)
+
+
+def _slowest_files_first(items: list) -> list:
+    """The tests file by file, the files with the most ``slow`` tests first, each file's
+    tests in their own order. pytest-xdist hands a worker the next file in this order
+    whenever it is free (``--dist loadfile``, ``--no-loadscope-reorder``), so the long
+    files start early and the short ones fill in at the end, and the two workers
+    finish together (longest first); its own order, by the count of all tests, would
+    start the whole-job file, a few long tests, last."""
+    files: dict[str, list] = {}
+    for item in items:
+        files.setdefault(item.nodeid.split("::")[0], []).append(item)
+
+    def slow(tests):
+        return sum(t.get_closest_marker("slow") is not None for t in tests)
+
+    ordered = sorted(files.values(), key=slow, reverse=True)  # stable: ties keep their order
+    return [t for tests in ordered for t in tests]
 
 
 @pytest.fixture(autouse=True)

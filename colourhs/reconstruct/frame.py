@@ -533,6 +533,7 @@ def _consistent_surface(
         "depth_factors": sinfo["depth_factors"],
         "depth_factor_sigma": sinfo["depth_factor_sigma"],
         "robust_pull_m": sinfo["robust_pull_m"],
+        "pair_jackknife_m": sinfo["pair_jackknife_m"],
         "converged": sinfo["converged"],
     }
     return z, nrm, ok, sinfo["weights"], sigma, info

@@ -123,6 +123,22 @@ def with_side_scaled(sides: HelmholtzSides, j: int, factor: float) -> HelmholtzS
     )
 
 
+def with_pairs(sides: HelmholtzSides, keep) -> HelmholtzSides:
+    """The same sides with only the reciprocal pairs ``keep`` (indices), in that order."""
+    j = [i for p in keep for i in (2 * p, 2 * p + 1)]
+    return HelmholtzSides(
+        [sides.cameras[i] for i in j],
+        sides.light[j],
+        [sides.maps[i] for i in j],
+        sides.blurred,
+        sides.order,
+        sides.blur_px,
+        sides.reference,
+        sides.p_ref,
+        sides.bands[j],
+    )
+
+
 def noise_correlation(blur_px: float, taps: int = 4) -> np.ndarray:
     """Correlation (taps,) of Gaussian-blurred white noise between pixels 0..taps-1 apart.
 

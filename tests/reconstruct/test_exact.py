@@ -392,7 +392,13 @@ def test_the_ratio_term_of_the_error_bar_predicts_the_depths_move(exact_rigs, re
     given 0.2 % uncertainty) predicts how far. Measured: the depth moves by
     0.103 mm, the term says 0.108 mm (with a finite 0.1 % step instead of the
     derivative the term said 2.19 mm: on exact data the rows sit on the robust
-    function's knee)."""
+    function's knee).
+
+    Without the given uncertainty the error bar still sees the move, through the
+    jackknife over the pairs (:func:`colourhs.reconstruct.bayes.uncertainty.pair_jackknife`):
+    0.39 mm with pair 0 off, 0.013 mm on the exact data. It is larger than the move:
+    a surface refitted on two pairs holds its depth mode less firmly, so pair 0's
+    error moves it further."""
     import copy
 
     fr, base = _reconstruction(reconstructed, exact_rigs[1], "sheet", "bayes")
@@ -411,3 +417,16 @@ def test_the_ratio_term_of_the_error_bar_predicts_the_depths_move(exact_rigs, re
     print(f"ratio off by {eps}: depth moved {shift:.4f} mm, the ratio term {term:.4f} mm")
     assert abs(shift) > 0.05
     assert term == pytest.approx(abs(shift), rel=0.1)
+    # Without the ratio's sigma, the pairs' jackknife sees the move: the three pairs
+    # agree on exact data, and pair 0's error bends the surface refitted without it
+    # differently from those refitted with it.
+    exact, off_pair = (_largest_jackknife(r) * 1e3 for r in (base, moved))
+    print(f"pair jackknife: exact {exact:.4f} mm, pair 0 off {off_pair:.4f} mm")
+    assert exact < 0.02  # measured 0.013
+    assert abs(shift) < off_pair < 5 * abs(shift)  # measured 0.39 against 0.10
+
+
+def _largest_jackknife(result) -> float:
+    """The largest of a Bayesian result's per-surface median pair jackknifes (metres)."""
+    jack = [j for j in result.info["surface"]["pair_jackknife_m"] if j is not None]
+    return max(jack)

@@ -43,6 +43,7 @@ from colourhs.reconstruct.bayes.uncertainty import (
     SIGMA_SAMPLES,
     depth_sigma,
     filled_sigma,
+    pair_jackknife,
     robust_scale_pull,
     surface_depth_sigma,
     valley_blocks,
@@ -152,6 +153,16 @@ class _Problem:
         out.pixel_weight = np.where(active, total[g.surface] / np.maximum(kept[g.surface], 1), 0)
         out.gram = SplineGram(
             self.B, self.spline.grid_coords, g.neighbours, self.sides.pairs, pixels=active
+        )
+        return out
+
+    def with_sides(self, sides: HelmholtzSides) -> _Problem:
+        """The same E over other ``sides`` (another set of reciprocal pairs) on the
+        same spline and pixels: its control points are this problem's."""
+        out = copy.copy(self)
+        out.sides = sides
+        out.gram = SplineGram(
+            self.B, self.spline.grid_coords, self.graph.neighbours, sides.pairs, pixels=self.active
         )
         return out
 
@@ -557,14 +568,16 @@ def refine_surface(
         depth's 1-sigma uncertainty (:func:`.uncertainty.surface_depth_sigma`:
         :func:`depth_sigma`, the depth search's :func:`.uncertainty.valley_sigma`
         with its pulls, and at least the move of
-        :func:`.uncertainty.robust_scale_pull`, metres; infinite on a surface
+        :func:`.uncertainty.robust_scale_pull` and the spread of
+        :func:`.uncertainty.pair_jackknife`, metres; infinite on a surface
         whose depth mode has no error bar; :func:`filled_sigma` where the rows
         were unusable, in filled holes and on a surface within one block, there
         at least its depth's distance from the nearest measured one), ``filled`` (H*W,)
         filled holes, ``energy`` after each step, ``depth_factors`` (the
         search's scale per surface), ``robust_pull_m`` (per surface, the median
         of :func:`.uncertainty.robust_scale_pull`'s move, metres; None without a
-        sigma), ``converged`` (False where the final stage did not settle: every
+        sigma), ``pair_jackknife_m`` (the same for :func:`.uncertainty.pair_jackknife`'s
+        spread), ``converged`` (False where the final stage did not settle: every
         sigma is then infinite, and neither is computed), ``surfaces``,
         ``restarted`` (surfaces whose depth came from a neighbour's,
         :func:`restart_round`) and ``control_points``.
@@ -623,15 +636,20 @@ def refine_surface(
     weights[graph.pix] = info["weights"] * info["valid"]
     sigma = np.full(H * W, np.nan)
     pull_median = [None] * graph.n_surfaces
+    jack_median = [None] * graph.n_surfaces
     if opts.sigma_samples > 0 and converged:  # unconverged: every sigma is infinite below
         say("refinement: each depth's uncertainty")
         local = depth_sigma(problem, c, opts.sigma_samples)
         say("refinement: the surface's move under a tighter robust scale")
         pull = np.abs(robust_scale_pull(problem, c))
-        sigma[graph.pix] = surface_depth_sigma(local, z, valley, graph.surface, pull)
+        say("refinement: the surface refitted with each reciprocal pair left out")
+        jack = pair_jackknife(problem, c)
+        floor = np.maximum(pull, jack)
+        sigma[graph.pix] = surface_depth_sigma(local, z, valley, graph.surface, floor)
         for k in range(graph.n_surfaces):
             on = np.isfinite(local) & (graph.surface == k)
             pull_median[k] = float(np.median(pull[on])) if on.any() else None
+            jack_median[k] = float(np.median(jack[on])) if on.any() else None
     filled = np.zeros(H * W, bool)
     if fill is not None:
         zh = fill_holes(z, graph, fill, rays, surfaces=explained)
@@ -669,6 +687,7 @@ def refine_surface(
             "depth_factors": factors.tolist(),
             "depth_factor_sigma": valley.tolist(),
             "robust_pull_m": pull_median,
+            "pair_jackknife_m": jack_median,
             "surfaces": int(graph.n_surfaces),
             "restarted": int(restarted.sum()),
             "control_points": int(B.shape[1]),

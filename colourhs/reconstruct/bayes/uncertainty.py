@@ -15,7 +15,9 @@ sigma from :func:`colourhs.calibration.photometric_solve.pair_ratio_sigma`), fil
 holes and fragments too small for a valley sigma from their nearest measured
 depth (:func:`filled_sigma`); the parts add in variance, and the sum is at least
 the move of the surface when E's robust scale is tightened, a model error
-that sensor noise lets into the fit (:func:`robust_scale_pull`), and it is
+that sensor noise lets into the fit (:func:`robust_scale_pull`), and the
+spread of the depths refitted with one reciprocal pair left out at a time, a
+model error of one pair (:func:`pair_jackknife`); and it is
 infinite on a surface whose depth mode has no error bar
 (:func:`surface_depth_sigma`). ML HS: the
 curvature of its chi-square cost along the ray (:func:`ml_sigma`).
@@ -30,7 +32,12 @@ import scipy.sparse as sp
 
 from colourhs.common.linalg import _factor
 from colourhs.reconstruct.bayes.restart import RESTART_TEST, energy_difference
-from colourhs.reconstruct.sides import HelmholtzSides, noise_correlation, with_side_scaled
+from colourhs.reconstruct.sides import (
+    HelmholtzSides,
+    noise_correlation,
+    with_pairs,
+    with_side_scaled,
+)
 
 VALLEY_BLOCK = 4  # blocks of the valley's uncertainty, in spline control spacings
 """Why ``VALLEY_BLOCK`` holds on any rig: in units of the spline's spacing
@@ -348,6 +355,43 @@ def robust_scale_pull(problem, c, steps: int = ROBUST_CHECK_STEPS) -> np.ndarray
     tight.robust = problem.robust * ROBUST_CHECK
     checked, _, _, _ = tight.lm(c, steps)
     return problem.B @ (checked - c)
+
+
+def pair_jackknife(problem, c) -> np.ndarray:
+    """Each pixel's depth jackknife standard deviation (n,) over the reciprocal pairs,
+    metres.
+
+    Beyond the paper. Every pair's rows of eq. (5) measure the same surface,
+    but what breaks the model breaks it pair by pair: the lights' reciprocity
+    defect (a light beside its lens: a glossy lobe differs between a pair's two
+    readings by a share no calibration removes, ``docs/capture-format.md``), a
+    pair's calibrated ratio mu_a / mu_b, the cross-talk unmixing of its
+    channels or a camera's chromaticity p. Such an error bends the surface
+    where the noise-only covariance (:func:`depth_sigma`) sees a good fit, and
+    it is correlated over whole regions, so no per-row or per-block variance of
+    the residuals measures it (at E's minimum the residuals are orthogonal to
+    the rows' gradients). Leaving one pair out removes that pair's share of it:
+    E over the other pairs (``problem``, ``refine._Problem``, with
+    :func:`colourhs.reconstruct.sides.with_pairs`) is refitted from ``c``
+    (Levenberg-Marquardt steps until E settles, as every stage of the
+    refinement), and the P leave-one-out depths ``z_k`` give the jackknife
+    variance ``(P - 1) / P sum_k (z_k - mean z)^2``, the spread that the pairs'
+    disagreement puts on the depth; where the pairs agree it is the noise's
+    own, which the covariance already holds. So, like
+    :func:`robust_scale_pull`, it is a floor of the error bar, not a term added
+    in variance. Zero with fewer than three pairs (one pair left cannot fix a
+    normal).
+    """
+    P = problem.sides.pairs
+    if P < 3:
+        return np.zeros(problem.graph.n)
+    z = []
+    for k in range(P):
+        alone = problem.with_sides(with_pairs(problem.sides, [q for q in range(P) if q != k]))
+        ck, _, _, _ = alone.lm(c, 1, settle=True)
+        z.append(problem.B @ ck)
+    z = np.asarray(z)
+    return np.sqrt((P - 1) / P * np.sum((z - z.mean(axis=0)) ** 2, axis=0))
 
 
 FILL_SIGMA = 2.0  # a filled hole's sigma, in units of its nearest measured depth's
