@@ -297,7 +297,9 @@ def light_offset_warning(rig: Rig, tolerance_deg: float | None = None) -> str | 
     reciprocal pairs at the rig's fixation point, against ``tolerance_deg``
     (default :data:`RECIPROCITY_DEFECT_TOLERANCE_DEG`). Helmholtz reciprocity
     (eq. 3) then holds for matte surfaces only; the depth of a glossy one can
-    be off by more than its ``depth_sigma``, which does not model it.
+    be off by more than its ``depth_sigma``, which covers the defect only where
+    it differs between the pairs (the jackknife over the pairs,
+    :func:`colourhs.reconstruct.bayes.uncertainty.pair_jackknife`).
     """
     tolerance = RECIPROCITY_DEFECT_TOLERANCE_DEG if tolerance_deg is None else tolerance_deg
     beyond = _lights_beyond(rig, tolerance)
