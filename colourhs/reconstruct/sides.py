@@ -21,7 +21,7 @@ sample's ray.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numba as nb
 import numpy as np
@@ -110,32 +110,18 @@ def with_side_scaled(sides: HelmholtzSides, j: int, factor: float) -> HelmholtzS
     log ratio mu_a / mu_b of pair ``j // 2`` moved by ``+-log(factor)`` (side a: +)."""
     maps = list(sides.maps)
     maps[j] = maps[j] * np.tile([factor, factor * factor], maps[j].shape[-1] // 2)
-    return HelmholtzSides(
-        sides.cameras,
-        sides.light,
-        maps,
-        sides.blurred,
-        sides.order,
-        sides.blur_px,
-        sides.reference,
-        sides.p_ref,
-        sides.bands,
-    )
+    return replace(sides, maps=maps)
 
 
 def with_pairs(sides: HelmholtzSides, keep) -> HelmholtzSides:
     """The same sides with only the reciprocal pairs ``keep`` (indices), in that order."""
     j = [i for p in keep for i in (2 * p, 2 * p + 1)]
-    return HelmholtzSides(
-        [sides.cameras[i] for i in j],
-        sides.light[j],
-        [sides.maps[i] for i in j],
-        sides.blurred,
-        sides.order,
-        sides.blur_px,
-        sides.reference,
-        sides.p_ref,
-        sides.bands[j],
+    return replace(
+        sides,
+        cameras=[sides.cameras[i] for i in j],
+        light=sides.light[j],
+        maps=[sides.maps[i] for i in j],
+        bands=sides.bands[j],
     )
 
 

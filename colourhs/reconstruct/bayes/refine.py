@@ -578,7 +578,7 @@ def refine_surface(
         of :func:`.uncertainty.robust_scale_pull`'s move, metres; None without a
         sigma), ``pair_jackknife_m`` (the same for :func:`.uncertainty.pair_jackknife`'s
         spread), ``converged`` (False where the final stage did not settle: every
-        sigma is then infinite, and neither is computed), ``surfaces``,
+        sigma is then infinite, and none of its parts is computed), ``surfaces``,
         ``restarted`` (surfaces whose depth came from a neighbour's,
         :func:`restart_round`) and ``control_points``.
     """
