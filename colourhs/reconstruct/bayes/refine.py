@@ -121,12 +121,12 @@ class _Problem:
         self.footprint = footprint
         self.spline, self.B, self.Dw, self.robust = spline, spline.basis, Dw, robust
         self.Bt = spline.basis.T.tocsr()  # B^T, once: every step multiplies by it
-        self.gram = SplineGram(spline.basis, spline.grid_coords, graph.neighbours, sides.pairs)
+        self.active = None  # every pixel's rows count
+        self.gram = self._gram()
         self.DtD = (Dw.T @ Dw).tocsr()  # the prior's normal matrix at level 1
         self.ctrl_surface = spline.surface_of
         self.prior_surface = prior_surface
         self.n = graph.n_surfaces
-        self.active = None  # every pixel's rows count
         self.pixel_weight = None
 
     def subsampled(self, stride: int) -> _Problem:
@@ -151,9 +151,7 @@ class _Problem:
         out = copy.copy(self)
         out.active = active
         out.pixel_weight = np.where(active, total[g.surface] / np.maximum(kept[g.surface], 1), 0)
-        out.gram = SplineGram(
-            self.B, self.spline.grid_coords, g.neighbours, self.sides.pairs, pixels=active
-        )
+        out.gram = out._gram()
         return out
 
     def with_sides(self, sides: HelmholtzSides) -> _Problem:
@@ -161,10 +159,14 @@ class _Problem:
         same spline and pixels: its control points are this problem's."""
         out = copy.copy(self)
         out.sides = sides
-        out.gram = SplineGram(
-            self.B, self.spline.grid_coords, self.graph.neighbours, sides.pairs, pixels=self.active
-        )
+        out.gram = out._gram()
         return out
+
+    def _gram(self) -> SplineGram:
+        """The Gauss-Newton matrix's assembly for this problem's pairs and active pixels."""
+        return SplineGram(
+            self.B, self.spline.grid_coords, self.graph.neighbours, self.sides.pairs, self.active
+        )
 
     def restricted(self, keep) -> _Problem:
         """E over the surfaces ``keep`` (n_surfaces,) bool alone; its control points
