@@ -26,7 +26,7 @@ from colourhs.reconstruct.bayes.restart import (
     energy_difference,
     neighbour_factors,
     surface_fit_levels,
-    surface_median_chi2,
+    surface_median,
     with_scan,
 )
 from colourhs.reconstruct.bayes.spline import SplineSurface, default_spacing
@@ -481,7 +481,7 @@ def explained_surfaces(chi2, usable, surface, scale) -> np.ndarray:
     rather than reported at a depth the data do not support.
     """
     n = int(surface.max()) + 1 if len(surface) else 0
-    med = surface_median_chi2(chi2, usable, surface, n)
+    med = surface_median(chi2, usable, surface, n)
     return med < scale  # NaN (no usable pixel): not explained
 
 
@@ -637,8 +637,7 @@ def refine_surface(
     weights = np.zeros(H * W)
     weights[graph.pix] = info["weights"] * info["valid"]
     sigma = np.full(H * W, np.nan)
-    pull_median = [None] * graph.n_surfaces
-    jack_median = [None] * graph.n_surfaces
+    pull_median = jack_median = [None] * graph.n_surfaces
     if opts.sigma_samples > 0 and converged:  # unconverged: every sigma is infinite below
         say("refinement: each depth's uncertainty")
         local = depth_sigma(problem, c, opts.sigma_samples)
@@ -648,10 +647,11 @@ def refine_surface(
         jack = pair_jackknife(problem, c)
         floor = np.maximum(pull, jack)
         sigma[graph.pix] = surface_depth_sigma(local, z, valley, graph.surface, floor)
-        for k in range(graph.n_surfaces):
-            on = np.isfinite(local) & (graph.surface == k)
-            pull_median[k] = float(np.median(pull[on])) if on.any() else None
-            jack_median[k] = float(np.median(jack[on])) if on.any() else None
+        on, n_s = np.isfinite(local), graph.n_surfaces
+        pull_median, jack_median = (
+            [None if np.isnan(m) else float(m) for m in surface_median(v, on, graph.surface, n_s)]
+            for v in (pull, jack)
+        )
     filled = np.zeros(H * W, bool)
     if fill is not None:
         zh = fill_holes(z, graph, fill, rays, surfaces=explained)

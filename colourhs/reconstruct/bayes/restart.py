@@ -49,15 +49,15 @@ SCAN_STARTS = (0.98, 1.02)  # depth factors tried on a surface without a better 
 """
 
 
-def surface_median_chi2(chi2, usable, surface, n_surfaces: int) -> np.ndarray:
-    """The median ``chi2`` (n,) of each surface's ``usable`` (n,) pixels (n_surfaces,);
-    NaN where a surface (``surface`` (n,)) has none."""
+def surface_median(values, usable, surface, n_surfaces: int) -> np.ndarray:
+    """The median of ``values`` (n,) over each surface's ``usable`` (n,) pixels
+    (n_surfaces,); NaN where a surface (``surface`` (n,)) has none."""
     from scipy.ndimage import median
 
     out = np.full(n_surfaces, np.nan)
     has = np.bincount(surface[usable], minlength=n_surfaces) > 0
     if has.any():
-        med = np.asarray(median(chi2[usable], surface[usable], np.arange(n_surfaces)), float)
+        med = np.asarray(median(values[usable], surface[usable], np.arange(n_surfaces)), float)
         out[has] = med[has]
     return out
 
@@ -73,7 +73,7 @@ def surface_fit_levels(chi2, usable, surface, n_surfaces: int, pairs: int) -> np
     ``pairs`` rows per pixel (the median of a chi-square with P degrees of
     freedom is about P - 2/3).
     """
-    return surface_median_chi2(chi2, usable, surface, n_surfaces) / (pairs - 2.0 / 3.0)
+    return surface_median(chi2, usable, surface, n_surfaces) / (pairs - 2.0 / 3.0)
 
 
 def neighbour_factors(
