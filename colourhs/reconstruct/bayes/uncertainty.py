@@ -9,9 +9,10 @@ search's own trial energies (:func:`valley_sigma`; where E does not curve
 upwards about it, the depths E's noise cannot rule out,
 :func:`flat_valley_sigma`) and the pull of the rows
 at the edges of unusable regions on it, a model error
-(:func:`rim_valley_pull`), and the move of that mode that the calibrated
-pair ratios' uncertainty allows (:func:`ratio_sensitivity`, the ratios'
-sigma from :func:`colourhs.calibration.photometric_solve.pair_ratio_sigma`), filled
+(:func:`rim_valley_pull`), and the move of that mode that the pair ratios'
+uncertainty allows (:func:`ratio_sensitivity`: the calibrated ratios' sigma from
+:func:`colourhs.calibration.photometric_solve.pair_ratio_sigma` and each pair's
+uniform disagreement beyond the noise, :func:`pair_disagreement`), filled
 holes and fragments too small for a valley sigma from their nearest measured
 depth (:func:`filled_sigma`); the parts add in variance, and the sum is at least
 the move of the surface when E's robust scale is tightened, a model error
@@ -248,6 +249,59 @@ def ratio_sensitivity(problem, tried, best, span, pixels, at, scale, step=RATIO_
             g = np.polyfit(x, change[k], 1)[0]
             if c > 0:
                 out[k, p] = -g / (2.0 * c) / step
+    return out
+
+
+def pair_disagreement(problem, c, scale) -> np.ndarray:
+    """Each surface's uniform disagreement of each reciprocal pair's two sides
+    (n_surfaces, P), as a log ratio: 0 where the noise explains it.
+
+    Beyond the paper. At the surface ``c`` (``problem``, ``refine._Problem``;
+    its active pixels) eq. (5) holds for pair k where its two sides' terms
+    along the normal agree, ``s_a (v_a . N) = s_b (v_b . N)``. Their log ratio
+    ``m = log(s_a v_a . N) - log(s_b v_b . N)`` has the noise variance
+    ``n2 = var_a / s_a^2 + var_b / s_b^2``. A wrong ratio mu_a / mu_b of the
+    pair (a calibration or unmixing error, a chromaticity wrong in one
+    camera) shifts m alike over the surface, and moves its depth mode by the
+    gain :func:`ratio_sensitivity` gives. Its size is the mean of ``m`` over
+    the surface's usable pixels, each weighted as E weighs it (its
+    Geman-McClure weight at robust ``scale``: rows E drops do not count); it
+    counts only beyond ``RESTART_TEST`` standard errors of that mean under the
+    noise model (``n2`` per pixel, times the gain of the sides' correlated
+    noise, :func:`correlated_gain`). Returns its magnitude.
+    """
+    from colourhs.reconstruct.bayes.surface import surface_normals
+    from colourhs.reconstruct.sides import sample_sides
+
+    g = problem.graph
+    H, W = g.shape
+    act = np.ones(g.n, bool) if problem.active is None else problem.active
+    z = problem.B @ c
+    rays = np.zeros((H * W, 3))
+    rays[g.pix] = problem.R
+    normals = surface_normals(g, z, rays, problem.c_ref)[act]
+    X = problem.c_ref + problem.R[act] * z[act, None]
+    s, var, v, _, _ = sample_sides(problem.sides, X, problem.R[act], derivatives=False)
+    _, _, info = problem._residuals(c, jacobian=False, scale=scale)
+    weight = (info["weights"] * info["valid"])[act]
+    P = problem.sides.pairs
+    with np.errstate(invalid="ignore", divide="ignore"):
+        along = s * np.einsum("npjc,nc->npj", v, normals)
+        m = np.log(along[..., 0] / along[..., 1])
+        n2 = var[..., 0] / s[..., 0] ** 2 + var[..., 1] / s[..., 1] ** 2
+    gain = correlated_gain(problem.sides)
+    surface = g.surface[act]
+    out = np.zeros((problem.n, P))
+    for k in range(problem.n):
+        for p in range(P):
+            on = (surface == k) & np.isfinite(m[:, p]) & np.isfinite(n2[:, p]) & (weight > 0)
+            w, total = weight[on], float(np.sum(weight[on]))
+            if total <= 0:
+                continue
+            mean = float(np.sum(w * m[on, p])) / total
+            se = float(np.sqrt(gain * np.sum(w * w * n2[on, p]))) / total
+            if abs(mean) > RESTART_TEST * se:
+                out[k, p] = abs(mean)
     return out
 
 

@@ -20,6 +20,7 @@ from colourhs.reconstruct.bayes.restart import RESTART_TEST
 from colourhs.reconstruct.bayes.uncertainty import (
     energy_rise,
     flat_valley_sigma,
+    pair_disagreement,
     ratio_sensitivity,
     rim_valley_pull,
     valley_blocks,
@@ -126,9 +127,10 @@ def depth_search(
     noise, at most ``max_steps`` steps;
     with ``clear_sides``, the sides with only the samples clear of every
     edge usable, the rim rows' bias :func:`rim_valley_pull` added in
-    variance; with ``ratio_sigma`` (P,), each pair's log-ratio uncertainty
-    from the photometric calibration, its move of the depth mode,
-    :func:`ratio_sensitivity` times it, added in variance).
+    variance; each pair's log-ratio uncertainty, ``ratio_sigma`` (P,) from the
+    photometric calibration and the pair's uniform disagreement beyond the
+    noise at the best depth (:func:`pair_disagreement`) in quadrature, moves
+    the depth mode by :func:`ratio_sensitivity` times it, added in variance).
     ``problem`` is E over the spline (``refine._Problem``, subsampled with
     :func:`search_stride`). ``say(text)``, if given, reports each trial depth (each is
     ``SEARCH_FITS`` LM steps). ``scale``: the robust scale at which energies
@@ -222,9 +224,14 @@ def depth_search(
         ]
         # NaN where E over every pixel does not curve upwards: the flat valley's sigma.
         sigma = np.hypot(sigma, np.nan_to_num(np.asarray(pull), nan=0.0))
-    if ratio_sigma is not None and np.any(np.isfinite(ratio_sigma)):
-        # The calibrated pair ratios' uncertainty, through each depth mode's gain.
+    # The pair ratios' uncertainty, calibrated and as each pair's uniform disagreement
+    # beyond the noise at the best depths, through each depth mode's gain.
+    ratios = pair_disagreement(problem, at(best), sc)
+    if ratio_sigma is not None:
+        known = np.nan_to_num(np.asarray(ratio_sigma, float), nan=0.0)  # NaN: unknown
+        ratios = np.sqrt(ratios**2 + known[None, :] ** 2)
+    if np.any(np.nan_to_num(ratios) > 0):
         gain = ratio_sensitivity(problem, tried, best, step, pixels, at, sc)
-        moved = np.sqrt(np.nansum((gain * np.asarray(ratio_sigma)[None, :]) ** 2, axis=1))
+        moved = np.sqrt(np.nansum((gain * ratios) ** 2, axis=1))
         sigma = np.hypot(sigma, np.where(np.all(np.isnan(gain), axis=1), 0.0, moved))
     return at(best), 1.0 + best, sigma
