@@ -637,7 +637,7 @@ def refine_surface(
     weights = np.zeros(H * W)
     weights[graph.pix] = info["weights"] * info["valid"]
     sigma = np.full(H * W, np.nan)
-    pull_median = jack_median = [None] * graph.n_surfaces
+    pull_median, jack_median = [None] * graph.n_surfaces, [None] * graph.n_surfaces
     if opts.sigma_samples > 0 and converged:  # unconverged: every sigma is infinite below
         say("refinement: each depth's uncertainty")
         local = depth_sigma(problem, c, opts.sigma_samples)
