@@ -464,9 +464,16 @@ def surface_normals(graph: SurfaceGraph, z: np.ndarray, rays, c_ref) -> np.ndarr
     where a pixel has no two consecutive linked neighbours (no triangle).
     """
     R = np.ascontiguousarray(rays[graph.pix], float)
-    X = c_ref + R * np.asarray(z, float)[:, None]
+    return pixel_normals(graph, c_ref + R * np.asarray(z, float)[:, None], R)
+
+
+def pixel_normals(graph: SurfaceGraph, X: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """:func:`surface_normals` of the graph's points ``X`` (graph.n, 3) on their rays
+    ``R`` (graph.n, 3): unit normals towards the camera, NaN where none."""
     out = np.empty((graph.n, 3))
-    _pixel_normals(X, R, graph.neighbours, out)
+    _pixel_normals(
+        np.ascontiguousarray(X, float), np.ascontiguousarray(R, float), graph.neighbours, out
+    )
     return out
 
 

@@ -270,18 +270,14 @@ def pair_disagreement(problem, c, scale) -> np.ndarray:
     noise model (``n2`` per pixel, times the gain of the sides' correlated
     noise, :func:`correlated_gain`). Returns its magnitude.
     """
-    from colourhs.reconstruct.bayes.surface import surface_normals
+    from colourhs.reconstruct.bayes.surface import pixel_normals
     from colourhs.reconstruct.sides import sample_sides
 
     g = problem.graph
-    H, W = g.shape
     act = np.ones(g.n, bool) if problem.active is None else problem.active
-    z = problem.B @ c
-    rays = np.zeros((H * W, 3))
-    rays[g.pix] = problem.R
-    normals = surface_normals(g, z, rays, problem.c_ref)[act]
-    X = problem.c_ref + problem.R[act] * z[act, None]
-    s, var, v, _, _ = sample_sides(problem.sides, X, problem.R[act], derivatives=False)
+    X = problem.c_ref + problem.R * (problem.B @ c)[:, None]
+    normals = pixel_normals(g, X, problem.R)[act]
+    s, var, v, _, _ = sample_sides(problem.sides, X[act], problem.R[act], derivatives=False)
     _, _, info = problem._residuals(c, jacobian=False, scale=scale)
     weight = (info["weights"] * info["valid"])[act]
     P = problem.sides.pairs
