@@ -288,16 +288,14 @@ def pair_disagreement(problem, c, scale) -> np.ndarray:
     gain = correlated_gain(problem.sides)
     surface = g.surface[act]
     out = np.zeros((problem.n, P))
-    for k in range(problem.n):
-        for p in range(P):
-            on = (surface == k) & np.isfinite(m[:, p]) & np.isfinite(n2[:, p]) & (weight > 0)
-            w, total = weight[on], float(np.sum(weight[on]))
-            if total <= 0:
-                continue
-            mean = float(np.sum(w * m[on, p])) / total
-            se = float(np.sqrt(gain * np.sum(w * w * n2[on, p]))) / total
-            if abs(mean) > RESTART_TEST * se:
-                out[k, p] = abs(mean)
+    for p in range(P):
+        on = np.isfinite(m[:, p]) & np.isfinite(n2[:, p]) & (weight > 0)
+        w, k = weight[on], surface[on]
+        total = np.bincount(k, w, problem.n)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            mean = np.bincount(k, w * m[on, p], problem.n) / total
+            se = np.sqrt(gain * np.bincount(k, w * w * n2[on, p], problem.n)) / total
+        out[:, p] = np.where((total > 0) & (np.abs(mean) > RESTART_TEST * se), np.abs(mean), 0.0)
     return out
 
 
