@@ -327,8 +327,13 @@ def hs_residuals(
     R : (n, 3) their rays (unit z-depth). c_ref : (3,) the rays' origin.
     robust : Geman-McClure scale, in units of the noise per row.
     weights : per-pixel IRLS weights to use instead of rho'(chi2).
-    jacobian : with False, J is None and the second value is each pixel's
-        robust energy rho(chi2), NaN where its samples are unusable.
+    jacobian : with False, J is None, the second value is each pixel's
+        robust energy rho(chi2), NaN where its samples are unusable, and
+        ``info["samples"]`` holds the sides E read, ``(s, var, v)`` of
+        :func:`colourhs.reconstruct.sides.sample_sides` at the evaluated
+        pixels (the active ones, in pixel order), for a caller that needs them
+        without sampling the images again (the Jacobian's callers keep their
+        rows for a whole step, and would keep these with them).
     scale : the Geman-McClure scale in chi2 units; default from the
         residuals (``robust^2 P`` times the larger of 1 and their median
         over its noise-only value), returned in ``info`` so that energies
@@ -377,12 +382,10 @@ def hs_residuals(
     if weights is None:
         weights = 1.0 / (1.0 + chi2 / scale) ** 2  # rho'(chi2): IRLS
     w = np.ascontiguousarray(weights, float)
+    info = {"valid": usable, "weights": w, "chi2": chi2, "scale": scale}
     if not jacobian:
-        return (
-            None,
-            robust_energy(chi2, usable, scale),
-            {"valid": usable, "weights": w, "chi2": chi2, "scale": scale},
-        )
+        info["samples"] = (s, var, v)
+        return None, robust_energy(chi2, usable, scale), info
     res = np.empty(len(idx) * P)
     # 32-bit indices: scipy keeps them as they are, where 64-bit ones are
     # checked and copied down to 32 bits on every call.
@@ -392,7 +395,7 @@ def hs_residuals(
     _pixel_rows(X, R, s, var, v, ds, dv, valid, nbr, idx, w, res, cols, vals)
     indptr = np.arange(0, 5 * len(res) + 1, 5, dtype=index)
     J = sp.csr_matrix((vals.ravel(), cols.ravel(), indptr), shape=(len(res), n))
-    info = {"valid": usable, "weights": w, "chi2": chi2, "scale": scale, "jacobian_values": vals}
+    info["jacobian_values"] = vals
     return J, res, info
 
 

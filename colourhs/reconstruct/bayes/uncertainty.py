@@ -271,14 +271,13 @@ def pair_disagreement(problem, c, scale) -> np.ndarray:
     noise, :func:`correlated_gain`). Returns its magnitude.
     """
     from colourhs.reconstruct.bayes.surface import pixel_normals
-    from colourhs.reconstruct.sides import sample_sides
 
     g = problem.graph
     act = np.ones(g.n, bool) if problem.active is None else problem.active
     X = problem.c_ref + problem.R * (problem.B @ c)[:, None]
     normals = pixel_normals(g, X, problem.R)[act]
-    s, var, v, _, _ = sample_sides(problem.sides, X[act], problem.R[act], derivatives=False)
     _, _, info = problem._residuals(c, jacobian=False, scale=scale)
+    s, var, v = info["samples"]
     weight = (info["weights"] * info["valid"])[act]
     P = problem.sides.pairs
     with np.errstate(invalid="ignore", divide="ignore"):
