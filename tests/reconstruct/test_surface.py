@@ -288,8 +288,10 @@ def test_jacobian_predicts_the_residuals(plane_sides):
 def test_active_pixels_rows_are_the_full_rows_to_the_bit(plane_sides):
     """The depth search's subsample (``active``) samples and evaluates only its
     pixels: their rows, Jacobian entries and chi2 must be those of the full
-    evaluation, to the bit, the others unusable, and the Gram matrix over them
-    that of their rows (to rounding: its threads' cells differ)."""
+    evaluation, to the bit, the others unusable, the sides it returns without
+    the Jacobian (``info["samples"]``) those that ``sample_sides`` gives at
+    them, and the Gram matrix over them that of their rows (to rounding: its
+    threads' cells differ)."""
     from colourhs.reconstruct.bayes.gram import SplineGram
     from colourhs.reconstruct.bayes.spline import SplineSurface
 
@@ -308,6 +310,15 @@ def test_active_pixels_rows_are_the_full_rows_to_the_bit(plane_sides):
     assert np.array_equal(ia["chi2"][active], info["chi2"][active])
     assert np.array_equal(ia["valid"], info["valid"] & active)
     assert ia["valid"].sum() > 0.24 * info["valid"].sum()  # measured 0.258
+    _, _, plain = hs_residuals(
+        z, graph, R, sides, ref.centre, scale=5.0, active=active, jacobian=False
+    )
+    X = ref.centre + R[active] * z[active, None]
+    want = sample_sides(sides, X, R[active], derivatives=False)[:3]
+    assert all(
+        np.array_equal(g, w, equal_nan=True) for g, w in zip(plain["samples"], want, strict=True)
+    )
+    assert np.array_equal(plain["chi2"], ia["chi2"])
     spline = SplineSurface(graph.rows, graph.cols, graph.surface, 6.0)
     args = (spline.basis, spline.grid_coords, graph.neighbours, sides.pairs)
     full = SplineGram(*args).matrix(np.where(rows[:, None], info["jacobian_values"], 0.0))
