@@ -636,6 +636,7 @@ def refine_surface(
     out_z[graph.pix[~explained[graph.surface]]] = np.nan
     weights = np.zeros(H * W)
     weights[graph.pix] = info["weights"] * info["valid"]
+    del info  # its sides (info["samples"]) need not stay through the error bar's refits
     sigma = np.full(H * W, np.nan)
     pull_median, jack_median = [None] * graph.n_surfaces, [None] * graph.n_surfaces
     if opts.sigma_samples > 0 and converged:  # unconverged: every sigma is infinite below
