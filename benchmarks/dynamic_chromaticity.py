@@ -274,7 +274,8 @@ def at_true_positions(tracked_h5: Path, calibrated_h5: Path, truth: dict, out_h5
     :func:`true_position_maps`), p the calibrated map's there (as the tracking samples
     it, :func:`colourhs.calibration.chromaticity_tracking.sample_at`), the tracking's
     sigma 0 where that p is known (NaN elsewhere) and ``p_sigma`` the calibrated map's
-    error bar there where it has one (``tracked_log_sigma``); the attributes the
+    error bar there, with the nearest sampling's position error, where it has one
+    (``tracked_log_sigma``); the attributes the
     tracked map's (a moved frame stays one); written to ``out_h5``. An oracle: the best
     any carry of the calibrated map can do, so what it misses against ``bayes_full_true``
     is the calibration's own error, carried to a pose where it no longer fits."""
@@ -297,7 +298,7 @@ def at_true_positions(tracked_h5: Path, calibrated_h5: Path, truth: dict, out_h5
             for key in ("position", "position_sigma", "sigma"):
                 f[f"{key}/{cam}"][...] = getattr(m, key)
             if f"p_sigma/{cam}" in f and f"sigma/{cam}" in g:
-                f[f"p_sigma/{cam}"][...] = tracked_log_sigma(g[f"sigma/{cam}"][()], m)
+                f[f"p_sigma/{cam}"][...] = tracked_log_sigma(g[cam][()], g[f"sigma/{cam}"][()], m)
     return out_h5
 
 

@@ -50,10 +50,16 @@ neighbour towards c only:
    of log p (``sigma``: the reconstruction weighs the channels by it). Where the
    calibrated map carries its own error bar
    (:func:`colourhs.calibration.chromaticity.log_sigma`, the chromatic captures'
-   sensor noise), the tracked map's 1-sigma of log p per band
-   (``p_sigma``, :func:`tracked_log_sigma`) is that error bar at the position and the
-   residual in quadrature: the p sampled there carries the calibration's error, and
-   a wrong position a wrong colour.
+   sensor noise), the tracked map's 1-sigma of log p per band (``p_sigma``,
+   :func:`tracked_log_sigma`) is that error bar at the position, the residual, and
+   the sampling's position error (:data:`POSITION_SIGMA_PX`) times the largest change
+   of log p from the sampled pixel to a neighbour (:func:`log_p_jump`), in
+   quadrature: the p sampled there carries the calibration's error, a wrong position
+   a wrong colour, and at a patch edge the nearest pixel may be the other patch's,
+   which the colours, blurred alike on both sides of the match, do not show (the
+   third term is 0 inside a patch of one colour). The reconstruction is not weighed
+   by that third term: widening the intensity variance at every colour edge moved
+   the depth of tracked cloths away from the truth.
 
 The map keeps the tracking's own holes. Where the reconstruction reads it for a
 moved frame, a pixel of its reference camera without p that shows the colour of a
@@ -93,6 +99,7 @@ __all__ = [
     "GAIN_OUTLIER",
     "GAIN_SIGMA_PX",
     "GAIN_SUPPORT",
+    "POSITION_SIGMA_PX",
     "PROXIMITY",
     "SEARCH_PX",
     "SELECT_WINDOW_PX",
@@ -104,6 +111,7 @@ __all__ = [
     "fill_from_colour",
     "flow_image",
     "image_colour",
+    "log_p_jump",
     "predict_from_both",
     "predict_positions",
     "prediction_flow",
@@ -160,6 +168,13 @@ COLOUR_FLOW_WIDTH_PX = 80
 640-pixel image, its patches of 16 pixels a fifth of that): the colour's edges, not its
 shading or highlights, at any image size; the brightness flow gives the fine detail
 where it is right."""
+
+
+POSITION_SIGMA_PX = 12**-0.5
+"""1-sigma of the position at which :func:`sample_at` takes p, pixels: the nearest
+pixel's centre stands for a point anywhere within that pixel, uniformly, whose standard
+deviation is one over the square root of 12 of the pixel's side; a property of the
+pixel lattice, so it holds at any image size and on any rig."""
 
 
 FILL_ROUNDS = 4
@@ -328,6 +343,24 @@ def sample_at(values: np.ndarray, position: np.ndarray) -> np.ndarray:
     return _remap(values, position[..., 0], position[..., 1], nearest=True)
 
 
+def log_p_jump(calibrated: np.ndarray) -> np.ndarray:
+    """The largest change of log p (H, W) from a pixel of the calibrated map
+    (``calibrated`` (H, W, 3)) to one of its 4-neighbours with a p, over the three
+    bands: 0 inside a patch of one colour, the patches' log ratio at its edge; 0 where
+    the pixel or all its neighbours have none (beyond the paper)."""
+    log_p = np.log(np.where(calibrated > 0, calibrated, np.nan))
+    jump = np.zeros(log_p.shape[:2])
+    with np.errstate(invalid="ignore"):
+        for axis in (0, 1):
+            d = np.nan_to_num(np.abs(np.diff(log_p, axis=axis)).max(axis=-1))
+            lo = [slice(None)] * 2
+            hi = [slice(None)] * 2
+            lo[axis], hi[axis] = slice(None, -1), slice(1, None)
+            jump[tuple(lo)] = np.maximum(jump[tuple(lo)], d)
+            jump[tuple(hi)] = np.maximum(jump[tuple(hi)], d)
+    return jump.astype(np.float32)
+
+
 def image_colour(rgb: np.ndarray) -> np.ndarray:
     """An image's colour (H, W, 3): each pixel's channels over their sum (NaN where it
     is dark), smoothed by a Gaussian of 1 pixel against the noise."""
@@ -461,14 +494,24 @@ def fill_from_colour(
     return p, sigma
 
 
-def tracked_log_sigma(calibrated_sigma: np.ndarray, tracked: TrackedMap) -> np.ndarray:
-    """Step 5's error bar of a tracked map: each band's 1-sigma of log p (H, W, 3), the
-    calibrated map's (``calibrated_sigma``, (H, W, 3),
+def tracked_log_sigma(
+    calibrated: np.ndarray, calibrated_sigma: np.ndarray, tracked: TrackedMap
+) -> np.ndarray:
+    """Step 5's error bar of a tracked map: each band's 1-sigma of log p (H, W, 3), in
+    quadrature the calibrated map's (``calibrated_sigma``, (H, W, 3),
     :func:`colourhs.calibration.chromaticity.log_sigma`) at the tracked position
-    (nearest, as p is sampled) and the match's residual (``tracked.sigma``) in
-    quadrature; NaN where either is unknown (beyond the paper)."""
-    calibration = sample_at(calibrated_sigma, tracked.position)
-    return np.hypot(calibration, tracked.sigma[..., None]).astype(np.float32)
+    (nearest, as p is sampled), the match's residual (``tracked.sigma``) and the
+    sampling's position error, :data:`POSITION_SIGMA_PX` times the largest change of
+    log p from the sampled pixel of ``calibrated`` (H, W, 3) to a neighbour
+    (:func:`log_p_jump`), where the point was carried (its position is not the pixel
+    itself: the chromatic frame's map is the calibrated one, measured where it is);
+    NaN where the first two are unknown (beyond the paper)."""
+    at = tracked.position
+    calibration = sample_at(calibrated_sigma, at)
+    carried = np.any(at != np.stack(_grid(at.shape), axis=-1), axis=-1)
+    jump = np.nan_to_num(sample_at(log_p_jump(calibrated), at))
+    match = np.hypot(tracked.sigma, np.where(carried, POSITION_SIGMA_PX * jump, 0.0))
+    return np.hypot(calibration, match[..., None]).astype(np.float32)
 
 
 def tracking_neighbour(frames: tuple[str, ...], chromatic_frame: str, frame: str) -> str | None:
@@ -555,7 +598,8 @@ def track_chromaticity(
                 image(c, cam),
             )
         if cam in error_bar:
-            maps[cam] = replace(maps[cam], p_sigma=tracked_log_sigma(error_bar[cam], maps[cam]))
+            p_sigma = tracked_log_sigma(calibrated[cam], error_bar[cam], maps[cam])
+            maps[cam] = replace(maps[cam], p_sigma=p_sigma)
         known = np.all(np.isfinite(calibrated[cam]), axis=-1).sum()
         tracked[cam] = float(np.all(np.isfinite(maps[cam].p), axis=-1).sum() / max(known, 1))
     attrs = {

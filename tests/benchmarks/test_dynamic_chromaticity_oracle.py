@@ -17,6 +17,8 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 
 import dynamic_chromaticity as dyn  # noqa: E402
 
+from colourhs.calibration.chromaticity_tracking import POSITION_SIGMA_PX, log_p_jump  # noqa: E402
+
 NAN = np.nan
 #: One camera's 1 x 3 map: a tracked p, a hole, and a p off the object (no truth).
 TRACKED = np.array([[[1.2, 0.9, 0.9], [NAN, NAN, NAN], [0.5, 1.0, 1.5]]], np.float32)
@@ -138,7 +140,8 @@ def test_position_error_of_a_tracked_map_against_the_meshes(tmp_path):
 
 def test_the_calibrated_map_is_sampled_where_each_point_truly_was(tmp_path):
     """dyn.at_true_positions: on the moved frame each pixel takes the calibrated p (and
-    its error bar) 5 px to its left, where its point was in the chromatic frame, with
+    its error bar, with the nearest sampling's position error at the map's jumps) 5 px
+    to its left, where its point was in the chromatic frame, with
     the tracking's sigma 0; nothing where the point was outside the image; the tracked
     map's attributes kept and its file untouched."""
     rig = _moved_plane(tmp_path)
@@ -165,8 +168,12 @@ def test_the_calibrated_map_is_sampled_where_each_point_truly_was(tmp_path):
         np.testing.assert_allclose(
             f["position/A"][()][..., 0][known], np.nonzero(known)[1] - SHIFT_PX, atol=1e-4
         )
-        expected_bar = np.broadcast_to(error_bar[: W - SHIFT_PX], (H, W - SHIFT_PX, 3))
-        np.testing.assert_allclose(f["p_sigma/A"][()][:, SHIFT_PX:], expected_bar, rtol=1e-6)
+        # the calibrated error bar there and the nearest sampling's position error at
+        # the stripes' log p jumps (each column its own colour), in quadrature
+        jump = POSITION_SIGMA_PX * log_p_jump(_pattern())[:, : W - SHIFT_PX]
+        expected_bar = np.hypot(error_bar[: W - SHIFT_PX], jump[..., None])
+        np.testing.assert_allclose(f["p_sigma/A"][()][:, SHIFT_PX:], expected_bar, rtol=1e-5)
+        assert jump.min() > 0.01
         assert (f.attrs["frame"], f.attrs["chromatic_frame"]) == ("000001", "000000")
     with h5py.File(tracked) as f:
         np.testing.assert_array_equal(f["A"][()], 2.0)

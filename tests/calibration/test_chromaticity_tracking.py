@@ -12,12 +12,15 @@ from scipy.ndimage import gaussian_filter, shift
 from colourhs.calibration.chromaticity_tracking import (
     COLOUR_TOL,
     GAIN_OUTLIER,
+    POSITION_SIGMA_PX,
     calibrated_as_tracked,
     dense_flow,
     fill_from_colour,
     flow_image,
     image_colour,
+    log_p_jump,
     prediction_flow,
+    sample_at,
     select_flow,
     shading_gain,
     track_camera,
@@ -118,28 +121,84 @@ def test_a_moving_surface_carries_its_colours_with_it():
 
 def test_a_tracked_maps_error_bar_carries_the_calibrations_at_its_position():
     """p_sigma is the calibrated map's 1-sigma of log p at each pixel's tracked position
-    (where its p was sampled) and the match's residual in quadrature; the chromatic
-    frame's is the calibrated one; NaN where either is unknown."""
+    (where its p was sampled), the match's residual and the nearest sampling's position
+    error times the log p jump there, in quadrature; the chromatic frame's is the
+    calibrated one; NaN where either of the first two is unknown."""
     p, shading = _patches(), _shading()
     rng = np.random.default_rng(3)
     calibrated_sigma = rng.uniform(0.01, 0.1, (H, W, 3)).astype(np.float32)
     calibrated_sigma[np.isnan(p)] = np.nan
     first = calibrated_as_tracked(p)
-    np.testing.assert_array_equal(tracked_log_sigma(calibrated_sigma, first), calibrated_sigma)
+    np.testing.assert_array_equal(
+        tracked_log_sigma(p, calibrated_sigma, first), calibrated_sigma
+    )  # measured where it is: no position error
     images = [_image(_moved(p, k * 2.0, 0.0), _moved(shading, k * 2.0, 0.0)) for k in range(2)]
     m = track_camera(p, first, images[1], images[0], images[0])
-    s = tracked_log_sigma(calibrated_sigma, m)
+    s = tracked_log_sigma(p, calibrated_sigma, m)
     known = np.all(np.isfinite(m.p), axis=-1)
     assert known.mean() > 0.5
     ys, xs = np.nonzero(known)
     x, y = np.round(m.position[ys, xs]).astype(int).T
-    expected = np.sqrt(calibrated_sigma[y, x] ** 2 + m.sigma[ys, xs, None] ** 2)
+    carried = (x != xs) | (y != ys) | np.any(m.position[ys, xs] != np.round(m.position[ys, xs]), -1)
+    position = np.where(carried, POSITION_SIGMA_PX * log_p_jump(p)[y, x], 0.0)
+    expected = np.sqrt(
+        calibrated_sigma[y, x] ** 2 + m.sigma[ys, xs, None] ** 2 + position[:, None] ** 2
+    )
     np.testing.assert_allclose(s[ys, xs], expected, rtol=1e-6)
+    assert np.mean(position > 0) > 0.01  # the patch edges
     # Two pixels to the right, each pixel's p and sigma come from its point's position.
     inner = known.copy()
     inner[:, :30], inner[:, -30:] = False, False
     assert np.mean(np.abs(m.position[inner][:, 0] - (np.nonzero(inner)[1] - 2)) < 0.5) > 0.95
     assert np.all(np.isnan(s[~known]))
+
+
+def test_log_p_jump_is_the_largest_log_ratio_to_a_neighbour():
+    """0 inside a patch of one colour and where a pixel or its neighbours have no p;
+    at a patch edge the largest band's |log p_a - log p_b| of the two patches."""
+    p = _patches()
+    jump = log_p_jump(p)
+    top, bottom = p[30, 50], p[45, 50]  # two vertically adjacent patches (rows 0-39, 40-79)
+    edge = np.abs(np.log(top) - np.log(bottom)).max()
+    assert jump[39, 50] == pytest.approx(edge, rel=1e-6)
+    assert jump[40, 50] == pytest.approx(edge, rel=1e-6)
+    assert jump[38, 50] == 0.0 and jump[41, 50] == 0.0
+    assert np.all(jump[:9] == 0.0) and np.all(jump[:, :9] == 0.0)  # no p off the object
+    interior = np.ones((H, W), bool)
+    for r in (39, 40, 79, 80):
+        interior[r] = False
+    for c in (39, 40, 79, 80, 119, 120):
+        interior[:, c] = False
+    assert np.all(jump[interior] == 0.0)
+
+
+def test_a_patch_edge_widens_the_error_bar_by_the_sampling_position_error():
+    """A surface moved 2 px, the calibrated map's own error bar 0: inside its patches
+    the colour match is exact and p_sigma stays near 0; at a patch edge the nearest
+    pixel may belong to the other patch, and p_sigma is POSITION_SIGMA_PX (1/sqrt(12)
+    px) times the jump of log p there (and the residual) in every band. The tracking's
+    sigma, which the reconstruction reads, is the colour residual alone."""
+    p, shading = _patches(), _shading()
+    images = [_image(_moved(p, k * 2.0, 0.0), _moved(shading, k * 2.0, 0.0)) for k in range(2)]
+    m = track_camera(p, calibrated_as_tracked(p), images[1], images[0], images[0])
+    s = tracked_log_sigma(p, np.zeros_like(p), m)
+    gy, gx = np.mgrid[:H, :W]
+    carried = np.any(m.position != np.stack([gx, gy], -1), axis=-1)  # all but a stray match
+    known = np.all(np.isfinite(m.p), axis=-1) & _inner(20) & carried
+    term = POSITION_SIGMA_PX * sample_at(log_p_jump(p), m.position)
+    edge = known & (term > 0.01)
+    inside = known & (term == 0)
+    ratio = s[edge].max(axis=-1) / term[edge]
+    print(
+        f"edge pixels {edge.sum()}, p_sigma / term median {np.median(ratio):.4f}; inside "
+        f"p_sigma median {np.median(s[inside]):.5f}; "
+        f"sigma at the edges {np.median(m.sigma[edge]):.5f}"
+    )
+    assert edge.sum() > 100 and inside.sum() > 0.8 * known.sum()
+    assert np.all(ratio >= 1 - 1e-6) and np.median(ratio) < 1.05
+    assert np.median(s[inside]) < 0.002
+    assert np.median(m.sigma[edge]) < 0.01  # the colour residual alone
+    assert POSITION_SIGMA_PX == pytest.approx(0.2887, abs=1e-4)
 
 
 def test_a_drifted_chain_is_re_anchored_by_the_flow_to_the_chromatic_frame():
@@ -334,11 +393,13 @@ def test_the_moving_toys_colours_follow_it(moving_toy, tmp_path, capsys):
     frame-by-frame maps (each from its neighbour's) against the true chromaticity of
     each frame, beside the calibrated map used unchanged (the paper's method).
 
-    The tracked map's error bar (``p_sigma``: the calibration's at the tracked position
-    and the match's residual) against the truth in frame 3, within 1, 2, 3 sigma:
-    measured 0.68, 0.87, 0.91 (the residual alone 0.35, 0.54, 0.65; the chromatic
-    frame's calibrated map 0.59, 0.80, 0.86, its pixels that mix two parts erring
-    beyond it)."""
+    The tracked map's error bar (``p_sigma``: the calibration's at the tracked position,
+    the match's residual and the nearest sampling's position error at colour edges)
+    against the truth in frame 3, within 1, 2, 3 sigma: measured 0.85, 0.97, 0.98;
+    without the position term 0.68, 0.87, 0.91, and the residual alone 0.35, 0.54,
+    0.65: the toy's errors sit at its colour edges, where the nearest pixel may be the
+    other part's. The chromatic frame's calibrated map: 0.59, 0.80, 0.86, its pixels
+    that mix two parts erring beyond it."""
     import h5py
 
     from colourhs.calibration.chromaticity import log_ratio_rms, log_sigma_coverage, map_log_sigma
@@ -376,10 +437,29 @@ def test_the_moving_toys_colours_follow_it(moving_toy, tmp_path, capsys):
         gt = np.concatenate([g[c][()].reshape(-1, 3) for c in cams])
         bar = np.concatenate([map_log_sigma(t, c).reshape(-1, 3) for c in cams])
         residual = np.concatenate([t[f"sigma/{c}"][()].ravel() for c in cams])
+        with h5py.File(calibrated) as c:
+            term = np.concatenate(
+                [
+                    POSITION_SIGMA_PX
+                    * sample_at(log_p_jump(c[cam][()]), t[f"position/{cam}"][()]).ravel()
+                    for cam in cams
+                ]
+            )
+    without = np.sqrt(np.maximum(bar**2 - term[:, None] ** 2, 0.0))
     _, within = log_sigma_coverage(p, gt, bar)
+    with np.errstate(divide="ignore", invalid="ignore"):  # 0 where only the term was
+        _, within_without = log_sigma_coverage(p, gt, without)
     _, within_residual = log_sigma_coverage(p, gt, residual)
-    print("frame 3 within 1, 2, 3 sigma:", within, "the residual alone:", within_residual)
-    assert within[0] > 0.6 and within[2] > 0.88  # measured 0.68, 0.907
+    print(
+        "frame 3 within 1, 2, 3 sigma:",
+        within,
+        "without the position term:",
+        within_without,
+        "the residual alone:",
+        within_residual,
+    )
+    assert 0.75 < within[0] < 0.92 and within[2] > 0.96
+    assert within_without[2] < 0.94  # the position term is what covers the edges
     assert within_residual[2] < 0.75  # measured 0.65
     # A camera's missing p takes the reference pixel's away from the chromatic frame
     # only (colourhs.reconstruct.dataterm); the calibrated map never.
