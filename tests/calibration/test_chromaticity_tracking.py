@@ -139,7 +139,7 @@ def test_a_tracked_maps_error_bar_carries_the_calibrations_at_its_position():
     assert known.mean() > 0.5
     ys, xs = np.nonzero(known)
     x, y = np.round(m.position[ys, xs]).astype(int).T
-    carried = (x != xs) | (y != ys) | np.any(m.position[ys, xs] != np.round(m.position[ys, xs]), -1)
+    carried = np.any(m.position[ys, xs] != np.stack([xs, ys], -1), axis=-1)  # not the pixel itself
     position = np.where(carried, POSITION_SIGMA_PX * log_p_jump(p)[y, x], 0.0)
     expected = np.sqrt(
         calibrated_sigma[y, x] ** 2 + m.sigma[ys, xs, None] ** 2 + position[:, None] ** 2
