@@ -331,11 +331,14 @@ def log_sigma_coverage(
     """How well a map's 1-sigma of log p covers its error against a truth.
 
     Over the pixels where the map, the truth and ``sigma`` are known: the median sigma
-    and, for each k of ``ks``, the share of the (pixel, band) differences of
-    :func:`log_ratio_rms`'s centred log ratios within k of their own sigma. Centring
-    takes the mean of three independent band errors out, so a centred difference's
-    sigma is ``sqrt(2/3)`` of the band's: an honest Gaussian error bar gives 0.68, 0.95
-    and 0.997 within 1, 2 and 3. None where no pixel has all three.
+    and, for each k of ``ks``, the share of the (pixel, band) differences
+    ``log p_b - log t_b`` within k of their sigma, the truth ``t`` scaled to the map's
+    own sum first. Only p's direction is measured, and its error bar is that of the map
+    as it is normalised (:func:`log_sigma`: sum 3, where a pure colour's dark band
+    carries most of the error and its bright bands little), so the truth is compared in
+    that gauge; a centred log ratio would hand each bright band a third of the dark
+    band's error, beyond its own bar. An honest Gaussian error bar gives 0.68, 0.95 and
+    0.997 within 1, 2 and 3. None where no pixel has all three.
 
     Parameters
     ----------
@@ -344,15 +347,17 @@ def log_sigma_coverage(
     sigma : ndarray, shape (..., 3) per band, or (...) the same in every band
         The 1-sigma of log p (:func:`log_sigma`, or a tracked map's).
     """
-    estimate = np.asarray(estimate, np.float64)
-    s = np.asarray(sigma, np.float64).reshape(estimate.shape[:-1] + (-1,))
-    s = np.broadcast_to(s, estimate.shape)
-    known = np.all(np.isfinite(s), axis=-1, keepdims=True)
-    d, ok = _centred_log_difference(np.where(known, estimate, np.nan), truth)
+    e = np.asarray(estimate, np.float64)
+    t = np.asarray(truth, np.float64)
+    s = np.asarray(sigma, np.float64).reshape(e.shape[:-1] + (-1,))
+    s = np.broadcast_to(s, e.shape)
+    ok = np.all(np.isfinite(e) & np.isfinite(t) & (e > 0) & (t > 0) & np.isfinite(s), axis=-1)
     if not ok.any():
         return None
-    within = np.abs(d) / (s[ok] * np.sqrt(2.0 / 3.0))
-    return float(np.median(s[ok])), [float(np.mean(within <= k)) for k in ks]
+    e, t, s = e[ok], t[ok], s[ok]
+    d = np.log(e) - np.log(t * e.sum(axis=1, keepdims=True) / t.sum(axis=1, keepdims=True))
+    within = np.abs(d) / s
+    return float(np.median(s)), [float(np.mean(within <= k)) for k in ks]
 
 
 def map_log_sigma(f: h5py.File, camera: str) -> np.ndarray | None:

@@ -17,11 +17,18 @@ capture format:
 1. Each pixel's residual against the mean of its 4 neighbours,
    ``r = i - (i_N + i_S + i_E + i_W) / 4``, is pure noise wherever the image
    is locally linear (smooth shading), with ``var(r) = 1.25 var(i)``.
-2. Pixels are binned by signal level; in every bin the robust variance
-   ``(1.4826 MAD(r))^2 / 1.25`` ignores the minority of pixels on edges
-   (markers, the board's outline, silhouettes).
+2. Pixels are binned by signal level (no bin spans more than
+   :data:`LEVEL_RATIO` in level); in every bin the robust variance
+   ``(1.4826 MAD(r))^2 / 1.25`` ignores a minority of pixels on edges.
 3. ``gain`` and ``offset`` are the non-negative weighted least-squares fit
    of the bins' variances against their median signal.
+4. Beyond a minority: on a small image a board's markers, its outline and
+   silhouettes are edges in a large share of the lit pixels, and the MAD of
+   step 2 then grows with them (a variance 1.3-2x the sensor's was measured
+   on 160 x 120 renders). So the fit is repeated :data:`STRUCTURE_ROUNDS`
+   times without the pixels near image structure (:func:`structure_mask`):
+   where the residual of the image smoothed over :data:`STRUCTURE_SCALE_PX`
+   exceeds :data:`STRUCTURE_K` of its own noise under the last fit.
 """
 
 from __future__ import annotations
@@ -30,6 +37,7 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 from colourhs.capture import COLOURS, dataset_of, read_image
@@ -41,6 +49,28 @@ RESIDUAL_VARIANCE = 1.25  # var(i - mean of 4 independent neighbours) / var(i)
 MIN_SIGNAL = 0.02  # bins below this are biased by clipping at the black level
 N_BINS = 24  # signal bins at most
 MIN_BIN = 100  # pixels a bin needs for a stable MAD (its relative error ~ 1 / sqrt(N))
+
+LEVEL_RATIO = 1.25
+"""Widest span of a signal bin, as the ratio of its upper to its lower level: a bin's
+variance stands for its median level only where the variance changes little across
+it, and an affine variance changes by at most this ratio over it, whatever the rig's
+levels (a quantile bin alone can span the gap between dark and lit pixels)."""
+
+STRUCTURE_SCALE_PX = 1.5
+"""Gaussian scale (pixels) at which :func:`structure_mask` looks for image structure.
+The smoothing divides the noise of the neighbour residual by about 10
+(:func:`smoothed_residual_gain`) but keeps a step's, so an edge stands out several times
+more clearly than in the pixel's own residual; in pixels, since an edge's footprint in an
+image is a pixel or two on any rig (the optics blur about a pixel)."""
+
+STRUCTURE_K = 4.0
+"""Noise sigmas of the smoothed residual beyond which a pixel is structure: noise alone
+passes it at 0.27 % of the pixels (a Gaussian's two-sided 3-sigma tail), so the pixels
+kept are the sensor's whatever its noise level."""
+
+STRUCTURE_ROUNDS = 2
+"""Refits without the structure of the last fit: the first fit (all pixels) sets the
+threshold too wide, the second from a fit already within about 10 % of the sensor's."""
 
 
 @dataclass(frozen=True)
@@ -85,7 +115,13 @@ def fit_affine_noise(
     floor : least variance a bin can have (full scale^2): the quantisation's
         (:func:`quantisation_variance`). Without it an evenly lit capture
         without noise (a synthetic one with noise, vignetting and light
-        fall-off off) has bins of variance 0 and no fit.
+        fall-off off) has bins of variance 0 and no fit. It also gives the
+        raw step, ``sqrt(12 floor)``: a residual is a multiple of a quarter
+        step, and on 8-bit data a MAD of such values moves by whole quarter
+        steps (a bin's variance by a factor of 2 either way). So each
+        residual is spread uniformly over its quarter step (a fixed seed:
+        the same images give the same fit) and that spread's variance,
+        ``(step / 4)^2 / 12``, taken off its bin's.
 
     Returns
     -------
@@ -102,10 +138,15 @@ def fit_affine_noise(
     r = np.asarray(residual, float)
     ok = np.isfinite(s) & np.isfinite(r) & (s > MIN_SIGNAL) & (s < 0.98)
     s, r = s[ok], r[ok]
+    quantum = np.sqrt(12.0 * floor) / 4.0
+    if quantum > 0:
+        r = r + quantum * (np.random.default_rng(0).random(len(r)) - 0.5)
     if len(s) < MIN_BIN:
         raise ValueError(f"noise estimate: only {len(s)} usable pixels (need {MIN_BIN})")
     bins = int(np.clip(len(s) // (2 * MIN_BIN), 1, N_BINS))
-    edges = np.unique(np.quantile(s, np.linspace(0, 1, bins + 1)))
+    edges = np.quantile(s, np.linspace(0, 1, bins + 1))
+    steps = int(np.ceil(np.log(s.max() / s.min()) / np.log(LEVEL_RATIO)))
+    edges = np.unique(np.concatenate([edges, s.min() * LEVEL_RATIO ** np.arange(1, steps)]))
     level, var, count = [], [], []
     which = np.clip(np.searchsorted(edges, s, side="right") - 1, 0, len(edges) - 2)
     for k in range(len(edges) - 1):
@@ -114,7 +155,7 @@ def fit_affine_noise(
             continue
         rk = r[sel]
         mad = np.median(np.abs(rk - np.median(rk)))
-        v = max((MAD_TO_SIGMA * mad) ** 2 / RESIDUAL_VARIANCE, floor)
+        v = max(((MAD_TO_SIGMA * mad) ** 2 - quantum**2 / 12.0) / RESIDUAL_VARIANCE, floor)
         if v <= 0:
             continue
         level.append(np.median(s[sel]))
@@ -138,14 +179,54 @@ def quantisation_variance(black_level: float, white_level: float) -> float:
     return 1.0 / (12.0 * (float(white_level) - float(black_level)) ** 2)
 
 
+def smoothed_residual_gain(scale_px: float = STRUCTURE_SCALE_PX) -> float:
+    """Standard deviation of :func:`neighbour_residuals` of independent unit noise
+    smoothed by a Gaussian of ``scale_px``: the root sum of squares of the two
+    filters' combined kernel."""
+    half = int(np.ceil(4 * scale_px)) + 2
+    delta = np.zeros((2 * half + 1, 2 * half + 1))
+    delta[half, half] = 1.0
+    kernel = neighbour_residuals(cv2.GaussianBlur(delta, (0, 0), scale_px))
+    return float(np.sqrt(np.sum(kernel**2)))
+
+
+def structure_mask(channel: np.ndarray, gain: float, offset: float) -> np.ndarray:
+    """Pixels (H-2, W-2, as :func:`neighbour_residuals`) of one channel (H, W) near
+    image structure under the noise ``var = gain * i + offset``: within a pixel of one
+    where the residual of the channel smoothed over :data:`STRUCTURE_SCALE_PX` exceeds
+    :data:`STRUCTURE_K` of that residual's noise (:func:`smoothed_residual_gain`
+    times the pixel's predicted sigma). Beyond the paper (step 4 of the module)."""
+    c = np.asarray(channel, np.float64)
+    smooth = neighbour_residuals(cv2.GaussianBlur(c, (0, 0), STRUCTURE_SCALE_PX))
+    sigma = np.sqrt(np.clip(c[1:-1, 1:-1], 0.0, None) * gain + offset)
+    found = np.abs(smooth) > STRUCTURE_K * smoothed_residual_gain() * sigma
+    return cv2.dilate(found.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+
+
 def estimate_noise(images: list[np.ndarray], floor: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Per-channel ``gain`` and ``offset`` (3,) from images (H, W, 3) of one camera;
-    ``floor``: see :func:`fit_affine_noise`."""
+    ``floor``: see :func:`fit_affine_noise`. The fit of every pixel, then
+    :data:`STRUCTURE_ROUNDS` fits without those near structure (:func:`structure_mask`,
+    step 4 of the module); a refit with too few pixels left keeps the fit before it."""
     gain, offset = np.zeros(3), np.zeros(3)
     for ch in range(3):
-        sig = np.concatenate([im[1:-1, 1:-1, ch].ravel() for im in images])
-        res = np.concatenate([neighbour_residuals(im[..., ch]).ravel() for im in images])
-        gain[ch], offset[ch] = fit_affine_noise(sig, res, floor)
+        sig = [im[1:-1, 1:-1, ch] for im in images]
+        res = [neighbour_residuals(im[..., ch]) for im in images]
+        gain[ch], offset[ch] = fit_affine_noise(
+            np.concatenate([a.ravel() for a in sig]),
+            np.concatenate([r.ravel() for r in res]),
+            floor,
+        )
+        for _ in range(STRUCTURE_ROUNDS):
+            keep = [~structure_mask(im[..., ch], gain[ch], offset[ch]) for im in images]
+            try:
+                gain[ch], offset[ch] = fit_affine_noise(
+                    np.concatenate([a[k] for a, k in zip(sig, keep, strict=True)]),
+                    np.concatenate([r[k] for r, k in zip(res, keep, strict=True)]),
+                    floor,
+                )
+            except ValueError:
+                break
     return gain, offset
 
 

@@ -23,9 +23,9 @@ def _shaded(rng, h=240, w=320):
 def test_affine_noise_recovered_from_smooth_images(full_well, read_e):
     """Shot plus read noise: var = i / full_well + (read / full_well)^2.
 
-    Measured: gain within 2.4 % of 1 / full_well; the offset is weakly
+    Measured: gain within 3.2 % of 1 / full_well; the offset is weakly
     determined where shot noise dominates (0 to 5x the truth), but the
-    predicted variance at 10 % and 50 % of full scale is within 4.8 %.
+    predicted variance at 10 % and 50 % of full scale is within 2.4 %.
     """
     rng = np.random.default_rng(3)
     clean = np.stack([_shaded(rng) * f for f in (1.0, 0.8, 0.6)], axis=-1)
@@ -34,10 +34,63 @@ def test_affine_noise_recovered_from_smooth_images(full_well, read_e):
         e = rng.poisson(clean * full_well) + rng.normal(0, read_e, clean.shape)
         images.append(e / full_well)
     gain, offset = estimate_noise(images)
-    assert np.allclose(gain, 1 / full_well, rtol=0.03)
+    assert np.allclose(gain, 1 / full_well, rtol=0.04)
     for i in (0.1, 0.5):
         truth = i / full_well + (read_e / full_well) ** 2
-        assert np.allclose(gain * i + offset, truth, rtol=0.06)
+        assert np.allclose(gain * i + offset, truth, rtol=0.04)
+
+
+@pytest.mark.parametrize("full_well, read_e", [(5000.0, 9.0), (15000.0, 3.0)])
+def test_8_bit_noise_recovered_despite_the_quantised_residuals(full_well, read_e):
+    """8-bit data of the renderer's sensor (black 2, white 255): a residual is a multiple
+    of a quarter step, so a bin's MAD moves by whole quarter steps unless each residual
+    is spread over its own (``fit_affine_noise``'s ``floor``). Measured: the predicted
+    variance at 10, 30 and 50 % of full scale within 5.3 % of the truth (the quantisation's
+    in it); 15.4 % with the MADs of the raw residuals."""
+    from colourhs.calibration.noise import quantisation_variance
+    from colourhs.synth.simulated_rig import Nuisances, sensor
+
+    rng = np.random.default_rng(3)
+    clean = np.stack([_shaded(rng) * f for f in (1.0, 0.8, 0.6)], axis=-1)
+    nuisances = Nuisances(full_well_e=full_well, read_noise_e=read_e)
+    images = [(sensor(clean, rng, nuisances, 8, 2, 255) - 2.0) / 253.0 for _ in range(4)]
+    floor = quantisation_variance(2, 255)
+    gain, offset = estimate_noise(images, floor)
+    for i in (0.1, 0.3, 0.5):
+        truth = i / full_well + (read_e / full_well) ** 2 + floor
+        assert np.allclose(gain * i + offset, truth, rtol=0.065)
+
+
+def test_the_renders_noise_is_found_beside_the_boards_markers(tiny_dataset, monkeypatch):
+    """The noise model of the tiny preset (160 x 120, whose board markers and outlines
+    make edges of a large share of the lit pixels) against the renderer's sensor
+    (``gt/rig_model.json``: full well and read noise). Measured, every camera and
+    channel: the predicted variance at 20 % and 50 % of full scale 0.94-0.97 of the
+    truth; 1.31-1.73 from the fit of every pixel (no structure masked), which the
+    MAD cannot hold against that many edges."""
+    import json
+
+    import colourhs.calibration.noise as noise
+
+    gt = json.loads((tiny_dataset / "gt" / "rig_model.json").read_text())["nuisances"]
+    spec = json.loads((tiny_dataset / "rig.json").read_text())["image"]
+    floor = noise.quantisation_variance(spec["black_level"], spec["white_level"])
+
+    def ratios(model):
+        out = []
+        for i in (0.2, 0.5):
+            truth = i / gt["full_well_e"] + (gt["read_noise_e"] / gt["full_well_e"]) ** 2 + floor
+            for cam in model.gain:
+                out.extend((model.gain[cam] * i + model.offset[cam]) / truth)
+        return np.array(out)
+
+    found = ratios(noise.calibrate_noise(tiny_dataset))
+    print("masked", found.min(), found.max())
+    assert 0.92 < found.min() and found.max() < 1.0
+    monkeypatch.setattr(noise, "STRUCTURE_ROUNDS", 0)
+    unmasked = ratios(noise.calibrate_noise(tiny_dataset))
+    print("unmasked", unmasked.min(), unmasked.max())
+    assert unmasked.min() > 1.25
 
 
 def test_neighbour_residual_is_zero_on_linear_images():
