@@ -24,8 +24,7 @@ capture format:
    of the bins' variances against their median signal.
 4. Beyond a minority: on a small image a board's markers, its outline and
    silhouettes are edges in a large share of the lit pixels, and the MAD of
-   step 2 then grows with them (a variance 1.3-2x the sensor's was measured
-   on 160 x 120 renders). So the fit is repeated :data:`STRUCTURE_ROUNDS`
+   step 2 then grows with them. So the fit is repeated :data:`STRUCTURE_ROUNDS`
    times without the pixels near image structure (:func:`structure_mask`):
    where the residual of the image smoothed over :data:`STRUCTURE_SCALE_PX`
    exceeds :data:`STRUCTURE_K` of its own noise under the last fit.
@@ -65,12 +64,12 @@ image is a pixel or two on any rig (the optics blur about a pixel)."""
 
 STRUCTURE_K = 4.0
 """Noise sigmas of the smoothed residual beyond which a pixel is structure: noise alone
-passes it at 0.27 % of the pixels (a Gaussian's two-sided 3-sigma tail), so the pixels
+passes it at 0.006 % of the pixels (a Gaussian's two-sided 4-sigma tail), so the pixels
 kept are the sensor's whatever its noise level."""
 
 STRUCTURE_ROUNDS = 2
 """Refits without the structure of the last fit: the first fit (all pixels) sets the
-threshold too wide, the second from a fit already within about 10 % of the sensor's."""
+threshold too wide, the second from a fit already free of most of the structure."""
 
 
 @dataclass(frozen=True)
