@@ -71,6 +71,14 @@ STRUCTURE_ROUNDS = 2
 """Refits without the structure of the last fit: the first fit (all pixels) sets the
 threshold too wide, the second from a fit already free of most of the structure."""
 
+MIN_KEPT_SHARE = 0.1
+"""Least share of the lit pixels a refit must keep to replace the fit before it. The
+mask takes the pixels near structure, up to about half of a small board image's; where it
+leaves less than a tenth, the image is structure throughout (a textured scene's own
+frame, a noise-free render, whose residuals are rounding and shading rather than a
+sensor's noise) and the few pixels left stand for nothing. A share, so it holds on any
+rig and at any image size."""
+
 
 @dataclass(frozen=True)
 class NoiseModel:
@@ -189,6 +197,9 @@ def smoothed_residual_gain(scale_px: float = STRUCTURE_SCALE_PX) -> float:
     return float(np.sqrt(np.sum(kernel**2)))
 
 
+_SMOOTHED_GAIN = smoothed_residual_gain()
+
+
 def structure_mask(channel: np.ndarray, gain: float, offset: float) -> np.ndarray:
     """Pixels (H-2, W-2, as :func:`neighbour_residuals`) of one channel (H, W) near
     image structure under the noise ``var = gain * i + offset``: within a pixel of one
@@ -198,7 +209,7 @@ def structure_mask(channel: np.ndarray, gain: float, offset: float) -> np.ndarra
     c = np.asarray(channel, np.float64)
     smooth = neighbour_residuals(cv2.GaussianBlur(c, (0, 0), STRUCTURE_SCALE_PX))
     sigma = np.sqrt(np.clip(c[1:-1, 1:-1], 0.0, None) * gain + offset)
-    found = np.abs(smooth) > STRUCTURE_K * smoothed_residual_gain() * sigma
+    found = np.abs(smooth) > STRUCTURE_K * _SMOOTHED_GAIN * sigma
     return cv2.dilate(found.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
 
 
@@ -206,7 +217,8 @@ def estimate_noise(images: list[np.ndarray], floor: float = 0.0) -> tuple[np.nda
     """Per-channel ``gain`` and ``offset`` (3,) from images (H, W, 3) of one camera;
     ``floor``: see :func:`fit_affine_noise`. The fit of every pixel, then
     :data:`STRUCTURE_ROUNDS` fits without those near structure (:func:`structure_mask`,
-    step 4 of the module); a refit with too few pixels left keeps the fit before it."""
+    step 4 of the module); a refit with too few pixels left (fewer than
+    :data:`MIN_KEPT_SHARE` of the lit ones, or too few for a fit) keeps the fit before it."""
     gain, offset = np.zeros(3), np.zeros(3)
     for ch in range(3):
         sig = [im[1:-1, 1:-1, ch] for im in images]
@@ -216,8 +228,14 @@ def estimate_noise(images: list[np.ndarray], floor: float = 0.0) -> tuple[np.nda
             np.concatenate([r.ravel() for r in res]),
             floor,
         )
+        lit = sum(int(np.count_nonzero(a > MIN_SIGNAL)) for a in sig)
         for _ in range(STRUCTURE_ROUNDS):
             keep = [~structure_mask(im[..., ch], gain[ch], offset[ch]) for im in images]
+            kept = sum(
+                int(np.count_nonzero(k & (a > MIN_SIGNAL))) for a, k in zip(sig, keep, strict=True)
+            )
+            if kept < MIN_KEPT_SHARE * lit:
+                break
             try:
                 gain[ch], offset[ch] = fit_affine_noise(
                     np.concatenate([a[k] for a, k in zip(sig, keep, strict=True)]),

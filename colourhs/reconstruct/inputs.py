@@ -16,7 +16,12 @@ import h5py
 import numpy as np
 
 from colourhs.calibration.crosstalk import load_crosstalk, unmix
-from colourhs.calibration.noise import NoiseModel, estimate_noise, load_noise
+from colourhs.calibration.noise import (
+    NoiseModel,
+    estimate_noise,
+    load_noise,
+    quantisation_variance,
+)
 from colourhs.capture import COLOURS, Rig, dataset_of, read_image, read_mask
 from colourhs.common.files import note_read
 from colourhs.reconstruct.dataterm import pair_arrays
@@ -202,7 +207,8 @@ def load_frame(
     for c, cam in enumerate(rig.camera_names):
         rgb = images[c].transpose(1, 2, 0)
         if model is None:
-            gain, offset = estimate_noise([rgb])
+            floor = quantisation_variance(rig.image.black_level, rig.image.white_level)
+            gain, offset = estimate_noise([rgb], floor)
             variance.append(NoiseModel({cam: gain}, {cam: offset}).variance(cam, rgb))
         else:
             variance.append(model.variance(cam, rgb))
