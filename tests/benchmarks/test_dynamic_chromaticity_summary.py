@@ -72,15 +72,20 @@ def test_the_error_bars_calibration_is_summarised_beside_the_depth():
 
 
 def test_chroma_sigma_calibration_against_the_truth():
-    """A map whose log p errs by independent Gaussian noise of its stated sigma in each
-    band (and by an arbitrary scale per pixel, which the calibration cannot measure)
-    is honest: 0.68 / 0.95 / 0.997 within 1 / 2 / 3 sigma; the same map stating a
-    third of that sigma is not."""
+    """A map normalised to sum 3 from captures whose log ratios err by independent
+    Gaussian noise of sigma ``s`` in each band (and by an arbitrary scale per pixel, which
+    the calibration cannot measure), stating each band's sigma of log p as
+    :func:`colourhs.calibration.chromaticity.log_sigma` does (``s sqrt(sum_c (delta_bc -
+    p_c / 3)^2)``), is honest: 0.68 / 0.95 / 0.997 within 1 / 2 / 3 sigma; the same map
+    stating a third of that sigma is not."""
     rng = np.random.default_rng(0)
     n = 200_000
     truth = rng.uniform(0.05, 2.0, (n, 3))
-    sigma = rng.uniform(0.01, 0.2, n)
-    p = truth * np.exp(sigma[:, None] * rng.standard_normal((n, 3)) + rng.normal(0, 1, (n, 1)))
+    s = rng.uniform(0.01, 0.2, n)
+    q = truth * np.exp(s[:, None] * rng.standard_normal((n, 3)) + rng.normal(0, 1, (n, 1)))
+    p = 3.0 * q / q.sum(axis=1, keepdims=True)
+    d = np.eye(3)[None, :, :] - p[:, None, :] / 3.0  # (n, band, c)
+    sigma = s[:, None] * np.sqrt(np.sum(d * d, axis=2))
     honest = dyn.chroma_sigma_error(p, truth, sigma)
     assert honest["chroma_sigma_median"] == pytest.approx(np.median(sigma))
     for k, share in ((1, 0.683), (2, 0.954), (3, 0.997)):

@@ -707,8 +707,9 @@ def test_scan_brings_a_plane_started_beyond_the_search(plane_sides, monkeypatch)
     """Beyond the paper: the whole plane started 12 % off (every surface alike, so no
     neighbour's depth helps) ends at a minimum of E beyond the depth search's reach;
     the first restart round's starts 2 % either side of each surface without a
-    better neighbour (restart.with_scan) reach the truth. Measured: 29.9 mm
-    without the scan, 0.285 mm with it."""
+    better neighbour (restart.with_scan) reach the truth. Measured: 47.5 mm
+    without the scan, 0.379 mm with it (29.9 and 0.285 mm with the frame's noise
+    fitted over every pixel, 1.4-1.7x the sensor's in red and green)."""
     import colourhs.reconstruct.bayes.refine as rf
     from colourhs.reconstruct.inputs import RayGrid
 
@@ -725,4 +726,4 @@ def test_scan_brings_a_plane_started_beyond_the_search(plane_sides, monkeypatch)
         z, _, info = rf.refine_surface(z0, mask, grid, sides, footprint, opts)
         errs[scan] = np.median(np.abs(z - gd)[info["valid"]]) * 1e3
     assert errs[False] > 25.0, errs
-    assert errs[True] < 0.32, errs
+    assert errs[True] < 0.42, errs
