@@ -57,8 +57,8 @@ levels (a quantile bin alone can span the gap between dark and lit pixels)."""
 
 STRUCTURE_SCALE_PX = 1.5
 """Gaussian scale (pixels) at which :func:`structure_mask` looks for image structure.
-The smoothing divides the noise of the neighbour residual by about 10
-(:func:`smoothed_residual_gain`) but keeps a step's, so an edge stands out several times
+The smoothing divides the noise of the neighbour residual about forty-fold
+(:func:`smoothed_residual_gain`) but keeps much of a step's, so an edge stands out several times
 more clearly than in the pixel's own residual; in pixels, since an edge's footprint in an
 image is a pixel or two on any rig (the optics blur about a pixel)."""
 
