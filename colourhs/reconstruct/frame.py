@@ -210,8 +210,15 @@ def reconstruct(
     solve = _ml_reconstruction if method == "ml" else _bayes_reconstruction
     z, nrm, ok, conf, sigma, stages = solve(frame, evaluate, search, opts, info, say)
     limit = MAX_SIGMA * np.abs(z) if opts.max_sigma_mm is None else opts.max_sigma_mm * 1e-3
+    # Where the refinement ran, a kept depth whose error bar did not compute (NaN: a
+    # surface whose uncertainty failed) has none: infinite, as docs/results-layout.md
+    # states, so it is flagged like one beyond the limit rather than kept silently.
+    # Without the refinement (ML, or too few pixels) no depth has one, and NaN flags
+    # nothing.
+    if "surface" in info:
+        sigma = np.where(ok & np.isnan(sigma), np.inf, sigma)
     with np.errstate(invalid="ignore"):
-        uncertain = ok & (sigma > limit)  # an unknown (NaN) sigma flags nothing
+        uncertain = ok & (sigma > limit)
     ok = ok & ~uncertain  # a new array: the last of ``stages`` may be ``ok`` itself
     z[~ok] = np.nan
     nrm[~ok] = np.nan
