@@ -20,8 +20,16 @@ capture format:
 2. Pixels are binned by signal level (no bin spans more than
    :data:`LEVEL_RATIO` in level); in every bin the robust variance
    ``(1.4826 MAD(r))^2 / 1.25`` ignores a minority of pixels on edges.
+   A pixel's level is the mean of its four diagonal neighbours
+   (:func:`neighbour_level`), which share no noise with ``r``: binned on its own
+   noisy value, a bin at the edge of the levels present (a dark channel's
+   cross-talk, a dim corner) selects the pixels whose noise pushed them in, and
+   its spread of ``r`` reads a fraction of the noise's.
 3. ``gain`` and ``offset`` are the non-negative weighted least-squares fit
-   of the bins' variances against their median signal.
+   of the bins' variances against their median signal, the rounding to the raw
+   values (:func:`quantisation_variance`, known from the rig's black and white
+   levels) taken off before the fit and added to the offset after it: the
+   offset is never below the rounding's, whatever few dark bins there are.
 4. Beyond a minority: on a small image a board's markers, its outline and
    silhouettes are edges in a large share of the lit pixels, and the MAD of
    step 2 then grows with them. So the fit is repeated :data:`STRUCTURE_ROUNDS`
@@ -103,6 +111,14 @@ class NoiseModel:
         return np.clip(np.asarray(image, float), 0.0, None) * g + o
 
 
+def neighbour_level(channel: np.ndarray) -> np.ndarray:
+    """The level (H-2, W-2) of each pixel of :func:`neighbour_residuals`: the mean of its
+    four diagonal neighbours, the pixel's own level wherever the image is locally linear,
+    and independent of the residual's noise (step 2 of the module; beyond the paper)."""
+    c = np.asarray(channel, float)
+    return (c[:-2, :-2] + c[:-2, 2:] + c[2:, :-2] + c[2:, 2:]) / 4.0
+
+
 def neighbour_residuals(channel: np.ndarray) -> np.ndarray:
     """``i - mean(4 neighbours)`` (H-2, W-2) of one channel (H, W): noise where locally linear."""
     c = np.asarray(channel, float)
@@ -117,10 +133,12 @@ def fit_affine_noise(
 
     Parameters
     ----------
-    signal : (N,) signal level of each pixel (fraction of full scale).
+    signal : (N,) signal level of each pixel (fraction of full scale), independent of
+        its residual's noise (:func:`neighbour_level`).
     residual : (N,) its :func:`neighbour_residuals`.
     floor : least variance a bin can have (full scale^2): the quantisation's
-        (:func:`quantisation_variance`). Without it an evenly lit capture
+        (:func:`quantisation_variance`), the least offset too (step 3 of the
+        module). Without it an evenly lit capture
         without noise (a synthetic one with noise, vignetting and light
         fall-off off) has bins of variance 0 and no fit. It also gives the
         raw step, ``sqrt(12 floor)``: a residual is a multiple of a quarter
@@ -134,7 +152,7 @@ def fit_affine_noise(
     -------
     gain, offset : non-negative floats (full scale, full scale^2).
 
-    With pixels for a single bin only, the offset is taken as 0 (shot noise).
+    With pixels for a single bin only, the offset is taken as ``floor`` (shot noise).
 
     Raises
     ------
@@ -154,7 +172,7 @@ def fit_affine_noise(
     edges = np.quantile(s, np.linspace(0, 1, bins + 1))
     steps = int(np.ceil(np.log(s.max() / s.min()) / np.log(LEVEL_RATIO)))
     edges = np.unique(np.concatenate([edges, s.min() * LEVEL_RATIO ** np.arange(1, steps)]))
-    level, var, count = [], [], []
+    level, var, count, silent = [], [], [], 0
     which = np.clip(np.searchsorted(edges, s, side="right") - 1, 0, len(edges) - 2)
     for k in range(len(edges) - 1):
         sel = which == k
@@ -164,20 +182,23 @@ def fit_affine_noise(
         mad = np.median(np.abs(rk - np.median(rk)))
         v = max(((MAD_TO_SIGMA * mad) ** 2 - quantum**2 / 12.0) / RESIDUAL_VARIANCE, floor)
         if v <= 0:
+            silent += sel.sum()
             continue
         level.append(np.median(s[sel]))
         var.append(v)
         count.append(sel.sum())
-    if not level:
-        raise ValueError("noise estimate: no measurable noise (every bin's spread is 0)")
+    if not level or silent > sum(count):
+        # Most pixels without spread: a noise-free image, whose few bins with one are
+        # its edges (their diagonal level between two flat parts), not noise.
+        raise ValueError("noise estimate: no measurable noise (most bins' spread is 0)")
     if len(level) == 1:
-        return float(var[0] / level[0]), 0.0
+        return float((var[0] - floor) / level[0]), float(floor)
     level, var, w = np.array(level), np.array(var), np.array(count, float)
     from scipy.optimize import nnls
 
     A = np.stack([level, np.ones_like(level)], axis=1) * np.sqrt(w)[:, None] / var[:, None]
-    gain, offset = nnls(A, np.sqrt(w))[0]
-    return float(gain), float(offset)
+    gain, offset = nnls(A, np.sqrt(w) * (var - floor) / var)[0]
+    return float(gain), float(offset + floor)
 
 
 def quantisation_variance(black_level: float, white_level: float) -> float:
@@ -221,7 +242,7 @@ def estimate_noise(images: list[np.ndarray], floor: float = 0.0) -> tuple[np.nda
     :data:`MIN_KEPT_SHARE` of the lit ones, or too few for a fit) keeps the fit before it."""
     gain, offset = np.zeros(3), np.zeros(3)
     for ch in range(3):
-        sig = [im[1:-1, 1:-1, ch] for im in images]
+        sig = [neighbour_level(im[..., ch]) for im in images]
         res = [neighbour_residuals(im[..., ch]) for im in images]
         gain[ch], offset[ch] = fit_affine_noise(
             np.concatenate([a.ravel() for a in sig]),
