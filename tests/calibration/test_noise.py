@@ -168,3 +168,28 @@ def test_an_image_that_is_structure_throughout_keeps_the_fit_of_every_pixel(monk
     monkeypatch.setattr(noise, "MIN_KEPT_SHARE", 0.0)
     masked = noise.estimate_noise(images, floor)  # the rounding of the smooth corner alone
     assert np.all(masked[0] * 0.5 + masked[1] < 0.1 * (gain * 0.5 + offset))
+
+
+def test_a_dim_channel_is_read_at_its_noise_where_its_levels_begin():
+    """A channel whose levels begin at 2.5 % of full scale (a dark band's cross-talk, a
+    dim corner): binned at each pixel's own noisy level, the lowest bins hold the
+    pixels whose noise lifted them in, and read low (0.88-0.95 of the sensor's
+    variance at 3 % and 5 %); binned at the diagonal neighbours' level, which shares
+    none of the residual's noise, 0.97-1.03. Read noise is a third of the variance at
+    3 %, so a low offset would show."""
+    from colourhs.calibration.noise import quantisation_variance
+
+    rng = np.random.default_rng(3)
+    full_well, read_e = 5000.0, 15.0
+    y, x = np.mgrid[0:240, 0:320]
+    base = 0.025 + 0.06 * (x / 320) ** 2 + 0.01 * np.sin(y / 30.0)
+    clean = np.stack([base * 8, base, base * 1.5], axis=-1)
+    images = []
+    for _ in range(4):
+        sigma = np.sqrt(clean / full_well + (read_e / full_well) ** 2)
+        images.append(np.round((clean + sigma * rng.normal(size=clean.shape)) * 65535) / 65535)
+    gain, offset = estimate_noise(images, quantisation_variance(0, 65535))
+    for i in (0.03, 0.05):
+        ratio = (gain * i + offset) / (i / full_well + (read_e / full_well) ** 2)
+        print(i, ratio)
+        assert np.all((0.95 < ratio) & (ratio < 1.05)), (i, ratio)
