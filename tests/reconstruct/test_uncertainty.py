@@ -275,3 +275,29 @@ def test_rim_valley_pull_is_the_move_of_the_minimum_less_its_noise():
     assert np.isnan(rim_valley_pull(agree, 0.0, 0.0005, clear, one_block))
     concave = {k: (-weight * k * k, 0.0) for k in deltas}
     assert np.isnan(rim_valley_pull(concave, 0.0, 0.004, clear, one_block))
+
+
+def test_a_barely_curving_valley_is_flat_not_infinitely_wide():
+    """16 blocks whose energies are ``a d^2 + b_g d`` along the depth factor, their
+    slopes b_g +-200 (the noise): ``valley_sigma`` is sqrt(16 / 15 * 16) 200 / (32 a),
+    which grows without bound as the curvature a falls to 0 from above (0.026 at
+    a = 1e3, 258 at a = 0.1: a corner sheet's depth mode got 300 times its depth
+    as its 1-sigma), where a valley that does not curve at all gets a finite
+    :func:`flat_valley_sigma`. Beyond the step it is fitted over the trials did not
+    measure it, and ``measured_valley_sigma`` calls the valley flat (inf: walk out);
+    within it, the quadratic's."""
+    from colourhs.reconstruct.bayes.uncertainty import measured_valley_sigma
+
+    G, step = 16, 0.005
+    groups = np.arange(G)
+    slope = np.where(groups % 2 == 0, 200.0, -200.0)
+    deltas = (-0.01, -0.005, -0.00125, 0.0, 0.00125, 0.005, 0.01)
+    expected = np.sqrt(16 / 15 * 16) * 200 / 32
+    for a in (1e5, 1e3, 0.1):
+        tried = {d: (a * d**2 + slope * d, 0.0, None) for d in deltas}
+        quadratic = valley_sigma(tried, 0.0, groups, step)
+        assert np.isclose(quadratic, expected / a)
+        measured = measured_valley_sigma(tried, 0.0, groups, step)
+        assert measured == (quadratic if a == 1e5 else np.inf)
+        # the flat valley's sigma: half the farthest trial E cannot rule out
+        assert flat_valley_sigma(tried, 0.0, groups) <= 0.5 * max(deltas)

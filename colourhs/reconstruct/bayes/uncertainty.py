@@ -104,6 +104,18 @@ def valley_sigma(tried: dict, best: float, groups: np.ndarray, span: float) -> f
     return float(np.sqrt(G / (G - 1) * np.sum((b - b.mean()) ** 2)) / curvature)
 
 
+def measured_valley_sigma(tried: dict, best: float, groups: np.ndarray, span: float) -> float:
+    """:func:`valley_sigma` where the trial depths measure it: at most ``span``, the
+    half-width its quadratics are fitted over; inf beyond (E flat within its noise
+    there, as where it does not curve upwards, so :func:`flat_valley_sigma` after a
+    walk out decides). Beyond the paper: as E's curvature falls to 0 from above, the
+    quadratic's sigma grows without bound (its curvature is the noise's), where a flat
+    valley's walk stays finite; a sigma beyond the span is one the trials did not
+    measure."""
+    sigma = valley_sigma(tried, best, groups, span)
+    return sigma if sigma <= span else float("inf")
+
+
 def flat_valley_sigma(tried: dict, best: float, groups: np.ndarray, test=RESTART_TEST) -> float:
     """Relative 1-sigma of a surface's depth factor where E does not curve upwards
     about its minimum (:func:`valley_sigma` inf): E's own noise decides.

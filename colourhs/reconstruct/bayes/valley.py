@@ -20,11 +20,11 @@ from colourhs.reconstruct.bayes.restart import RESTART_TEST
 from colourhs.reconstruct.bayes.uncertainty import (
     energy_rise,
     flat_valley_sigma,
+    measured_valley_sigma,
     pair_disagreement,
     ratio_sensitivity,
     rim_valley_pull,
     valley_blocks,
-    valley_sigma,
 )
 
 SEARCH_STEP = 0.005  # depth search step, relative (0.5 % of the depth)
@@ -121,8 +121,9 @@ def depth_search(
 
     Returns the control points at each surface's best depth (shape re-fitted),
     the factors (n_surfaces,) applied and the relative 1-sigma uncertainty
-    of each factor (:func:`valley_sigma`, from the trial depths' energies, or,
-    where E does not curve upwards about its minimum, :func:`flat_valley_sigma`
+    of each factor (:func:`measured_valley_sigma`, from the trial depths' energies, or,
+    where E does not curve upwards about its minimum or so little that the trials
+    do not measure its sigma, :func:`flat_valley_sigma`
     after a walk out on each side, a step at a time, until E rises beyond its
     noise, at most ``max_steps`` steps;
     with ``clear_sides``, the sides with only the samples clear of every
@@ -130,7 +131,8 @@ def depth_search(
     variance; each pair's log-ratio uncertainty, ``ratio_sigma`` (P,) from the
     photometric calibration and the pair's uniform disagreement beyond the
     noise at the best depth (:func:`pair_disagreement`) in quadrature, moves
-    the depth mode by :func:`ratio_sensitivity` times it, added in variance).
+    the depth mode by :func:`ratio_sensitivity` times it, added in variance,
+    where the valley is not flat).
     ``problem`` is E over the spline (``refine._Problem``, subsampled with
     :func:`search_stride`). ``say(text)``, if given, reports each trial depth (each is
     ``SEARCH_FITS`` LM steps). ``scale``: the robust scale at which energies
@@ -210,7 +212,7 @@ def depth_search(
     g = problem.graph
     groups = valley_blocks(g.rows, g.cols, g.shape[1], problem.spline.spacing)
     blocks = [groups[pixels[k]] for k in range(n)]
-    sigma = np.array([valley_sigma(tried[k], best[k], blocks[k], step) for k in range(n)])
+    sigma = np.array([measured_valley_sigma(tried[k], best[k], blocks[k], step) for k in range(n)])
     flat = np.isinf(sigma)  # E flat within its noise at this step: walk out until it rises
     walk_out(tried, best, blocks, flat, step, max_steps, partial(trial, at(best), best))
     for k in np.flatnonzero(flat):
@@ -232,6 +234,7 @@ def depth_search(
         ratios = np.sqrt(ratios**2 + known[None, :] ** 2)
     if np.any(np.nan_to_num(ratios) > 0):
         gain = ratio_sensitivity(problem, tried, best, step, pixels, at, sc)
+        gain[flat] = np.nan  # no quadratic holds there: the walk's width stands for it
         moved = np.sqrt(np.nansum((gain * ratios) ** 2, axis=1))
         sigma = np.hypot(sigma, np.where(np.all(np.isnan(gain), axis=1), 0.0, moved))
     return at(best), 1.0 + best, sigma
