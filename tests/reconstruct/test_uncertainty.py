@@ -280,24 +280,27 @@ def test_rim_valley_pull_is_the_move_of_the_minimum_less_its_noise():
 def test_a_barely_curving_valley_is_flat_not_infinitely_wide():
     """16 blocks whose energies are ``a d^2 + b_g d`` along the depth factor, their
     slopes b_g +-200 (the noise): ``valley_sigma`` is sqrt(16 / 15 * 16) 200 / (32 a),
-    which grows without bound as the curvature a falls to 0 from above (0.026 at
-    a = 1e3, 258 at a = 0.1: a corner sheet's depth mode got 300 times its depth
-    as its 1-sigma), where a valley that does not curve at all gets a finite
-    :func:`flat_valley_sigma`. Beyond the step it is fitted over the trials did not
-    measure it, and ``measured_valley_sigma`` calls the valley flat (inf: walk out);
-    within it, the quadratic's."""
+    which grows without bound as the curvature a falls to 0 from above (258 at
+    a = 0.1: a corner sheet's depth mode got 300 times its depth as its 1-sigma),
+    where a valley that does not curve at all gets a finite
+    :func:`flat_valley_sigma`. Beyond every depth the search tries (12 steps of
+    0.005) no trial measured it, and ``measured_valley_sigma`` calls the valley flat
+    (inf: walk out); within it, the quadratic's stands (0.026 at a = 1e3, beyond
+    the step but within the reach)."""
     from colourhs.reconstruct.bayes.uncertainty import measured_valley_sigma
 
-    G, step = 16, 0.005
+    G, step, reach = 16, 0.005, 0.06
     groups = np.arange(G)
     slope = np.where(groups % 2 == 0, 200.0, -200.0)
     deltas = (-0.01, -0.005, -0.00125, 0.0, 0.00125, 0.005, 0.01)
     expected = np.sqrt(16 / 15 * 16) * 200 / 32
-    for a in (1e5, 1e3, 0.1):
+    for a, stands in ((1e5, True), (1e3, True), (1e2, False), (0.1, False)):
         tried = {d: (a * d**2 + slope * d, 0.0, None) for d in deltas}
         quadratic = valley_sigma(tried, 0.0, groups, step)
         assert np.isclose(quadratic, expected / a)
-        measured = measured_valley_sigma(tried, 0.0, groups, step)
-        assert measured == (quadratic if a == 1e5 else np.inf)
+        measured = measured_valley_sigma(tried, 0.0, groups, step, reach)
+        assert measured == (quadratic if stands else np.inf)
         # the flat valley's sigma: half the farthest trial E cannot rule out
         assert flat_valley_sigma(tried, 0.0, groups) <= 0.5 * max(deltas)
+    few = {d: tried[d] for d in (-0.005, 0.005)}  # too few trials: a fragment's NaN stays
+    assert np.isnan(measured_valley_sigma(few, 0.0, groups, step, reach))

@@ -104,16 +104,20 @@ def valley_sigma(tried: dict, best: float, groups: np.ndarray, span: float) -> f
     return float(np.sqrt(G / (G - 1) * np.sum((b - b.mean()) ** 2)) / curvature)
 
 
-def measured_valley_sigma(tried: dict, best: float, groups: np.ndarray, span: float) -> float:
-    """:func:`valley_sigma` where the trial depths measure it: at most ``span``, the
-    half-width its quadratics are fitted over; inf beyond (E flat within its noise
-    there, as where it does not curve upwards, so :func:`flat_valley_sigma` after a
-    walk out decides). Beyond the paper: as E's curvature falls to 0 from above, the
+def measured_valley_sigma(
+    tried: dict, best: float, groups: np.ndarray, span: float, reach: float
+) -> float:
+    """:func:`valley_sigma` (its quadratics fitted within ``span`` of ``best``) where it is
+    at most ``reach``, the farthest the depth search tries; inf beyond (E flat within
+    its noise, as where it does not curve upwards, so :func:`flat_valley_sigma` after a
+    walk out decides); NaN where :func:`valley_sigma` is (too few trial depths: a
+    fragment, whose sigma comes from its neighbours). Beyond the paper: as E's
+    curvature falls to 0 from above, the
     quadratic's sigma grows without bound (its curvature is the noise's), where a flat
-    valley's walk stays finite; a sigma beyond the span is one the trials did not
-    measure."""
+    valley's walk stays finite; a scatter beyond every depth the search could try is
+    one no trial measured."""
     sigma = valley_sigma(tried, best, groups, span)
-    return sigma if sigma <= span else float("inf")
+    return float("inf") if sigma > reach else sigma  # NaN (too few trials) stays NaN
 
 
 def flat_valley_sigma(tried: dict, best: float, groups: np.ndarray, test=RESTART_TEST) -> float:

@@ -122,8 +122,8 @@ def depth_search(
     Returns the control points at each surface's best depth (shape re-fitted),
     the factors (n_surfaces,) applied and the relative 1-sigma uncertainty
     of each factor (:func:`measured_valley_sigma`, from the trial depths' energies, or,
-    where E does not curve upwards about its minimum or so little that the trials
-    do not measure its sigma, :func:`flat_valley_sigma`
+    where E does not curve upwards about its minimum or so little that that sigma
+    is beyond every depth the search tries, :func:`flat_valley_sigma`
     after a walk out on each side, a step at a time, until E rises beyond its
     noise, at most ``max_steps`` steps;
     with ``clear_sides``, the sides with only the samples clear of every
@@ -212,7 +212,10 @@ def depth_search(
     g = problem.graph
     groups = valley_blocks(g.rows, g.cols, g.shape[1], problem.spline.spacing)
     blocks = [groups[pixels[k]] for k in range(n)]
-    sigma = np.array([measured_valley_sigma(tried[k], best[k], blocks[k], step) for k in range(n)])
+    reach = max_steps * step
+    sigma = np.array(
+        [measured_valley_sigma(tried[k], best[k], blocks[k], step, reach) for k in range(n)]
+    )
     flat = np.isinf(sigma)  # E flat within its noise at this step: walk out until it rises
     walk_out(tried, best, blocks, flat, step, max_steps, partial(trial, at(best), best))
     for k in np.flatnonzero(flat):
