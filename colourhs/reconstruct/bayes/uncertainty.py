@@ -112,10 +112,9 @@ def measured_valley_sigma(
     its noise, as where it does not curve upwards, so :func:`flat_valley_sigma` after a
     walk out decides); NaN where :func:`valley_sigma` is (too few trial depths: a
     fragment, whose sigma comes from its neighbours). Beyond the paper: as E's
-    curvature falls to 0 from above, the
-    quadratic's sigma grows without bound (its curvature is the noise's), where a flat
-    valley's walk stays finite; a scatter beyond every depth the search could try is
-    one no trial measured."""
+    curvature falls to 0 from above, the quadratic's sigma grows without bound (its
+    curvature is the noise's), where a flat valley's walk stays finite; a scatter
+    beyond every depth the search could try is one no trial measured."""
     sigma = valley_sigma(tried, best, groups, span)
     return float("inf") if sigma > reach else sigma  # NaN (too few trials) stays NaN
 
