@@ -96,6 +96,18 @@ the chromaticity error of the map used against the frame's truth
   frame's truth (:func:`chroma_floor`): what carrying any map on the pixel grid
   costs at patch edges with no tracking or calibration error, the floor of a tracked
   map's ``chroma_rms_log``.
+- With ``--noise-free`` (:func:`noise_free_maps`): the chromatic captures are
+  rendered again with the sensor noise alone off (same seed, rig, cross-talk,
+  filters and everything else) and calibrated as the noisy ones are: the map
+  eq. (12) gives without sensor noise. Carried to each frame by the true
+  positions (:func:`noise_free_error`), it is what a map's error bar claims to
+  cover, where the truth also holds eq. (12)'s own model error (a white specular
+  lobe in the chromatic pose, which the albedo truth does not have):
+  ``chroma_nf_rms_log`` (``chroma_rms_log`` against it) and
+  ``chroma_nf_within_1/2/3`` (as ``chroma_sigma_within_k``) per map, and
+  ``nf_model_rms_log`` per frame, the carried noise-free map against the frame's
+  truth (eq. (12)'s definition plus carrying on the pixel grid: no tracking, no
+  noise).
 
 The summary (``dynamic_chromaticity_summary<TAG>.md`` / ``.json``) gives per
 scene x variant and metric the median over seeds and the worst seed of the
@@ -491,6 +503,99 @@ def chroma_floor(
     return rms if np.isfinite(rms) else None
 
 
+#: A map against the noise-free map carried by the true motion (:func:`noise_free_error`).
+NOISE_FREE_COLUMNS = (
+    "chroma_nf_rms_log",
+    "chroma_nf_within_1",
+    "chroma_nf_within_2",
+    "chroma_nf_within_3",
+)
+
+
+def noise_free_maps(data: Path, preset: str, seed: int, root: Path, objects) -> dict[str, Path]:
+    """The chromaticity maps eq. (12) gives without sensor noise: the chromatic captures
+    of ``objects`` (chromatic objects of ``data``, rendered from ``preset`` and ``seed``)
+    rendered again with only the noise off (``root / "noise_free"``, its photometric
+    captures and scenes linked from ``data``, which the dataset's checks read) and
+    calibrated as the noisy ones are (no noise model: nothing to propagate); object ->
+    ``root / "calib" / "noise_free_<object>.h5"``."""
+    from colourhs.calibration.chromaticity import chromaticity_maps
+    from colourhs.capture import open_dataset
+    from colourhs.synth.simulated_rig import Nuisances
+    from colourhs.synth.synthesise import RenderSelection, synthesise
+
+    ds = open_dataset(data, check_images=False)
+    scenes = tuple(n for n, sc in ds.scenes.items() if sc.chromatic in objects)
+    out = root / "noise_free"
+    selection = RenderSelection(parts=("chromatic",), scenes=scenes)
+    synthesise(out, preset, seed=seed, nuisances=Nuisances().without("noise"), selection=selection)
+    (out / "scenes").mkdir(exist_ok=True)
+    for name in ("photometric", *(f"scenes/{n}" for n in ds.scenes)):
+        if not (out / name).exists():
+            (out / name).symlink_to((data / name).resolve(), target_is_directory=True)
+    maps = {}
+    for obj in objects:
+        maps[obj] = root / "calib" / f"noise_free_{obj}.h5"
+        chromaticity_maps(out, obj, maps[obj])
+    return maps
+
+
+def noise_free_error(
+    map_h5: Path, noise_free_h5: Path, positions: dict | None, home: bool, cameras
+) -> dict:
+    """:data:`NOISE_FREE_COLUMNS` of a map against the noise-free map
+    (:func:`noise_free_maps`) carried to its frame by the true positions (``positions``,
+    :func:`true_position_maps`, sampled as a tracking samples,
+    :func:`colourhs.calibration.chromaticity_tracking.sample_at`; on the chromatic frame,
+    ``home``, the noise-free map itself), pooled over ``cameras``: the error the map's
+    own 1-sigma of log p (:func:`colourhs.calibration.chromaticity.map_log_sigma`) claims
+    to cover, its calibration's sensor noise and its tracking's error, with eq. (12)'s
+    model error taken out. None where there is nothing to compare (a moved frame
+    without true positions, a map without an error bar for the shares)."""
+    import h5py
+
+    from colourhs.calibration.chromaticity import log_ratio_rms, map_log_sigma
+    from colourhs.calibration.chromaticity_tracking import sample_at
+
+    if not home and positions is None:
+        return dict.fromkeys(NOISE_FREE_COLUMNS)
+    with h5py.File(map_h5) as f, h5py.File(noise_free_h5) as g:
+        p = np.concatenate([np.asarray(f[c][()], float) for c in cameras])
+        ref = [g[c][()] if home else sample_at(g[c][()], positions[c]) for c in cameras]
+        ref = np.concatenate([np.asarray(r, float) for r in ref])
+        sigmas = [map_log_sigma(f, c) for c in cameras]
+    rms = log_ratio_rms(p, ref)
+    out = {"chroma_nf_rms_log": rms if np.isfinite(rms) else None}
+    cover = None
+    if all(s is not None for s in sigmas):
+        sig = np.concatenate([np.asarray(s, float) for s in sigmas])
+        cover = chroma_sigma_error(p, ref, sig)
+    for k in (1, 2, 3):
+        out[f"chroma_nf_within_{k}"] = None if cover is None else cover[f"chroma_sigma_within_{k}"]
+    return out
+
+
+def noise_free_model_error(
+    noise_free_h5: Path, truth_h5: Path, positions: dict | None, home: bool, cameras
+) -> float | None:
+    """``nf_model_rms_log``: the noise-free map (:func:`noise_free_maps`) carried to the
+    frame as :func:`noise_free_error` carries it, against the frame's truth
+    (``chroma_rms_log``): eq. (12)'s model error with no sensor noise and no tracking
+    error, plus carrying on the pixel grid (:func:`chroma_floor`); None without true
+    positions on a moved frame."""
+    import h5py
+
+    from colourhs.calibration.chromaticity import log_ratio_rms
+    from colourhs.calibration.chromaticity_tracking import sample_at
+
+    if not home and positions is None:
+        return None
+    with h5py.File(noise_free_h5) as g, h5py.File(truth_h5) as t:
+        ref = [g[c][()] if home else sample_at(g[c][()], positions[c]) for c in cameras]
+        rms = log_ratio_rms(np.concatenate(ref), np.concatenate([t[c][()] for c in cameras]))
+    return rms if np.isfinite(rms) else None
+
+
 def evaluate_frame(data, scene, frame, variant: Variant, files, chromatic, map_h5, work) -> dict:
     """One frame of one scene x variant (``generalisation.evaluate_variant`` on that frame,
     with ``map_h5`` as the object's chromaticity map where there is one)."""
@@ -542,11 +647,13 @@ def run_seed(
     variants=VARIANTS,
     keep: Path | None = None,
     evaluate: tuple[int, ...] | None = None,
+    noise_free: bool = False,
 ) -> list[dict]:
     """One seed of ``preset``: render (no geometric captures; ``frames``: only those),
     calibrate, then every frame of every dynamic chromatic sequence (``evaluate``: only
     those indices and the chromatic frame; a tracked map still follows every rendered
-    frame) with each variant; rows."""
+    frame) with each variant; rows. ``noise_free``: also each map against the noise-free
+    map (:func:`noise_free_maps`, :data:`NOISE_FREE_COLUMNS`, ``nf_model_rms_log``)."""
     from colourhs.capture import open_dataset
     from colourhs.synth.synthesise import RenderSelection, synthesise
 
@@ -559,6 +666,11 @@ def run_seed(
     t_calib = time.time() - t0
     ds = open_dataset(data, check_images=False)
     cameras = ds.rig.camera_names
+    if noise_free:
+        objects = sorted({sc.chromatic for sc in ds.scenes.values() if sc.dynamic and sc.chromatic})
+        t0 = time.time()
+        nf = noise_free_maps(data, preset, seed, root, objects)
+        t_calib += time.time() - t0
     rows = []
     t0 = time.time()
     for scene, sc in ds.scenes.items():
@@ -573,6 +685,10 @@ def run_seed(
             # the true positions once per frame, for the floor and every map's position error
             positions = true_position_maps(data, scene, frame, sc.chromatic_frame, ds.rig)
             floor = chroma_floor(data, scene, frame, sc.chromatic_frame, positions, cameras)
+            home = i == chroma_index
+            nf_model = None
+            if noise_free:
+                nf_model = noise_free_model_error(nf[sc.chromatic], truth, positions, home, cameras)
             for v in variants:
                 map_h5 = None if v.source is None else maps[v.name].get(frame)
                 if v.source is not None and map_h5 is None:
@@ -587,9 +703,13 @@ def run_seed(
                 err = {"chroma_rms_log": None, "chroma_known": None}
                 err |= dict.fromkeys(CHROMA_SIGMA_COLUMNS)
                 err |= dict.fromkeys(POSITION_COLUMNS)
+                err |= dict.fromkeys(NOISE_FREE_COLUMNS) if noise_free else {}
                 if map_h5 is not None:
                     err |= chroma_error(Path(map_h5), truth, cameras)
                     err |= position_error(Path(map_h5), positions, cameras)
+                    if noise_free:
+                        nf_h5 = nf[sc.chromatic]
+                        err |= noise_free_error(Path(map_h5), nf_h5, positions, home, cameras)
                 rows.append(
                     {
                         "preset": preset,
@@ -602,6 +722,7 @@ def run_seed(
                         **m,
                         **err,
                         "chroma_floor_rms_log": floor,
+                        **({"nf_model_rms_log": nf_model} if noise_free else {}),
                     }
                 )
                 print(f"seed {seed} {scene:13s} {frame} {v.name:18s} {_line(rows[-1])}", flush=True)
@@ -631,6 +752,10 @@ METRICS = (
     ("chroma_known", "chroma known", ".3f", "min"),
     ("chroma_floor_rms_log", "chroma floor RMS log", ".3f", "max"),
     ("chroma_sigma_within_3", "chroma within 3 sigma", ".2f", "min"),
+    ("chroma_nf_rms_log", "chroma RMS log vs noise-free map", ".3f", "max"),
+    ("chroma_nf_within_1", "within 1 sigma of noise-free map", ".2f", "min"),
+    ("chroma_nf_within_3", "within 3 sigma of noise-free map", ".2f", "min"),
+    ("nf_model_rms_log", "noise-free map's model RMS log", ".3f", "max"),
     ("track_position_px", "position error (px)", ".2f", "max"),
     ("track_motion_px", "motion (px)", ".1f", "max"),
 )
@@ -972,6 +1097,13 @@ def _home_moved(home: dict, moved: dict, col: str, fmt: str) -> str:
     return f"{_pair(home.get(col), fmt)}; {_pair(moved.get(col), fmt)}"
 
 
+def _nf_cell(home: dict, moved: dict) -> str:
+    """The noise-free map's cell: within 1 sigma, then 3, each chromatic; moved."""
+    one = _home_moved(home, moved, "chroma_nf_within_1", ".2f")
+    three = _home_moved(home, moved, "chroma_nf_within_3", ".2f")
+    return "-" if one == three == "-" else f"{one} // {three}"
+
+
 def summarise_markdown(summary: dict) -> str:
     """:func:`summarise` as markdown: the chromatic frame against the moved frames per
     scene x variant, then per scene a table per frame (median over seeds / worst seed)."""
@@ -984,7 +1116,10 @@ def summarise_markdown(summary: dict) -> str:
         "chromatic frame; `worst moved`: each seed's worst such frame. Chroma RMS log: RMS "
         "of the centred log ratios' difference to the truth over the object's pixels where "
         "the map has a p (`known`: their share); chroma within 3 sigma: the share of those "
-        "pixels' and bands' differences within 3 of the map's own sigma of log p. "
+        "pixels' and bands' differences within 3 of the map's own sigma of log p, "
+        "against the truth; against the noise-free map (`--noise-free`, carried by the "
+        "true motion: what the error bar claims to cover) within 1 and 3 (0.68, 0.997 "
+        "for an honest Gaussian bar). "
         "Position error: a tracked map's median "
         "distance from each pixel's tracked position in the chromatic frame to its point's "
         "true one (pixels; motion: the true one's median distance from the pixel). Within "
@@ -1006,6 +1141,7 @@ def summarise_markdown(summary: dict) -> str:
         "chroma RMS log, chromatic / moved",
         "chroma known, chromatic / moved",
         "chroma within 3 sigma, chromatic / moved",
+        "chroma within 1 / 3 sigma of the noise-free map, chromatic / moved",
         "position error (px), chromatic / moved",
         "empty",
     ]
@@ -1024,6 +1160,7 @@ def summarise_markdown(summary: dict) -> str:
                 _home_moved(h, m, "chroma_rms_log", ".3f"),
                 _home_moved(h, m, "chroma_known", ".3f"),
                 _home_moved(h, m, "chroma_sigma_within_3", ".2f"),
+                _nf_cell(h, m),
                 _home_moved(h, m, "track_position_px", ".2f"),
                 str(len(e["empty_frames"])),
             ]
@@ -1091,6 +1228,12 @@ def main(argv=None) -> dict:
         "(bayes_dyn_truth_in_holes) or where it has a p (bayes_dyn_truth_where_known), "
         "and the calibrated map at the true positions (bayes_dyn_true_positions)",
     )
+    p.add_argument(
+        "--noise-free",
+        action="store_true",
+        help="also render the chromatic captures without sensor noise and score every "
+        "map against the noise-free map carried by the true motion (its error bar's claim)",
+    )
     p.add_argument("--keep", type=Path, default=None, help="keep datasets and results here")
     p.add_argument("--tag", default="", help="suffix of the output files")
     p.add_argument(
@@ -1118,7 +1261,7 @@ def main(argv=None) -> dict:
             frame_indices(args.seeds),
             "colourhs-dynchroma",
             lambda seed, root: run_seed(
-                seed, args.preset, root, frames, variants, args.keep, evaluate
+                seed, args.preset, root, frames, variants, args.keep, evaluate, args.noise_free
             ),
             csv,
         )

@@ -206,3 +206,77 @@ def test_the_chroma_floor_is_the_carried_truths_error(tmp_path):
     expected = log_ratio_rms(_pattern(SHIFT_PX), _pattern())
     assert expected > 0.2
     assert dyn.chroma_floor(*args) == pytest.approx(expected, rel=1e-5)
+
+
+def test_a_map_is_scored_against_the_noise_free_map_where_its_points_truly_were(tmp_path):
+    """dyn.noise_free_error: the noise-free map carried 5 px by the true motion is what a
+    moved map is compared with; a map equal to it has RMS 0 (every pixel within its
+    error bar), and a map left where the chromatic frame was misses the moved stripes.
+    A pure colour's map with Gaussian errors of its own sigma of log p in its dark band
+    (the bright bands move only by the sum-3 scale, and their sigma says so) falls
+    within 1 and 3 of it as an honest Gaussian (0.68, 0.997). On the chromatic frame
+    the noise-free map itself is the reference; a moved frame without true positions
+    has none."""
+    rig = _moved_plane(tmp_path)
+    truth = dyn.true_position_maps(tmp_path, "plane", "000001", "000000", rig)
+    cams = rig.camera_names
+    sigma = 0.05
+    pure = np.broadcast_to(np.float32([0.03, 1.485, 1.485]), (H, W, 3))
+    rng = np.random.default_rng(0)
+    noisy = pure * np.stack([np.exp(rng.normal(0.0, sigma, (H, W))), *[np.ones((H, W))] * 2], -1)
+    noisy = 3 * noisy / noisy.sum(-1, keepdims=True)
+    # the bright bands' log error is the dark band's times its share of the sum
+    bars = np.float32([sigma, sigma * 0.01, sigma * 0.01])
+    for name, reference, p in (
+        ("exact", _pattern(), _pattern(SHIFT_PX)),
+        ("unmoved", _pattern(), _pattern()),
+        ("noisy", pure, noisy),
+    ):
+        with h5py.File(tmp_path / f"{name}_nf.h5", "w") as f:
+            f["A"] = reference
+        with h5py.File(tmp_path / f"{name}.h5", "w") as f:
+            f["A"] = p.astype(np.float32)
+            f["p_sigma/A"] = np.broadcast_to(bars, (H, W, 3))
+
+    def error(name, positions=truth, home=False):
+        map_h5, nf_h5 = tmp_path / f"{name}.h5", tmp_path / f"{name}_nf.h5"
+        return dyn.noise_free_error(map_h5, nf_h5, positions, home, cams)
+
+    exact = error("exact")
+    assert exact["chroma_nf_rms_log"] == pytest.approx(0.0, abs=1e-6)
+    assert exact["chroma_nf_within_1"] == 1.0
+    unmoved = error("unmoved")
+    assert unmoved["chroma_nf_rms_log"] > 0.2 and unmoved["chroma_nf_within_3"] < 0.5
+    noisy_err = error("noisy")  # 0.677 / 0.998 measured: H x (W - 5) pixels
+    assert 0.65 < noisy_err["chroma_nf_within_1"] < 0.71
+    assert noisy_err["chroma_nf_within_3"] > 0.99
+    home = error("unmoved", None, True)
+    assert home["chroma_nf_rms_log"] == pytest.approx(0.0, abs=1e-6)
+    assert error("exact", None) == dict.fromkeys(dyn.NOISE_FREE_COLUMNS)
+
+
+def test_the_noise_free_maps_model_error_is_against_the_frames_truth(tmp_path):
+    """dyn.noise_free_model_error: a noise-free map equal to the chromatic frame's truth,
+    carried by the true motion, has no error against a truth that moved with the plane,
+    and the unmoved pattern's error against one that did not; None without true
+    positions on a moved frame."""
+    rig = _moved_plane(tmp_path)
+    noise_free = tmp_path / "noise_free.h5"
+    with h5py.File(noise_free, "w") as f:
+        f["A"] = _pattern()
+    truth = dyn.true_position_maps(tmp_path, "plane", "000001", "000000", rig)
+    folder = tmp_path / "scenes" / "plane" / "gt" / "chromaticity"
+    _truths(tmp_path, _pattern(SHIFT_PX))
+    cams = rig.camera_names
+    args = (noise_free, folder / "000001.h5")
+    assert dyn.noise_free_model_error(*args, truth, False, cams) == pytest.approx(0.0, abs=1e-6)
+    assert dyn.noise_free_model_error(*args, None, False, cams) is None
+    _truths(tmp_path, _pattern())
+    from colourhs.calibration.chromaticity import log_ratio_rms
+
+    expected = log_ratio_rms(_pattern(SHIFT_PX), _pattern())
+    assert dyn.noise_free_model_error(*args, truth, False, cams) == pytest.approx(
+        expected, rel=1e-5
+    )
+    home = dyn.noise_free_model_error(noise_free, folder / "000000.h5", None, True, cams)
+    assert home == pytest.approx(0.0, abs=1e-6)
