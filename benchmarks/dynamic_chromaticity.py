@@ -515,28 +515,21 @@ NOISE_FREE_COLUMNS = (
 def noise_free_maps(data: Path, preset: str, seed: int, root: Path, objects) -> dict[str, Path]:
     """The chromaticity maps eq. (12) gives without sensor noise: the chromatic captures
     of ``objects`` (chromatic objects of ``data``, rendered from ``preset`` and ``seed``)
-    rendered again with only the noise off (``root / "noise_free"``, its photometric
-    captures and scenes linked from ``data``, which the dataset's checks read) and
+    rendered again with only the noise off
+    (:func:`colourhs.synth.synthesise.noise_free_chromatic`, under ``root``) and
     calibrated as the noisy ones are (no noise model: nothing to propagate); object ->
     ``root / "calib" / "noise_free_<object>.h5"``."""
     from colourhs.calibration.chromaticity import chromaticity_maps
     from colourhs.capture import open_dataset
-    from colourhs.synth.simulated_rig import Nuisances
-    from colourhs.synth.synthesise import RenderSelection, synthesise
+    from colourhs.synth.synthesise import noise_free_chromatic
 
     ds = open_dataset(data, check_images=False)
     scenes = tuple(n for n, sc in ds.scenes.items() if sc.chromatic in objects)
-    out = root / "noise_free"
-    selection = RenderSelection(parts=("chromatic",), scenes=scenes)
-    synthesise(out, preset, seed=seed, nuisances=Nuisances().without("noise"), selection=selection)
-    (out / "scenes").mkdir(exist_ok=True)
-    for name in ("photometric", *(f"scenes/{n}" for n in ds.scenes)):
-        if not (out / name).exists():
-            (out / name).symlink_to((data / name).resolve(), target_is_directory=True)
+    noise_free = noise_free_chromatic(data, root / "noise_free", preset, seed, scenes)
     maps = {}
     for obj in objects:
         maps[obj] = root / "calib" / f"noise_free_{obj}.h5"
-        chromaticity_maps(out, obj, maps[obj])
+        chromaticity_maps(noise_free, obj, maps[obj])
     return maps
 
 

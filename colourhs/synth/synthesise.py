@@ -571,6 +571,44 @@ def synthesise_exact(
     )
 
 
+def noise_free_chromatic(
+    dataset: str | Path,
+    out: str | Path,
+    preset: str | Preset,
+    seed: int = 0,
+    scenes: tuple[str, ...] | None = None,
+    workers: int | None = None,
+) -> Path:
+    """``dataset`` (rendered by :func:`synthesise` from ``preset`` and ``seed``) with its
+    chromatic captures rendered again with the sensor noise alone off: every other
+    nuisance, the rig, the poses and the scenes the same. ``out`` gets the new captures
+    of ``scenes``' chromatic objects (None: every scene's) under ``out/render`` and the
+    dataset folder ``out/noise_free``, which it returns: links to them and to every
+    other entry of ``dataset`` (another object's chromatic captures stay the noisy
+    ones). The chromaticity that eq. (12) gives from it is the map's own
+    definition without the noise its error bar propagates (beyond the paper: what that
+    error bar claims to cover)."""
+    dataset, out = Path(dataset).resolve(), Path(out)
+    render = synthesise(
+        out / "render",
+        preset,
+        seed=seed,
+        nuisances=Nuisances().without("noise"),
+        selection=RenderSelection(parts=("chromatic",), scenes=scenes),
+        workers=workers,
+    )
+    folder = out / "noise_free"
+    (folder / "chromatic").mkdir(parents=True)
+    for entry in dataset.iterdir():
+        if entry.name != "chromatic":
+            (folder / entry.name).symlink_to(entry, target_is_directory=entry.is_dir())
+    for entry in (dataset / "chromatic").iterdir():
+        target = render / "chromatic" / entry.name
+        target = target if target.exists() else entry  # not rendered: the noisy captures
+        (folder / "chromatic" / entry.name).symlink_to(target.resolve(), target_is_directory=True)
+    return folder
+
+
 def preset_chromatic_objects(preset: str | Preset) -> list[str]:
     """The chromatic objects (but ``white``) of ``preset``'s datasets, known before one
     is rendered (the workflow plans their chromaticity maps from them)."""

@@ -258,27 +258,6 @@ def test_sigma_of_log_p_is_calibrated_against_the_truth(tiny_dataset, tmp_path):
     np.testing.assert_array_equal(a.chroma, b.chroma)
 
 
-def _noise_free_captures(dataset, tmp_path):
-    """``dataset`` (the tiny preset, seed 0) with its chromatic captures rendered again
-    without sensor noise (every other nuisance the same): the links of its other
-    folders and the new ``chromatic/``."""
-    from colourhs.synth.synthesise import Nuisances, RenderSelection, synthesise
-
-    render = synthesise(
-        tmp_path / "render",
-        "tiny",
-        nuisances=Nuisances().without("noise"),
-        selection=RenderSelection(parts=("chromatic",), scenes=("statue", "toy")),
-        workers=1,
-    )
-    out = tmp_path / "noise_free"
-    out.mkdir()
-    for entry in dataset.iterdir():
-        target = render / "chromatic" if entry.name == "chromatic" else entry
-        (out / entry.name).symlink_to(target, target_is_directory=target.is_dir())
-    return out
-
-
 def test_the_toys_error_bar_is_its_noise_not_its_model_error(tiny_dataset, tmp_path):
     """Beyond the paper: the toy's map misses its albedo beyond its error bar, and the
     misses are the map's own definition, not its noise. Eq. (12) gives the chromaticity
@@ -293,13 +272,13 @@ def test_the_toys_error_bar_is_its_noise_not_its_model_error(tiny_dataset, tmp_p
     0.096 from the albedo (the statue's 0.0013)."""
     from colourhs.calibration.chromaticity import log_ratio_rms
     from colourhs.calibration.noise import calibrate_noise
+    from colourhs.synth.synthesise import noise_free_chromatic
 
     noise = tmp_path / "noise.json"
     calibrate_noise(tiny_dataset, noise)
     noisy = chromaticity_maps(tiny_dataset, "toy", tmp_path / "toy.h5", noise_json=noise).maps
-    exact = chromaticity_maps(
-        _noise_free_captures(tiny_dataset, tmp_path), "toy", tmp_path / "exact.h5"
-    ).maps
+    noise_free = noise_free_chromatic(tiny_dataset, tmp_path, "tiny", scenes=("toy",), workers=1)
+    exact = chromaticity_maps(noise_free, "toy", tmp_path / "exact.h5").maps
     with (
         h5py.File(tmp_path / "toy.h5") as f,
         h5py.File(tiny_dataset / "scenes" / "toy" / "gt" / "chromaticity.h5") as g,
