@@ -51,15 +51,20 @@ neighbour towards c only:
    calibrated map carries its own error bar
    (:func:`colourhs.calibration.chromaticity.log_sigma`, the chromatic captures'
    sensor noise), the tracked map's 1-sigma of log p per band (``p_sigma``,
-   :func:`tracked_log_sigma`) is that error bar at the position, the residual, and
-   the sampling's position error (:data:`POSITION_SIGMA_PX`) times the largest change
-   of log p from the sampled pixel to a neighbour (:func:`log_p_jump`), in
-   quadrature: the p sampled there carries the calibration's error, a wrong position
-   a wrong colour, and at a patch edge the nearest pixel may be the other patch's,
-   which the colours, blurred alike on both sides of the match, do not show (the
-   third term is 0 inside a patch of one colour). The reconstruction is not weighed
-   by that third term: widening the intensity variance at every colour edge moved
-   the depth of tracked cloths away from the truth.
+   :func:`tracked_log_sigma`) is that error bar at the position and the position's
+   error times the colour edge there, in quadrature: the p sampled there carries the
+   calibration's error, and at a patch edge a point placed off its true position
+   takes the other patch's p, which the colours, blurred alike on both sides of the
+   match, do not show. The position's error is the nearest sampling's
+   (:data:`POSITION_SIGMA_PX`) and the prediction's, the distance between step 1's
+   two predictions (``spread``: where the chained and the direct flow disagree, one
+   of them is wrong), in quadrature; the edge is the largest change of log p from the
+   sampled pixel to a neighbour beyond the calibration's noise (:func:`log_p_jump`;
+   0 inside a patch of one colour). The match's residual is not in ``p_sigma``:
+   inside a patch it is the shading's change and the images' noise, not an error of
+   p. The reconstruction is not weighed by the edge term: widening the intensity
+   variance at every colour edge moved the depth of tracked cloths away from the
+   truth.
 
 The map keeps the tracking's own holes. Where the reconstruction reads it for a
 moved frame, a pixel of its reference camera without p that shows the colour of a
@@ -99,6 +104,7 @@ __all__ = [
     "GAIN_OUTLIER",
     "GAIN_SIGMA_PX",
     "GAIN_SUPPORT",
+    "JUMP_NOISE_SIGMAS",
     "POSITION_SIGMA_PX",
     "PROXIMITY",
     "SEARCH_PX",
@@ -170,6 +176,13 @@ shading or highlights, at any image size; the brightness flow gives the fine det
 where it is right."""
 
 
+JUMP_NOISE_SIGMAS = 3.0
+"""How many 1-sigmas of two neighbouring pixels' noise difference a change of log p
+must exceed to count as a colour edge (:func:`log_p_jump`): beyond 3 sigma a Gaussian
+difference is noise once in 370; a property of the noise's distribution, not of the
+rig."""
+
+
 POSITION_SIGMA_PX = 12**-0.5
 """1-sigma of the position at which :func:`sample_at` takes p, pixels: the nearest
 pixel's centre stands for a point anywhere within that pixel, uniformly, whose standard
@@ -203,6 +216,11 @@ class TrackedMap:
         colour residual.
     p_sigma : (H, W, 3) float32 or None, each band's 1-sigma of log p of the map
         (:func:`tracked_log_sigma`); None where the calibrated map has no error bar.
+    spread : (H, W) float32 or None, how far apart step 1's two predictions (the
+        chained and the direct one, :func:`predict_from_both`) put each pixel's point,
+        pixels: the flows' own disagreement, a measure of the prediction's position
+        error (0 in the chromatic frame); None where not measured (a file written
+        without it).
     """
 
     p: np.ndarray
@@ -210,6 +228,7 @@ class TrackedMap:
     position_sigma: np.ndarray
     sigma: np.ndarray
     p_sigma: np.ndarray | None = None
+    spread: np.ndarray | None = None
 
 
 def flow_image(rgb: np.ndarray) -> np.ndarray:
@@ -343,16 +362,29 @@ def sample_at(values: np.ndarray, position: np.ndarray) -> np.ndarray:
     return _remap(values, position[..., 0], position[..., 1], nearest=True)
 
 
-def log_p_jump(calibrated: np.ndarray) -> np.ndarray:
+def log_p_jump(calibrated: np.ndarray, calibrated_sigma: np.ndarray | None = None) -> np.ndarray:
     """The largest change of log p (H, W) from a pixel of the calibrated map
     (``calibrated`` (H, W, 3)) to one of its 4-neighbours with a p, over the three
     bands: 0 inside a patch of one colour, the patches' log ratio at its edge; 0 where
-    the pixel or all its neighbours have none (beyond the paper)."""
+    the pixel or all its neighbours have none (beyond the paper).
+
+    With the map's error bar (``calibrated_sigma`` (H, W, 3), 1-sigma of log p), each
+    band's change less :data:`JUMP_NOISE_SIGMAS` of the two pixels' noise, in
+    quadrature (0 where no larger): the colour edge alone, since a change that noise
+    explains is not one a displaced sample would make (the noise is the calibration's
+    own term of :func:`tracked_log_sigma`)."""
     log_p = np.log(np.where(calibrated > 0, calibrated, np.nan))
     jump = np.zeros(log_p.shape[:2])
     with np.errstate(invalid="ignore"):
         for axis in (0, 1):
-            d = np.nan_to_num(np.abs(np.diff(log_p, axis=axis)).max(axis=-1))
+            d = np.abs(np.diff(log_p, axis=axis))
+            if calibrated_sigma is not None:
+                s = np.asarray(calibrated_sigma, float)
+                lo_s = s[:-1] if axis == 0 else s[:, :-1]
+                hi_s = s[1:] if axis == 0 else s[:, 1:]
+                noise = JUMP_NOISE_SIGMAS**2 * (np.nan_to_num(lo_s) ** 2 + np.nan_to_num(hi_s) ** 2)
+                d = np.sqrt(np.maximum(d * d - noise, 0.0))
+            d = np.nan_to_num(d.max(axis=-1))
             lo = [slice(None)] * 2
             hi = [slice(None)] * 2
             lo[axis], hi[axis] = slice(None, -1), slice(1, None)
@@ -426,7 +458,9 @@ def calibrated_as_tracked(calibrated: np.ndarray) -> TrackedMap:
     known = np.all(np.isfinite(calibrated), axis=-1)
     position = np.where(known[..., None], np.stack([gx, gy], axis=-1), np.nan)
     zero = np.where(known, 0.0, np.nan).astype(np.float32)
-    return TrackedMap(calibrated.astype(np.float32), position.astype(np.float32), zero, zero)
+    return TrackedMap(
+        calibrated.astype(np.float32), position.astype(np.float32), zero, zero, spread=zero
+    )
 
 
 def track_camera(
@@ -447,7 +481,9 @@ def track_camera(
     """
     colour, anchor = image_colour(frame_rgb), image_colour(anchor_rgb)
     chained = predict_positions(neighbour, prediction_flow(frame_rgb, neighbour_rgb))
-    predicted = predict_from_both(chained, prediction_flow(frame_rgb, anchor_rgb), colour, anchor)
+    direct = prediction_flow(frame_rgb, anchor_rgb)
+    predicted = predict_from_both(chained, direct, colour, anchor)
+    spread = np.linalg.norm(chained - np.stack(_grid(colour.shape), axis=-1) - direct, axis=-1)
     colour = colour * np.exp(-shading_gain(colour, anchor, predicted))
     colour /= colour.sum(axis=-1, keepdims=True)
     position, distance = colour_match(predicted, colour, anchor)
@@ -463,7 +499,11 @@ def track_camera(
     moved[lost] = np.nan
     sigma[lost] = np.nan
     return TrackedMap(
-        p.astype(np.float32), position, moved.astype(np.float32), sigma.astype(np.float32)
+        p.astype(np.float32),
+        position,
+        moved.astype(np.float32),
+        sigma.astype(np.float32),
+        spread=spread.astype(np.float32),
     )
 
 
@@ -500,18 +540,27 @@ def tracked_log_sigma(
     """Step 5's error bar of a tracked map: each band's 1-sigma of log p (H, W, 3), in
     quadrature the calibrated map's (``calibrated_sigma``, (H, W, 3),
     :func:`colourhs.calibration.chromaticity.log_sigma`) at the tracked position
-    (nearest, as p is sampled), the match's residual (``tracked.sigma``) and the
-    sampling's position error, :data:`POSITION_SIGMA_PX` times the largest change of
-    log p from the sampled pixel of ``calibrated`` (H, W, 3) to a neighbour
-    (:func:`log_p_jump`), where the point was carried (its position is not the pixel
-    itself: the chromatic frame's map is the calibrated one, measured where it is);
-    NaN where the first two are unknown (beyond the paper)."""
+    (nearest, as p is sampled) and the position's error times the colour edge of
+    ``calibrated`` (H, W, 3) there (:func:`log_p_jump`, its noise taken out), where
+    the point was carried (its position is not the pixel itself: the chromatic
+    frame's map is the calibrated one, measured where it is). The position's error
+    is the nearest sampling's, :data:`POSITION_SIGMA_PX`, and the prediction's
+    (``tracked.spread``, the two flows' disagreement), in quadrature. NaN where the
+    calibration's is unknown or the tracking lost the point (beyond the paper).
+
+    The match's colour residual (``tracked.sigma``) is not in it: inside a patch it is
+    the shading's change and the images' noise, not an error of p, and where the colour
+    shows another patch the match is refused (:data:`COLOUR_TOL`)."""
     at = tracked.position
     calibration = sample_at(calibrated_sigma, at)
     carried = np.any(at != np.stack(_grid(at.shape), axis=-1), axis=-1)
-    jump = np.nan_to_num(sample_at(log_p_jump(calibrated), at))
-    match = np.hypot(tracked.sigma, np.where(carried, POSITION_SIGMA_PX * jump, 0.0))
-    return np.hypot(calibration, match[..., None]).astype(np.float32)
+    spread = 0.0 if tracked.spread is None else np.nan_to_num(tracked.spread)
+    position = np.where(carried, np.hypot(POSITION_SIGMA_PX, spread), 0.0)
+    jump = np.nan_to_num(sample_at(log_p_jump(calibrated, calibrated_sigma), at))
+    lost = ~np.isfinite(tracked.sigma)
+    out = np.hypot(calibration, (position * jump)[..., None])
+    out[lost] = np.nan
+    return out.astype(np.float32)
 
 
 def tracking_neighbour(frames: tuple[str, ...], chromatic_frame: str, frame: str) -> str | None:
@@ -531,6 +580,7 @@ def read_tracked(path: str | Path, camera: str) -> TrackedMap:
             f[f"position_sigma/{camera}"][()],
             f[f"sigma/{camera}"][()],
             f[f"p_sigma/{camera}"][()] if f"p_sigma/{camera}" in f else None,
+            f[f"spread/{camera}"][()] if f"spread/{camera}" in f else None,
         )
 
 
@@ -616,6 +666,8 @@ def track_chromaticity(
             f[f"position/{cam}"] = m.position
             f[f"position_sigma/{cam}"] = m.position_sigma
             f[f"sigma/{cam}"] = m.sigma
+            if m.spread is not None:
+                f[f"spread/{cam}"] = m.spread
             if m.p_sigma is not None:
                 f[f"p_sigma/{cam}"] = m.p_sigma
         f.attrs.update(attrs)
