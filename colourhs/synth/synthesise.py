@@ -578,10 +578,12 @@ def noise_free_chromatic(
     seed: int = 0,
     scenes: tuple[str, ...] | None = None,
     workers: int | None = None,
+    nuisances: Nuisances | None = None,
 ) -> Path:
-    """``dataset`` (rendered by :func:`synthesise` from ``preset`` and ``seed``) with its
-    chromatic captures rendered again with the sensor noise alone off: every other
-    nuisance, the rig, the poses and the scenes the same. ``out`` gets the new captures
+    """``dataset`` (rendered by :func:`synthesise` from ``preset``, ``seed`` and
+    ``nuisances``, default all on) with its chromatic captures rendered again with the
+    sensor noise alone off: every other nuisance, the rig, the poses and the scenes the
+    same. ``out`` gets the new captures
     of ``scenes``' chromatic objects (None: every scene's) under ``out/render`` and the
     dataset folder ``out/noise_free``, which it returns: links to them and to every
     other entry of ``dataset`` (another object's chromatic captures stay the noisy
@@ -593,7 +595,7 @@ def noise_free_chromatic(
         out / "render",
         preset,
         seed=seed,
-        nuisances=Nuisances().without("noise"),
+        nuisances=(Nuisances() if nuisances is None else nuisances).without("noise"),
         selection=RenderSelection(parts=("chromatic",), scenes=scenes),
         workers=workers,
     )

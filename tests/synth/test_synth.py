@@ -312,3 +312,25 @@ def test_malformed_copies_fail_with_the_right_message(tiny_dataset, tmp_path):
     (bad / "rig.json").write_text(json.dumps(rig))
     with pytest.raises(CaptureFormatError, match=r"rig\.json.*blue"):
         open_dataset(bad)
+
+
+@pytest.mark.slow
+def test_a_noise_free_copy_differs_from_its_dataset_by_the_noise_alone(tmp_path):
+    """noise_free_chromatic: the chromatic captures of a dataset rendered without noise
+    and cross-talk come out the same files when its nuisances are passed (only the
+    noise goes, and it was off already), and differ when they are not (the default
+    puts the cross-talk back); the other entries are the dataset's own."""
+    from colourhs.synth.synthesise import noise_free_chromatic
+
+    nuisances = Nuisances().without("noise", "crosstalk")
+    selection = RenderSelection(parts=("chromatic",), scenes=("toy",))
+    data = synthesise(tmp_path / "d", "tiny", nuisances=nuisances, selection=selection, workers=1)
+    same = noise_free_chromatic(data, tmp_path / "a", "tiny", scenes=("toy",), nuisances=nuisances)
+    other = noise_free_chromatic(data, tmp_path / "b", "tiny", scenes=("toy",))
+    files = sorted((data / "chromatic" / "toy").rglob("*.png"))
+    assert len(files) >= 6
+    for f in files:
+        rel = f.relative_to(data)
+        assert (same / rel).read_bytes() == f.read_bytes()
+    assert any((other / f.relative_to(data)).read_bytes() != f.read_bytes() for f in files)
+    assert (same / "rig.json").resolve() == (data / "rig.json").resolve()
