@@ -105,9 +105,9 @@ the chromaticity error of the map used against the frame's truth
   lobe in the chromatic pose, which the albedo truth does not have):
   ``chroma_nf_rms_log`` (``chroma_rms_log`` against it) and
   ``chroma_nf_within_1/2/3`` (as ``chroma_sigma_within_k``) per map, and
-  ``nf_model_rms_log`` per frame, the carried noise-free map against the frame's
-  truth (eq. (12)'s definition plus carrying on the pixel grid: no tracking, no
-  noise).
+  ``nf_model_rms_log`` per frame (:func:`carried_error`), the carried noise-free
+  map against the frame's truth (eq. (12)'s definition plus carrying on the pixel
+  grid: no tracking, no noise).
 
 The summary (``dynamic_chromaticity_summary<TAG>.md`` / ``.json``) gives per
 scene x variant and metric the median over seeds and the worst seed of the
@@ -474,33 +474,54 @@ def position_error(map_h5: Path, truth: dict | None, cameras) -> dict:
     }
 
 
+def carried(map_h5: Path, positions: dict | None, cameras) -> np.ndarray:
+    """A file's maps of ``cameras`` side by side (float), each carried by the true
+    positions (``positions``, :func:`true_position_maps`) as a tracking samples the
+    calibrated map (:func:`colourhs.calibration.chromaticity_tracking.sample_at`);
+    ``positions`` None: as they are (the chromatic frame)."""
+    import h5py
+
+    from colourhs.calibration.chromaticity_tracking import sample_at
+
+    with h5py.File(map_h5) as f:
+        maps = [
+            f[c][()] if positions is None else sample_at(f[c][()], positions[c]) for c in cameras
+        ]
+    return np.concatenate([np.asarray(m, float) for m in maps])
+
+
+def carried_error(
+    source_h5: Path, truth_h5: Path, positions: dict | None, home: bool, cameras
+) -> float | None:
+    """``chroma_rms_log`` of ``source_h5``'s maps carried to a frame (:func:`carried`; on
+    the chromatic frame, ``home``, as they are) against the frame's truth, pooled over
+    ``cameras``; None without true positions on a moved frame, or where no pixel has
+    both."""
+    import h5py
+
+    from colourhs.calibration.chromaticity import log_ratio_rms
+
+    if not home and positions is None:
+        return None
+    with h5py.File(truth_h5) as t:
+        true = np.concatenate([t[c][()] for c in cameras])
+    rms = log_ratio_rms(carried(source_h5, None if home else positions, cameras), true)
+    return rms if np.isfinite(rms) else None
+
+
 def chroma_floor(
     data: Path, scene: str, frame: str, chromatic: str, truth: dict | None, cameras
 ) -> float | None:
     """``chroma_floor_rms_log``: the chromatic frame's true chromaticity carried to the
-    frame by the true positions (``truth``, :func:`true_position_maps`, sampled as a
-    tracking samples the calibrated map,
-    :func:`colourhs.calibration.chromaticity_tracking.sample_at`) against the frame's
-    truth, ``chroma_rms_log`` pooled over ``cameras``: what carrying a map on the pixel
-    grid costs with neither a tracking nor a calibration error (a pixel whose point lies
-    within half a pixel of a patch edge in the chromatic frame takes the other patch's
-    p), the floor of any carried map's error. 0 on the chromatic frame; None without
-    true positions (``truth`` None)."""
-    import h5py
-
-    from colourhs.calibration.chromaticity import log_ratio_rms
-    from colourhs.calibration.chromaticity_tracking import sample_at
-
+    frame by the true positions (``truth``, :func:`carried_error`) against the frame's
+    truth: what carrying a map on the pixel grid costs with neither a tracking nor a
+    calibration error (a pixel whose point lies within half a pixel of a patch edge in
+    the chromatic frame takes the other patch's p), the floor of any carried map's
+    error. 0 on the chromatic frame; None without true positions (``truth`` None)."""
     if frame == chromatic:
         return 0.0
-    if truth is None:
-        return None
     folder = data / "scenes" / scene / "gt" / "chromaticity"
-    with h5py.File(folder / f"{chromatic}.h5") as home, h5py.File(folder / f"{frame}.h5") as now:
-        carried = np.concatenate([sample_at(home[c][()], truth[c]) for c in cameras])
-        true = np.concatenate([now[c][()] for c in cameras])
-    rms = log_ratio_rms(carried, true)
-    return rms if np.isfinite(rms) else None
+    return carried_error(folder / f"{chromatic}.h5", folder / f"{frame}.h5", truth, False, cameras)
 
 
 #: A map against the noise-free map carried by the true motion (:func:`noise_free_error`).
@@ -538,24 +559,22 @@ def noise_free_error(
 ) -> dict:
     """:data:`NOISE_FREE_COLUMNS` of a map against the noise-free map
     (:func:`noise_free_maps`) carried to its frame by the true positions (``positions``,
-    :func:`true_position_maps`, sampled as a tracking samples,
-    :func:`colourhs.calibration.chromaticity_tracking.sample_at`; on the chromatic frame,
-    ``home``, the noise-free map itself), pooled over ``cameras``: the error the map's
-    own 1-sigma of log p (:func:`colourhs.calibration.chromaticity.map_log_sigma`) claims
-    to cover, its calibration's sensor noise and its tracking's error, with eq. (12)'s
-    model error taken out. None where there is nothing to compare (a moved frame
-    without true positions, a map without an error bar for the shares)."""
+    :func:`carried`; on the chromatic frame, ``home``, the noise-free map itself),
+    pooled over ``cameras``: the error the map's own 1-sigma of log p
+    (:func:`colourhs.calibration.chromaticity.map_log_sigma`) claims to cover, its
+    calibration's sensor noise and its tracking's error, with eq. (12)'s model error
+    taken out (``nf_model_rms_log``: :func:`carried_error` of the noise-free map). None
+    where there is nothing to compare (a moved frame without true positions, a map
+    without an error bar for the shares)."""
     import h5py
 
     from colourhs.calibration.chromaticity import log_ratio_rms, map_log_sigma
-    from colourhs.calibration.chromaticity_tracking import sample_at
 
     if not home and positions is None:
         return dict.fromkeys(NOISE_FREE_COLUMNS)
-    with h5py.File(map_h5) as f, h5py.File(noise_free_h5) as g:
+    ref = carried(noise_free_h5, None if home else positions, cameras)
+    with h5py.File(map_h5) as f:
         p = np.concatenate([np.asarray(f[c][()], float) for c in cameras])
-        ref = [g[c][()] if home else sample_at(g[c][()], positions[c]) for c in cameras]
-        ref = np.concatenate([np.asarray(r, float) for r in ref])
         sigmas = [map_log_sigma(f, c) for c in cameras]
     rms = log_ratio_rms(p, ref)
     out = {"chroma_nf_rms_log": rms if np.isfinite(rms) else None}
@@ -566,27 +585,6 @@ def noise_free_error(
     for k in (1, 2, 3):
         out[f"chroma_nf_within_{k}"] = None if cover is None else cover[f"chroma_sigma_within_{k}"]
     return out
-
-
-def noise_free_model_error(
-    noise_free_h5: Path, truth_h5: Path, positions: dict | None, home: bool, cameras
-) -> float | None:
-    """``nf_model_rms_log``: the noise-free map (:func:`noise_free_maps`) carried to the
-    frame as :func:`noise_free_error` carries it, against the frame's truth
-    (``chroma_rms_log``): eq. (12)'s model error with no sensor noise and no tracking
-    error, plus carrying on the pixel grid (:func:`chroma_floor`); None without true
-    positions on a moved frame."""
-    import h5py
-
-    from colourhs.calibration.chromaticity import log_ratio_rms
-    from colourhs.calibration.chromaticity_tracking import sample_at
-
-    if not home and positions is None:
-        return None
-    with h5py.File(noise_free_h5) as g, h5py.File(truth_h5) as t:
-        ref = [g[c][()] if home else sample_at(g[c][()], positions[c]) for c in cameras]
-        rms = log_ratio_rms(np.concatenate(ref), np.concatenate([t[c][()] for c in cameras]))
-    return rms if np.isfinite(rms) else None
 
 
 def evaluate_frame(data, scene, frame, variant: Variant, files, chromatic, map_h5, work) -> dict:
@@ -681,7 +679,7 @@ def run_seed(
             home = i == chroma_index
             nf_model = None
             if noise_free:
-                nf_model = noise_free_model_error(nf[sc.chromatic], truth, positions, home, cameras)
+                nf_model = carried_error(nf[sc.chromatic], truth, positions, home, cameras)
             for v in variants:
                 map_h5 = None if v.source is None else maps[v.name].get(frame)
                 if v.source is not None and map_h5 is None:

@@ -258,10 +258,10 @@ def test_a_map_is_scored_against_the_noise_free_map_where_its_points_truly_were(
 
 
 def test_the_noise_free_maps_model_error_is_against_the_frames_truth(tmp_path):
-    """dyn.noise_free_model_error: a noise-free map equal to the chromatic frame's truth,
-    carried by the true motion, has no error against a truth that moved with the plane,
-    and the unmoved pattern's error against one that did not; None without true
-    positions on a moved frame."""
+    """dyn.carried_error of the noise-free map (``nf_model_rms_log``): a noise-free map
+    equal to the chromatic frame's truth, carried by the true motion, has no error
+    against a truth that moved with the plane, and the unmoved pattern's error against
+    one that did not; None without true positions on a moved frame."""
     rig = _moved_plane(tmp_path)
     noise_free = tmp_path / "noise_free.h5"
     with h5py.File(noise_free, "w") as f:
@@ -271,14 +271,12 @@ def test_the_noise_free_maps_model_error_is_against_the_frames_truth(tmp_path):
     _truths(tmp_path, _pattern(SHIFT_PX))
     cams = rig.camera_names
     args = (noise_free, folder / "000001.h5")
-    assert dyn.noise_free_model_error(*args, truth, False, cams) == pytest.approx(0.0, abs=1e-6)
-    assert dyn.noise_free_model_error(*args, None, False, cams) is None
+    assert dyn.carried_error(*args, truth, False, cams) == pytest.approx(0.0, abs=1e-6)
+    assert dyn.carried_error(*args, None, False, cams) is None
     _truths(tmp_path, _pattern())
     from colourhs.calibration.chromaticity import log_ratio_rms
 
     expected = log_ratio_rms(_pattern(SHIFT_PX), _pattern())
-    assert dyn.noise_free_model_error(*args, truth, False, cams) == pytest.approx(
-        expected, rel=1e-5
-    )
-    home = dyn.noise_free_model_error(noise_free, folder / "000000.h5", None, True, cams)
+    assert dyn.carried_error(*args, truth, False, cams) == pytest.approx(expected, rel=1e-5)
+    home = dyn.carried_error(noise_free, folder / "000000.h5", None, True, cams)
     assert home == pytest.approx(0.0, abs=1e-6)
