@@ -400,24 +400,31 @@ def chroma_sigma_error(p: np.ndarray, truth: np.ndarray, sigma: np.ndarray) -> d
     }
 
 
+def map_with_sigma(map_h5: Path, cameras) -> tuple[np.ndarray, np.ndarray | None]:
+    """A map's p of ``cameras`` side by side (:func:`carried`, as it is) and its 1-sigma of
+    log p the same way (:func:`colourhs.calibration.chromaticity.map_log_sigma`; None
+    where a camera has none)."""
+    import h5py
+
+    from colourhs.calibration.chromaticity import map_log_sigma
+
+    with h5py.File(map_h5) as f:
+        sigmas = [map_log_sigma(f, cam) for cam in cameras]
+    if any(s is None for s in sigmas):
+        return carried(map_h5, None, cameras), None
+    return carried(map_h5, None, cameras), np.concatenate([np.asarray(s, float) for s in sigmas])
+
+
 def chroma_error(map_h5: Path, truth_h5: Path, cameras) -> dict:
     """``chroma_rms_log`` (:func:`colourhs.calibration.chromaticity.log_ratio_rms` of the
     cameras' maps side by side) and ``chroma_known`` of a map against a frame's truth
     (module docstring), pooled over ``cameras``; None where the object has no pixel.
-    A map with a 1-sigma of log p
-    (:func:`colourhs.calibration.chromaticity.map_log_sigma`) also gets
+    A map with a 1-sigma of log p (:func:`map_with_sigma`) also gets
     :func:`chroma_sigma_error`'s columns (None without)."""
-    import h5py
+    from colourhs.calibration.chromaticity import log_ratio_rms
 
-    from colourhs.calibration.chromaticity import log_ratio_rms, map_log_sigma
-
-    with h5py.File(map_h5) as f, h5py.File(truth_h5) as g:
-        t = np.concatenate([np.asarray(g[cam][()], float) for cam in cameras])
-        p = np.concatenate([np.asarray(f[cam][()], float) for cam in cameras])
-        sigmas = [map_log_sigma(f, cam) for cam in cameras]
-        sig = None
-        if all(s is not None for s in sigmas):
-            sig = np.concatenate([np.asarray(s, float) for s in sigmas])
+    t = carried(truth_h5, None, cameras)
+    p, sig = map_with_sigma(map_h5, cameras)
     on = np.all(np.isfinite(t) & (t > 0), axis=-1)
     known = on & np.all(np.isfinite(p) & (p > 0), axis=-1)
     out = {
@@ -566,22 +573,15 @@ def noise_free_error(
     taken out (``nf_model_rms_log``: :func:`carried_error` of the noise-free map). None
     where there is nothing to compare (a moved frame without true positions, a map
     without an error bar for the shares)."""
-    import h5py
-
-    from colourhs.calibration.chromaticity import log_ratio_rms, map_log_sigma
+    from colourhs.calibration.chromaticity import log_ratio_rms
 
     if not home and positions is None:
         return dict.fromkeys(NOISE_FREE_COLUMNS)
     ref = carried(noise_free_h5, None if home else positions, cameras)
-    with h5py.File(map_h5) as f:
-        p = np.concatenate([np.asarray(f[c][()], float) for c in cameras])
-        sigmas = [map_log_sigma(f, c) for c in cameras]
+    p, sig = map_with_sigma(map_h5, cameras)
     rms = log_ratio_rms(p, ref)
     out = {"chroma_nf_rms_log": rms if np.isfinite(rms) else None}
-    cover = None
-    if all(s is not None for s in sigmas):
-        sig = np.concatenate([np.asarray(s, float) for s in sigmas])
-        cover = chroma_sigma_error(p, ref, sig)
+    cover = None if sig is None else chroma_sigma_error(p, ref, sig)
     for k in (1, 2, 3):
         out[f"chroma_nf_within_{k}"] = None if cover is None else cover[f"chroma_sigma_within_{k}"]
     return out
