@@ -35,6 +35,17 @@ log = logging.getLogger(__name__)
 
 OFF_DIAGONAL = tuple((c, b) for c in range(3) for b in range(3) if c != b)
 
+RING_GAP = 1
+"""Pixels between a reading's box and its ring (:func:`_box_images`): the ring is the
+instrumental variable of the fit, so it must share no pixel, and hence no noise, with
+the reading. A reading taken between pixels (the partner camera's pixel of a board
+point, an offset light's direction: bilinear, :func:`_build_led_problem`) is made of
+the boxes of the four pixels around it, which reach one pixel beyond each one's own
+box; a ring one pixel clear of its box is clear of them all. Without the gap the ring
+of one of the four held its neighbours' readings, and with single-pixel boxes (images
+under 240 pixels wide) on a noisy sensor F came out many standard errors off. A
+property of bilinear sampling on the pixel lattice, so it holds on any rig."""
+
 
 def _inv3(M: np.ndarray) -> np.ndarray:
     """Inverses of (N, 3, 3) matrices by cofactors (much faster than a batched LU)."""
@@ -171,7 +182,8 @@ def _box_images(rig, shots, k: int, K: int, margin_m: float) -> list[dict]:
     A pixel is valid when its centre sees the board's white surface at least
     ``margin_m`` (and 1.5 pixels) from markers and edges and is not saturated. The box mean
     needs every pixel of its box valid; the ring (the K x K box less the
-    k x k one) averages its valid pixels and needs a third of them. A bar over
+    (k + 2 :data:`RING_GAP`) one: :data:`RING_GAP` pixels clear of the box) averages
+    its valid pixels and needs a third of them. A bar over
     the shots (:func:`colourhs.common.progress.bar`).
     """
     import cv2
@@ -201,12 +213,13 @@ def _box_images(rig, shots, k: int, K: int, margin_m: float) -> list[dict]:
             valid = valid.reshape(H, W) & ~shot.saturated[name]
             v = valid.astype(np.float32)
             img = np.ascontiguousarray(shot.images[name], np.float32) * v[..., None]
-            n_small, n_big = bsum(v, k), bsum(v, K)
-            s_small, s_big = bsum(img, k), bsum(img, K)
-            ring_n = n_big - n_small
-            ok = (n_small > k * k - 0.5) & (ring_n >= (K * K - k * k) / 3)
+            g = k + 2 * RING_GAP
+            n_small, n_gap, n_big = bsum(v, k), bsum(v, g), bsum(v, K)
+            s_small, s_gap, s_big = bsum(img, k), bsum(img, g), bsum(img, K)
+            ring_n = n_big - n_gap
+            ok = (n_small > k * k - 0.5) & (ring_n >= (K * K - g * g) / 3)
             with np.errstate(invalid="ignore", divide="ignore"):
-                ring = (s_big - s_small) / ring_n[..., None]
+                ring = (s_big - s_gap) / ring_n[..., None]
             per[name] = (s_small / (k * k), np.where(ok[..., None], ring, 0.0), ok)
         out.append(per)
     return out
@@ -250,7 +263,7 @@ def _build_led_problem(rig, shots, fields, opts) -> _LedProblem:
     W, H = rig.image.width, rig.image.height
     step = int(opts["step_px"])
     k = 2 * (step // 2) + 1  # odd box, centred on the sample
-    K = k + 4  # ring of width 2 around it
+    K = k + 2 * RING_GAP + 4  # a ring 2 pixels wide, RING_GAP pixels clear of the box
     cams = rig.cameras
     nc, npose = len(cams), len(shots)
     sdeg = int(opts["sigma_degree"])
