@@ -244,9 +244,9 @@ def test_the_fits_instrument_shares_no_noise_with_its_readings(noisy_corner_tiny
 
     corner-tiny seed 3, measured max / RMS of |M_est - M_true| per camera: 1.34 / 0.92,
     1.43 / 0.76, 1.25 / 0.54 % with the ring one pixel clear (RING_GAP); 5.42 / 3.16,
-    6.12 / 3.37, 4.53 / 2.65 % without the gap (F many standard errors off: the
-    cloth of this rig came out 7.3 mm off, against 1.5 mm); the filter mixing alone
-    1.62 / 1.07, 2.44 / 1.13, 1.40 / 0.89 %.
+    6.12 / 3.37, 4.53 / 2.65 % without the gap (F many standard errors off: on the
+    same rig, corner-dynamic-tiny seed 3's cloth came out 7.3 mm off, against 1.5 mm
+    with the gap); the filter mixing alone 1.62 / 1.07, 2.44 / 1.13, 1.40 / 0.89 %.
     """
     import colourhs.calibration.crosstalk_led as led
 
